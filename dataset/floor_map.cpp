@@ -1,0 +1,189 @@
+#include "dataset/floor_map.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+constexpr int kMaxLayers = 16;  // floor candidates per column (storeys, furniture)
+
+struct Candidate {
+  int cell;
+  Eigen::Vector3f point;
+  float headroom;  // distance to the first surface above; inf when none
+};
+
+int findRoot(std::vector<int>& parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
+}  // namespace
+
+FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptions& o) {
+  PAIRCAST_CHECK(o.cellSize > 0);
+  up_ = scene.upVector();
+  axisA_ = Eigen::Vector3f::UnitX();  // both up axes (y, z) are perpendicular to x
+  axisB_ = up_.cross(axisA_);  // right-handed (a, b, up)
+  cell_ = o.cellSize;
+  double aMin = 1e30, aMax = -1e30, bMin = 1e30, bMax = -1e30, hMax = -1e30;
+  for (const auto& p : scene.mesh.positions) {
+    const double a = p.dot(axisA_), b = p.dot(axisB_), h = p.dot(up_);
+    aMin = std::min(aMin, a), aMax = std::max(aMax, a);
+    bMin = std::min(bMin, b), bMax = std::max(bMax, b);
+    hMax = std::max(hMax, h);
+  }
+  const double extent = std::max(aMax - aMin, bMax - bMin);
+  // Keep the grid bounded on huge scenes: at most ~4M columns.
+  cell_ = std::max(cell_, extent / 2000.0);
+  origin_ = {aMin, bMin};
+  nA_ = std::max(1, static_cast<int>(std::ceil((aMax - aMin) / cell_)));
+  nB_ = std::max(1, static_cast<int>(std::ceil((bMax - bMin) / cell_)));
+  const size_t cells = static_cast<size_t>(nA_) * nB_;
+  const float cosSlope = static_cast<float>(std::cos(o.maxSlopeDegrees * M_PI / 180.0));
+  const float top = static_cast<float>(hMax + 1.0);
+
+  // 1. Peel each column from the top: every near-horizontal surface is a candidate.
+  std::vector<Candidate> candidates;
+  {
+    std::vector<Ray> rays(cells);
+    std::vector<float> tStart(cells, 0.0f);
+    std::vector<Hit> hits(cells);
+    std::vector<Eigen::Vector3f> origins(cells);
+    for (int i = 0; i < nA_; ++i) {
+      for (int j = 0; j < nB_; ++j) {
+        const float a = static_cast<float>(origin_.x() + (i + 0.5) * cell_);
+        const float b = static_cast<float>(origin_.y() + (j + 0.5) * cell_);
+        origins[static_cast<size_t>(i) * nB_ + j] = a * axisA_ + b * axisB_ + top * up_;
+      }
+    }
+    std::vector<int> active(cells);
+    std::iota(active.begin(), active.end(), 0);
+    for (int layer = 0; layer < kMaxLayers && !active.empty(); ++layer) {
+      rays.resize(active.size());
+      hits.resize(active.size());
+      for (size_t k = 0; k < active.size(); ++k)
+        rays[k] = Ray{origins[active[k]], -up_, tStart[active[k]], 1e30f};
+      caster.intersect(rays.data(), hits.data(), rays.size());
+      std::vector<int> next;
+      for (size_t k = 0; k < active.size(); ++k) {
+        if (hits[k].triangle < 0) continue;
+        const int c = active[k];
+        if (std::abs(hits[k].normal.dot(up_)) >= cosSlope)
+          candidates.push_back({c, origins[c] - hits[k].t * up_, 0.0f});
+        tStart[c] = hits[k].t + 1e-3f;
+        next.push_back(c);
+      }
+      active.swap(next);
+    }
+  }
+  if (candidates.empty()) return;
+
+  // 2. Headroom and wall clearance, by rays from each candidate.
+  const int kDirs = 8;
+  const float heights[2] = {0.5f, 1.5f};
+  const size_t perCand = 1 + 2 * kDirs;
+  std::vector<Ray> rays(candidates.size() * perCand);
+  std::vector<Hit> hits(rays.size());
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    const Eigen::Vector3f p = candidates[k].point + 0.02f * up_;
+    rays[k * perCand] = Ray{p, up_, 0.0f, 1e30f};
+    for (int h = 0; h < 2; ++h) {
+      for (int d = 0; d < kDirs; ++d) {
+        const float ang = static_cast<float>(2.0 * M_PI * d / kDirs);
+        const Eigen::Vector3f dir = std::cos(ang) * axisA_ + std::sin(ang) * axisB_;
+        rays[k * perCand + 1 + h * kDirs + d] =
+            Ray{candidates[k].point + heights[h] * up_, dir, 0.0f,
+                static_cast<float>(o.wallClearance)};
+      }
+    }
+  }
+  caster.intersect(rays.data(), hits.data(), rays.size());
+  std::vector<Candidate> open;
+  size_t covered = 0;
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    const Hit& above = hits[k * perCand];
+    const float headroom = above.triangle >= 0 ? above.t : std::numeric_limits<float>::infinity();
+    if (headroom < o.headroom) continue;
+    bool clear = true;
+    for (size_t r = 1; r < perCand && clear; ++r) clear = hits[k * perCand + r].triangle < 0;
+    if (!clear) continue;
+    candidates[k].headroom = headroom;
+    covered += std::isfinite(headroom);
+    open.push_back(candidates[k]);
+  }
+  // A scene with ceilings over most of its open floor is an interior: then standing points
+  // with nothing above (roofs, outside) are not inside it.
+  hasCeiling_ = !open.empty() && covered * 2 >= open.size();
+  if (hasCeiling_) {
+    open.erase(std::remove_if(open.begin(), open.end(),
+                              [](const Candidate& c) { return !std::isfinite(c.headroom); }),
+               open.end());
+  }
+  if (open.empty()) return;
+
+  // 3. Connected regions over 4-neighbouring cells whose floors differ less than a step.
+  std::vector<std::vector<int>> byCell(cells);
+  for (size_t k = 0; k < open.size(); ++k) byCell[open[k].cell].push_back(static_cast<int>(k));
+  std::vector<int> parent(open.size());
+  std::iota(parent.begin(), parent.end(), 0);
+  for (size_t k = 0; k < open.size(); ++k) {
+    const int c = open[k].cell, i = c / nB_, j = c % nB_;
+    const int nbrs[2][2] = {{i + 1, j}, {i, j + 1}};
+    for (const auto& n : nbrs) {
+      if (n[0] >= nA_ || n[1] >= nB_) continue;
+      for (int m : byCell[static_cast<size_t>(n[0]) * nB_ + n[1]]) {
+        if (std::abs((open[m].point - open[k].point).dot(up_)) < o.stepHeight)
+          parent[findRoot(parent, m)] = findRoot(parent, static_cast<int>(k));
+      }
+    }
+  }
+  std::vector<int> regionSize(open.size(), 0);
+  for (size_t k = 0; k < open.size(); ++k) ++regionSize[findRoot(parent, static_cast<int>(k))];
+  const int largest = *std::max_element(regionSize.begin(), regionSize.end());
+  const double cellArea = cell_ * cell_;
+  const double minCells =
+      std::max(o.minRegionArea / cellArea, o.minRegionShare * static_cast<double>(largest));
+
+  cellPoints_.assign(cells, {});
+  for (size_t k = 0; k < open.size(); ++k) {
+    if (regionSize[findRoot(parent, static_cast<int>(k))] < minCells) continue;
+    cellPoints_[open[k].cell].push_back(static_cast<int>(points_.size()));
+    points_.push_back(open[k].point);
+  }
+}
+
+double FloorMap::area() const { return points_.size() * cell_ * cell_; }
+
+Eigen::Vector3f FloorMap::sample(Rng& rng) const {
+  PAIRCAST_CHECK(!points_.empty());
+  const Eigen::Vector3f& p = points_[rng.below(points_.size())];
+  const float da = static_cast<float>(rng.uniform(-0.5, 0.5) * cell_);
+  const float db = static_cast<float>(rng.uniform(-0.5, 0.5) * cell_);
+  return p + da * axisA_ + db * axisB_;
+}
+
+std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double radius) const {
+  if (points_.empty() || !p.allFinite()) return std::nullopt;
+  const double a = p.dot(axisA_) - origin_.x(), b = p.dot(axisB_) - origin_.y();
+  const int ci = static_cast<int>(std::floor(a / cell_)), cj = static_cast<int>(std::floor(b / cell_));
+  const int reach = static_cast<int>(std::ceil(radius / cell_));
+  float best = std::numeric_limits<float>::infinity();
+  int bestIndex = -1;
+  for (int i = std::max(0, ci - reach); i <= std::min(nA_ - 1, ci + reach); ++i) {
+    for (int j = std::max(0, cj - reach); j <= std::min(nB_ - 1, cj + reach); ++j) {
+      for (int k : cellPoints_[static_cast<size_t>(i) * nB_ + j]) {
+        const float d = (points_[k] - p).squaredNorm();
+        if (d < best) best = d, bestIndex = k;
+      }
+    }
+  }
+  if (bestIndex < 0 || best > radius * radius) return std::nullopt;
+  return points_[bestIndex];
+}
+
+}  // namespace paircast

@@ -1,0 +1,43 @@
+// generate_pairs as a library call: samples pairs in every scene, in parallel, and writes them
+// as tar shards and/or CroCo's folder layout. Resumable: a killed run, started again with the
+// same arguments, finishes the job with no duplicate, missing or corrupt file, and with the
+// same bytes as an uninterrupted run, whatever --jobs is.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "dataset/pair_generator.h"
+#include "render/scene_loader.h"
+
+namespace paircast {
+
+struct GenerateConfig {
+  std::vector<std::string> scenes;  // files, folders (searched recursively) or .txt lists
+  std::string out;
+  int pairsPerScene = 100;
+  uint64_t seed = 0;
+  int jobs = 0;                  // worker threads; 0 = all cores
+  bool shards = true;            // pairs-NNNNNN.tar + index.json
+  bool croco = false;            // <scene>/<idx>_1.jpeg ... + metadata.json + pairs.txt
+  bool saveDepth = false;
+  int shardSize = 1000;          // pairs per shard
+  uint64_t shardMaxBytes = 1ull << 30;
+  int jpegQuality = 90;
+  int shardIndex = 0;            // this machine's part of the scene list ...
+  int numShards = 1;             // ... of numShards parts
+  bool progress = true;          // progress line on stderr
+  LoadOptions load;
+  PairOptions pair;
+};
+
+// Expands the --scenes arguments into scene files, sorted within each folder, in argument order.
+// Throws paircast::Error naming an argument that does not exist.
+std::vector<std::string> expandSceneList(const std::vector<std::string>& args);
+
+// Runs the job and returns the summary (also written to <out>/summary.json). Scenes that fail
+// to load or have no walkable floor or valid views are skipped with a warning and listed.
+nlohmann::json runGenerate(const GenerateConfig& config);
+
+}  // namespace paircast

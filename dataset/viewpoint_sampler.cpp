@@ -1,0 +1,75 @@
+#include "dataset/viewpoint_sampler.h"
+
+#include <cmath>
+
+#include "util/error.h"
+
+namespace paircast {
+
+Eigen::Matrix3d orientationNoise(double panDeg, double tiltDeg, double rollDeg) {
+  constexpr double kDeg = M_PI / 180.0;
+  // Habitat's UP, RIGHT and FRONT are -y, +x and +z in OpenCV camera axes.
+  return (Eigen::AngleAxisd(panDeg * kDeg, -Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(tiltDeg * kDeg, Eigen::Vector3d::UnitX()) *
+          Eigen::AngleAxisd(rollDeg * kDeg, Eigen::Vector3d::UnitZ()))
+      .toRotationMatrix();
+}
+
+ViewpointSampler::ViewpointSampler(const Scene& scene, const RayCaster& caster,
+                                   const SamplerOptions& options)
+    : options_(options), up_(scene.upVector().cast<double>()), floor_(scene, caster, options.floor) {
+  if (!(options.minHeight > 0 && options.maxHeight >= options.minHeight))
+    throw Error("camera heights must satisfy 0 < min <= max");
+  if (floor_.empty())
+    throw Error(scene.path, "no walkable floor found (is --up right? the scene needs "
+                            "horizontal surfaces with " +
+                                std::to_string(options.floor.headroom) + " m of headroom)");
+}
+
+Eigen::Matrix3d ViewpointSampler::orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
+                                         Rng& rng) const {
+  Eigen::Vector3d forward = target - eye;
+  // Looking straight up or down: fall back to a horizontal direction.
+  if ((forward - forward.dot(up_) * up_).norm() < 1e-6) forward = up_.unitOrthogonal();
+  const Eigen::Matrix3d R = lookAtRotation(eye, eye + forward, up_);
+  const double pan = rng.uniform(-options_.panDegrees, options_.panDegrees);
+  const double tilt = rng.uniform(-options_.tiltDegrees, options_.tiltDegrees);
+  const double roll = rng.uniform(-options_.rollDegrees, options_.rollDegrees);
+  return R * orientationNoise(pan, tilt, roll);
+}
+
+Viewpoint ViewpointSampler::sampleReference(const Camera& intrinsics, Rng& rng) const {
+  Viewpoint v;
+  v.floorPoint = floor_.sample(rng);
+  const double height = rng.uniform(options_.minHeight, options_.maxHeight);
+  const Eigen::Vector3d eye = v.floorPoint.cast<double>() + height * up_;
+  const double yaw = rng.uniform(0.0, 2.0 * M_PI);
+  const Eigen::Vector3d a = up_.unitOrthogonal(), b = up_.cross(a);
+  const Eigen::Vector3d forward = std::cos(yaw) * a + std::sin(yaw) * b;
+  v.camera = intrinsics;
+  v.camera.R_cam2world = orient(eye, eye + forward, rng);
+  v.camera.t_cam2world = eye;
+  return v;
+}
+
+Viewpoint ViewpointSampler::sampleOther(const Camera& intrinsics, const Viewpoint& from,
+                                        const Eigen::Vector3d& target, Rng& rng) const {
+  Viewpoint v;
+  v.floorPoint = from.floorPoint;
+  const Eigen::Vector3f a = up_.unitOrthogonal().cast<float>();
+  const Eigen::Vector3f b = up_.cast<float>().cross(a);
+  for (int s = 0; s < options_.walkSteps; ++s) {
+    const float da = static_cast<float>(options_.walkScale * rng.normal());
+    const float db = static_cast<float>(options_.walkScale * rng.normal());
+    rng.normal();  // CroCo draws a third (vertical, zero-weighted) component
+    if (auto snapped = floor_.snap(v.floorPoint + da * a + db * b)) v.floorPoint = *snapped;
+  }
+  const double height = rng.uniform(options_.minHeight, options_.maxHeight);
+  const Eigen::Vector3d eye = v.floorPoint.cast<double>() + height * up_;
+  v.camera = intrinsics;
+  v.camera.R_cam2world = orient(eye, target, rng);
+  v.camera.t_cam2world = eye;
+  return v;
+}
+
+}  // namespace paircast

@@ -1,0 +1,66 @@
+// Camera poses inside a scene, following CroCo's habitat generator: a camera 1.2 to 1.8 m above
+// a walkable point, with a random yaw and pan/tilt/roll noise; the second view of a pair comes
+// from a short random walk on the floor and looks at the mean 3D point seen by the first.
+#pragma once
+
+#include <Eigen/Core>
+
+#include "dataset/floor_map.h"
+#include "render/camera.h"
+#include "render/ray_caster.h"
+#include "render/scene_loader.h"
+#include "util/random.h"
+
+namespace paircast {
+
+struct SamplerOptions {
+  double minHeight = 1.2;  // camera height above the floor, metres
+  double maxHeight = 1.8;
+  double panDegrees = 3.0;  // orientation noise, uniform in [-x, x]
+  double tiltDegrees = 10.0;
+  double rollDegrees = 5.0;
+  int walkSteps = 5;        // random walk of the second view
+  double walkScale = 2.0;   // each step: walkScale * N(0, 1) along both floor axes (CroCo's
+                            // random_step_variance)
+  FloorOptions floor;
+};
+
+// A sampled camera with the floor point under it.
+struct Viewpoint {
+  Camera camera;
+  Eigen::Vector3f floorPoint;
+};
+
+class ViewpointSampler {
+ public:
+  // Builds the floor map. Throws paircast::Error naming the scene when it has no walkable floor.
+  ViewpointSampler(const Scene& scene, const RayCaster& caster, const SamplerOptions& options);
+
+  // A reference view: random floor point, height and yaw, plus orientation noise.
+  // `intrinsics` gives the size and K; its pose is ignored.
+  Viewpoint sampleReference(const Camera& intrinsics, Rng& rng) const;
+  // The second view: a random walk from `from.floorPoint`, looking at `target`, plus noise.
+  Viewpoint sampleOther(const Camera& intrinsics, const Viewpoint& from,
+                        const Eigen::Vector3d& target, Rng& rng) const;
+  Camera sampleView(const Camera& intrinsics, Rng& rng) const {
+    return sampleReference(intrinsics, rng).camera;
+  }
+
+  const FloorMap& floor() const { return floor_; }
+  const SamplerOptions& options() const { return options_; }
+  Eigen::Vector3d up() const { return up_; }
+
+ private:
+  // worldFromCamera rotation looking along `forward` (levelled on up), then the noise.
+  Eigen::Matrix3d orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
+                         Rng& rng) const;
+  SamplerOptions options_;
+  Eigen::Vector3d up_;
+  FloorMap floor_;
+};
+
+// worldFromCamera rotation of CroCo's orientation noise (pan about the camera's up, tilt about
+// its right, roll about its forward axis, in that order), in OpenCV camera axes.
+Eigen::Matrix3d orientationNoise(double panDeg, double tiltDeg, double rollDeg);
+
+}  // namespace paircast

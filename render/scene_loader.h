@@ -1,0 +1,43 @@
+// Mesh scenes from files through assimp: glb, gltf, obj (+mtl), ply, fbx, dae, ifc and the
+// other formats assimp reads. Node transforms are applied, faces triangulated, and materials
+// (base colour factor, base-colour or diffuse texture, vertex colours) kept per triangle.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "render/mesh.h"
+
+namespace paircast {
+
+// Which world axis points up in the file. Positions are never rotated: poses stay in the
+// file's own frame, and the samplers use up to find floors and level the cameras.
+enum class UpAxis { Y, Z };
+UpAxis parseUpAxis(const std::string& text);  // "y" or "z"; throws paircast::Error otherwise
+Eigen::Vector3f upVector(UpAxis up);
+
+struct LoadOptions {
+  UpAxis up = UpAxis::Y;
+  double scale = 1.0;                    // multiplies every position (file units -> metres)
+  size_t maxTriangles = 50'000'000;      // refuse larger scenes instead of exhausting memory
+  uint64_t maxFileBytes = 4ull << 30;    // refuse larger files
+};
+
+struct Scene {
+  std::string path;
+  std::string name;  // file stem, used for output folders
+  UpAxis up = UpAxis::Y;
+  Mesh mesh;
+  std::vector<std::string> warnings;  // e.g. textures that could not be read
+  Eigen::Vector3f upVector() const { return paircast::upVector(up); }
+};
+
+// Loads a scene. Throws paircast::Error naming `path` when the file is missing, of an
+// unsupported type, corrupt, empty (no triangles), too large, or has non-finite vertices.
+Scene loadScene(const std::string& path, const LoadOptions& options = {});
+
+// True when assimp has an importer for the extension of `path`.
+bool isSupportedSceneFile(const std::string& path);
+
+}  // namespace paircast

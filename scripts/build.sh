@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Configures and builds paircast in build/ (Release, Ninja when present). Extra arguments go to
+# CMake, e.g. scripts/build.sh -DPAIRCAST_SANITIZE=address,undefined
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD_DIR=${BUILD_DIR:-build}
+generator=()
+if command -v ninja >/dev/null; then generator=(-G Ninja); fi
+if [[ ! -f "$BUILD_DIR/CMakeCache.txt" ]]; then
+  cmake -S . -B "$BUILD_DIR" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release "$@"
+elif (($#)); then
+  cmake -S . -B "$BUILD_DIR" "$@"
+fi
+cmake --build "$BUILD_DIR" -j "$(nproc)"

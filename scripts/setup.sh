@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages paircast needs. Idempotent: installs only what is missing,
+# and runs `apt-get update` once, only when something is missing.
+set -euo pipefail
+
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config
+  libembree-dev libassimp-dev libeigen3-dev libopenimageio-dev openimageio-tools
+  libgtest-dev libtorch-dev libopenblas0-pthread libgloo-dev
+  nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev
+)
+# Optional references for tests and benchmarks (Python side): torch, open3d, sklearn.
+if [[ "${PAIRCAST_WITH_REFERENCES:-1}" == 1 ]]; then
+  PACKAGES+=(python3-numpy python3-torch python3-open3d python3-sklearn python3-openimageio)
+fi
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]} == 0)); then
+  echo "setup: all ${#PACKAGES[@]} packages are installed"
+  exit 0
+fi
+SUDO=""
+if [[ $(id -u) != 0 ]]; then SUDO=sudo; fi
+echo "setup: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

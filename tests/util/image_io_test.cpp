@@ -1,0 +1,115 @@
+#include "util/image_io.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <fstream>
+
+#include "test_paths.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+Image8 gradient(int w, int h) {
+  Image8 img(w, h, 3);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      uint8_t* p = img.pixel(x, y);
+      p[0] = static_cast<uint8_t>(x * 255 / (w - 1));
+      p[1] = static_cast<uint8_t>(y * 255 / (h - 1));
+      p[2] = 77;
+    }
+  return img;
+}
+
+TEST(ImageIo, PngRoundTripIsExact) {
+  const std::string path = testing::scratchDir("png") + "/g.png";
+  const Image8 img = gradient(37, 21);
+  writeImage(path, img);
+  const Image8 back = readImage8(path);
+  EXPECT_EQ(back.width, 37);
+  EXPECT_EQ(back.height, 21);
+  EXPECT_EQ(back.data, img.data);
+}
+
+TEST(ImageIo, JpegRoundTripIsClose) {
+  const Image8 img = gradient(64, 64);
+  const auto bytes = encodeImage(img, "jpg", 95);
+  const Image8 back = decodeImage8(bytes.data(), bytes.size(), "g.jpg");
+  ASSERT_EQ(back.size(), img.size());
+  double err = 0;
+  for (size_t i = 0; i < img.size(); ++i) err += std::abs(int(back.data[i]) - int(img.data[i]));
+  EXPECT_LT(err / img.size(), 2.0);
+}
+
+TEST(ImageIo, ExrKeepsFloatDepthExactly) {
+  const std::string path = testing::scratchDir("exr") + "/d.exr";
+  ImageF depth(5, 3, 1);
+  for (size_t i = 0; i < depth.size(); ++i) depth.data[i] = i == 4 ? 0.0f : 0.1234567f * i;
+  writeExr(path, depth);
+  const ImageF back = readImageF(path);
+  EXPECT_EQ(back.channels, 1);
+  EXPECT_EQ(back.data, depth.data);
+}
+
+TEST(ImageIo, BadFilesGiveErrorsNamingThem) {
+  const std::string dir = testing::scratchDir("bad");
+  EXPECT_THROW(readImage8(dir + "/none.png"), Error);
+  std::ofstream(dir + "/junk.png") << "not a png at all";
+  try {
+    readImage8(dir + "/junk.png");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("junk.png"), std::string::npos);
+  }
+  EXPECT_THROW(writeImage(dir + "/x.bmp2", gradient(4, 4)), Error);
+  EXPECT_THROW(decodeImage8("abc", 3, "mem.jpg"), Error);
+}
+
+TEST(AtomicFile, WritesWholeFilesAndLeavesNoTemporaries) {
+  const std::string dir = testing::scratchDir("atomic");
+  writeFileAtomic(dir + "/a.txt", "first");
+  writeFileAtomic(dir + "/a.txt", "second");
+  EXPECT_EQ(readFile(dir + "/a.txt"), "second");
+  size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) files += e.is_regular_file();
+  EXPECT_EQ(files, 1u);
+  EXPECT_THROW(writeFileAtomic(dir + "/no/such/folder/a.txt", "x"), Error);
+}
+
+TEST(AtomicFile, FullDiskIsAnErrorAndKeepsTheOldFile) {
+  // A file-size limit makes write() fail like a full disk (EFBIG), inside a child process.
+  const std::string dir = testing::scratchDir("full");
+  writeFileAtomic(dir + "/keep.txt", "old");
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    signal(SIGXFSZ, SIG_IGN);
+    rlimit lim{4096, 4096};
+    setrlimit(RLIMIT_FSIZE, &lim);
+    try {
+      writeFileAtomic(dir + "/keep.txt", std::string(1 << 20, 'x'));
+      _exit(2);  // should have failed
+    } catch (const Error& e) {
+      _exit(std::string(e.what()).find("keep.txt") != std::string::npos ? 0 : 3);
+    }
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  EXPECT_EQ(readFile(dir + "/keep.txt"), "old");
+  size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) files += e.is_regular_file();
+  EXPECT_EQ(files, 1u) << "no temporary left behind";
+}
+
+}  // namespace
+}  // namespace paircast

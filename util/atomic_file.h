@@ -1,0 +1,28 @@
+// Crash-safe writes: data goes to a temporary name in the same folder, is flushed to disk,
+// then renamed over the target, so a reader sees either the old file or the whole new one.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace paircast {
+
+// Writes `data` to `path` atomically. Throws paircast::Error naming `path` on failure (a full
+// disk included) and leaves no temporary file behind.
+void writeFileAtomic(const std::string& path, std::string_view data);
+
+// The temporary name used for `path` by this process: "<dir>/.<name>.tmp.<pid>".
+std::string tempPathFor(const std::string& path);
+
+// Renames `from` to `to` after fsync-ing `from`, then fsyncs the folder.
+void commitFile(const std::string& from, const std::string& to);
+
+// Reads a whole file. Throws paircast::Error naming `path` when it cannot be read.
+std::string readFile(const std::string& path);
+
+// Creates a folder and its parents. Throws paircast::Error naming `path` on failure.
+void makeDirs(const std::string& path);
+
+}  // namespace paircast

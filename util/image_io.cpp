@@ -1,0 +1,131 @@
+#include "util/image_io.h"
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+
+#include <filesystem>
+
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+using OIIO::ImageInput;
+using OIIO::ImageOutput;
+using OIIO::ImageSpec;
+using OIIO::TypeDesc;
+
+std::string lowerExt(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext.empty() ? ext : ext.substr(1);
+}
+
+// Writes through an in-memory proxy so that every file write goes through writeFileAtomic.
+template <typename T>
+std::vector<unsigned char> encode(const Image<T>& image, const std::string& format, TypeDesc type,
+                                  int jpegQuality) {
+  if (image.width <= 0 || image.height <= 0 || image.channels <= 0)
+    throw Error("cannot encode an empty image");
+  std::vector<unsigned char> bytes;
+  OIIO::Filesystem::IOVecOutput proxy(bytes);
+  const std::string name = "image." + format;
+  auto out = ImageOutput::create(name);
+  if (!out) throw Error(name, "no OpenImageIO writer: " + OIIO::geterror());
+  ImageSpec spec(image.width, image.height, image.channels, type);
+  if (format == "jpg" || format == "jpeg") {
+    spec.attribute("Compression", "jpeg:" + std::to_string(jpegQuality));
+  } else if (format == "exr") {
+    spec.attribute("compression", "zip");
+    if (image.channels == 1) spec.channelnames = {"Y"};
+  }
+  if (!out->set_ioproxy(&proxy) || !out->open(name, spec))
+    throw Error(name, "cannot open encoder: " + out->geterror());
+  const TypeDesc src = std::is_same_v<T, float> ? TypeDesc::FLOAT : TypeDesc::UINT8;
+  if (!out->write_image(src, image.data.data())) throw Error(name, out->geterror());
+  if (!out->close()) throw Error(name, out->geterror());
+  return bytes;
+}
+
+template <typename T>
+Image<T> decode(std::unique_ptr<ImageInput> in, const std::string& name, int channels) {
+  const ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
+    throw Error(name, "image has no pixels");
+  if (static_cast<int64_t>(spec.width) * spec.height > (int64_t(1) << 28))
+    throw Error(name, "image is too large (" + std::to_string(spec.width) + "x" +
+                          std::to_string(spec.height) + ")");
+  const int nc = channels > 0 ? channels : spec.nchannels;
+  Image<T> image(spec.width, spec.height, nc);
+  const TypeDesc dst = std::is_same_v<T, float> ? TypeDesc::FLOAT : TypeDesc::UINT8;
+  std::vector<T> all(static_cast<size_t>(spec.width) * spec.height * spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, dst, all.data()))
+    throw Error(name, "cannot decode image: " + in->geterror());
+  const size_t n = static_cast<size_t>(spec.width) * spec.height;
+  for (size_t i = 0; i < n; ++i) {
+    for (int c = 0; c < nc; ++c) {
+      int sc = spec.nchannels >= 3 ? std::min(c, spec.nchannels - 1) : 0;
+      image.data[i * nc + c] = all[i * spec.nchannels + sc];
+    }
+  }
+  return image;
+}
+
+template <typename T>
+Image<T> readFileImage(const std::string& path, int channels) {
+  if (!fs::exists(path)) throw Error(path, "no such file");
+  auto in = ImageInput::open(path);
+  if (!in) throw Error(path, "cannot read image: " + OIIO::geterror());
+  return decode<T>(std::move(in), path, channels);
+}
+
+template <typename T>
+Image<T> readMemImage(const void* data, size_t size, const std::string& name, int channels) {
+  OIIO::Filesystem::IOMemReader proxy(data, size);
+  auto in = ImageInput::open(name, nullptr, &proxy);
+  if (!in) throw Error(name, "cannot decode image: " + OIIO::geterror());
+  return decode<T>(std::move(in), name, channels);
+}
+
+}  // namespace
+
+std::vector<unsigned char> encodeImage(const Image8& image, std::string_view format,
+                                       int jpegQuality) {
+  return encode(image, std::string(format), TypeDesc::UINT8, jpegQuality);
+}
+
+std::vector<unsigned char> encodeExr(const ImageF& image, bool half) {
+  return encode(image, "exr", half ? TypeDesc::HALF : TypeDesc::FLOAT, 0);
+}
+
+void writeImage(const std::string& path, const Image8& image, int jpegQuality) {
+  const std::string ext = lowerExt(path);
+  if (ext != "png" && ext != "jpg" && ext != "jpeg")
+    throw Error(path, "unsupported image extension (use .png, .jpg or .jpeg)");
+  auto bytes = encodeImage(image, ext, jpegQuality);
+  writeFileAtomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+
+void writeExr(const std::string& path, const ImageF& image, bool half) {
+  if (lowerExt(path) != "exr") throw Error(path, "float maps are written as .exr");
+  auto bytes = encodeExr(image, half);
+  writeFileAtomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+
+Image8 readImage8(const std::string& path, int channels) {
+  return readFileImage<uint8_t>(path, channels);
+}
+
+ImageF readImageF(const std::string& path) { return readFileImage<float>(path, 0); }
+
+Image8 decodeImage8(const void* data, size_t size, const std::string& name, int channels) {
+  return readMemImage<uint8_t>(data, size, name, channels);
+}
+
+ImageF decodeImageF(const void* data, size_t size, const std::string& name) {
+  return readMemImage<float>(data, size, name, 0);
+}
+
+}  // namespace paircast
