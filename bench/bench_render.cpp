@@ -6,10 +6,16 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <sstream>
+#include <unistd.h>
 #include <vector>
+
+#include "util/image_io.h"
 
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
@@ -107,6 +113,64 @@ Camera defaultCamera(const Scene& scene, int resolution) {
   return c;
 }
 
+// A 224 x 224-cell height field: 100,352 triangles, to time the BVH build at the target's size.
+Mesh syntheticMesh() {
+  Mesh m;
+  const int mat = m.addMaterial(Material{});
+  const int n = 224;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) {
+      m.positions.emplace_back(0.05f * i, 0.1f * std::sin(0.3f * i) * std::cos(0.2f * j), 0.05f * j);
+      m.uvs.emplace_back(0.0f, 0.0f);
+      m.colors.emplace_back(1.0f, 1.0f, 1.0f);
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i, b = a + 1, c = a + n + 1, d = c + 1;
+      m.triangles.emplace_back(a, b, d);
+      m.triangles.emplace_back(a, d, c);
+      m.triangleMaterial.insert(m.triangleMaterial.end(), 2, mat);
+    }
+  return m;
+}
+
+// Runs ../shared/tools/ref_raycast.py (Open3D) on the same mesh, camera and rays: its speed, and
+// its agreement with our depth. Returns the SUMMARY fields, or an empty object when unavailable.
+nlohmann::json open3dReference(const std::string& mesh, const Camera& cam, const ImageF& depth) {
+  const std::string tool =
+      (std::filesystem::path(PAIRCAST_SOURCE_DIR).parent_path() / "shared/tools/ref_raycast.py").string();
+  if (!std::filesystem::exists(tool) || std::system("/usr/bin/python3 -c 'import open3d' 2>/dev/null") != 0)
+    return {};
+  const auto dir = std::filesystem::temp_directory_path() / ("bench_render_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  writeCameraJson((dir / "cam.json").string(), cam);
+  writeExr((dir / "ours.exr").string(), depth);
+  const std::string cmd = "/usr/bin/python3 " + tool + " --mesh '" + mesh + "' --camera " +
+                          (dir / "cam.json").string() + " --compare " + (dir / "ours.exr").string() +
+                          " --bench --repeat 10 --threads " + std::to_string(omp_get_max_threads()) +
+                          " 2>&1 | grep '^SUMMARY' | tail -1";
+  nlohmann::json out;
+  if (FILE* p = popen(cmd.c_str(), "r")) {
+    char buf[4096];
+    std::string line;
+    while (fgets(buf, sizeof buf, p)) line += buf;
+    pclose(p);
+    std::istringstream is(line);
+    std::string tok;
+    while (is >> tok) {
+      const auto eq = tok.find('=');
+      if (eq == std::string::npos) continue;
+      try {
+        out[tok.substr(0, eq)] = std::stod(tok.substr(eq + 1));
+      } catch (...) {
+        out[tok.substr(0, eq)] = tok.substr(eq + 1);
+      }
+    }
+  }
+  std::filesystem::remove_all(dir);
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -129,8 +193,13 @@ int main(int argc, char** argv) {
     auto t0 = Clock::now();
     RayCaster caster(scene.mesh);
     const double build = seconds(t0);
-    std::printf("BVH build: %.3f s for %zu triangles (%.2f s per 100k)\n", build,
-                scene.mesh.numTriangles(), build / scene.mesh.numTriangles() * 1e5);
+    std::printf("BVH build: %.3f s for %zu triangles\n", build, scene.mesh.numTriangles());
+    const Mesh synthetic = syntheticMesh();
+    t0 = Clock::now();
+    { RayCaster big(synthetic); }
+    const double build100k = seconds(t0);
+    std::printf("BVH build: %.3f s for a synthetic %zu-triangle mesh (target: under 1 s)\n",
+                build100k, synthetic.numTriangles());
     EmbreeBound bound(scene.mesh);
 
     nlohmann::json last;
@@ -163,9 +232,23 @@ int main(int argc, char** argv) {
                   "bound) | rgb+depth %.2f Mrays/s (%.2fx depth time)\n",
                   cam.width, cam.height, 100.0 * hits / rays, mBound, mDepth,
                   100.0 * mDepth / mBound, mRgbd, tRgbd / tDepth);
+      const nlohmann::json o3d = open3dReference(scenePath, cam, depth);
+      if (o3d.contains("best_Mrays/s")) {
+        const double m = o3d["best_Mrays/s"].get<double>();
+        std::printf("  open3d cast_rays %.2f Mrays/s: ours depth-only %.2fx faster; depth agreement "
+                    "within 1 mm: %.4f%% of pixels\n",
+                    m, mDepth / m, 100.0 * o3d.value("agree_1mm", 0.0));
+      } else {
+        std::printf("  open3d comparison skipped (needs ../shared/tools and python3-open3d)\n");
+      }
       last = {{"scene", scenePath}, {"resolution", res}, {"mrays_depth", mDepth},
               {"mrays_rgbd", mRgbd}, {"mrays_embree_bound", mBound},
-              {"build_seconds", build}, {"triangles", scene.mesh.numTriangles()}};
+              {"build_seconds", build}, {"build_seconds_100k", build100k},
+              {"triangles", scene.mesh.numTriangles()}};
+      if (o3d.contains("best_Mrays/s")) {
+        last["mrays_open3d"] = o3d["best_Mrays/s"];
+        last["agree_1mm_open3d"] = o3d.value("agree_1mm", 0.0);
+      }
     }
     std::printf("%s\n", last.dump().c_str());
     return 0;

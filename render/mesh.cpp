@@ -30,18 +30,12 @@ float linearToSrgb(float c) {
   return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
 }
 
-uint8_t linearToSrgb8(float c) {
-  // A 4096-entry table: the pow() per channel would otherwise dominate shading.
-  static const std::array<uint8_t, 4097> table = [] {
-    std::array<uint8_t, 4097> t{};
-    for (int i = 0; i <= 4096; ++i)
-      t[i] = static_cast<uint8_t>(std::lround(255.0f * linearToSrgb(i / 4096.0f)));
-    return t;
-  }();
-  if (!(c > 0.0f)) return 0;
-  if (c >= 1.0f) return 255;
-  return table[static_cast<int>(c * 4096.0f + 0.5f)];
-}
+const std::array<uint8_t, 4097> kLinearToSrgb8 = [] {
+  std::array<uint8_t, 4097> t{};
+  for (int i = 0; i <= 4096; ++i)
+    t[i] = static_cast<uint8_t>(std::lround(255.0f * linearToSrgb(i / 4096.0f)));
+  return t;
+}();
 
 Eigen::Vector3f Texture::sample(float u, float v) const {
   const auto& lut = srgbTable();

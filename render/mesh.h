@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -66,6 +67,12 @@ MeshStats computeStats(const Mesh& mesh);
 // sRGB <-> linear, per channel in [0, 1].
 float srgbToLinear(float c);
 float linearToSrgb(float c);
-uint8_t linearToSrgb8(float c);
+// Table of linearToSrgb over [0, 1] in 4096 steps, rounded to 8 bits.
+extern const std::array<uint8_t, 4097> kLinearToSrgb8;
+inline uint8_t linearToSrgb8(float c) {
+  if (!(c > 0.0f)) return 0;
+  if (c >= 1.0f) return 255;
+  return kLinearToSrgb8[static_cast<int>(c * 4096.0f + 0.5f)];
+}
 
 }  // namespace paircast

@@ -83,6 +83,10 @@ inline RTCIntersectContext coherentContext() {
 
 struct RayCaster::Impl {
   RTCScene scene = nullptr;
+  // Per-triangle data precomputed at build time, so that shading a hit is a few loads:
+  std::vector<Eigen::Vector3f> normal;  // [T] unit geometric normal
+  std::vector<Eigen::Vector3f> albedo;  // [T] linear albedo when `flat`, else the factor
+  std::vector<uint8_t> flat;            // [T] 1: albedo is constant over the triangle
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
   }
@@ -114,6 +118,23 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
   }
   for (size_t t = 0; t < mesh.numTriangles(); ++t) {
     for (int k = 0; k < 3; ++k) indices[3 * t + k] = static_cast<uint32_t>(mesh.triangles[t][k]);
+  }
+  const size_t T = mesh.numTriangles();
+  impl_->normal.resize(T);
+  impl_->albedo.resize(T);
+  impl_->flat.resize(T);
+  for (size_t t = 0; t < T; ++t) {
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    const Eigen::Vector3f& p0 = mesh.positions[tri[0]];
+    // Embree's Ng is (p2 - p0) x (p1 - p0) ... up to sign; its sign is fixed at shading time.
+    Eigen::Vector3f n = (mesh.positions[tri[1]] - p0).cross(mesh.positions[tri[2]] - p0);
+    impl_->normal[t] = n.norm() > 0 ? n.normalized() : Eigen::Vector3f::UnitZ();
+    const Material& mat = mesh.materials[mesh.triangleMaterial[t]];
+    const bool sameColour = mesh.colors[tri[0]] == mesh.colors[tri[1]] &&
+                            mesh.colors[tri[0]] == mesh.colors[tri[2]];
+    impl_->flat[t] = mat.texture < 0 && sameColour;
+    impl_->albedo[t] = impl_->flat[t] ? mat.baseColor.cwiseProduct(mesh.colors[tri[0]]).eval()
+                                      : mat.baseColor;
   }
   rtcCommitGeometry(geom);
   rtcAttachGeometry(impl_->scene, geom);
@@ -166,6 +187,7 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
   const ShadingOptions& sh = options.shading;
   const Eigen::Vector3f sunDir = sh.sunDirection.normalized();
   const Mesh& mesh = mesh_;
+  const Impl& impl = *impl_;
   RTCScene scene = impl_->scene;
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
 
@@ -184,11 +206,10 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
         const size_t pix = static_cast<size_t>(y) * W + x0 + i;
         const bool hit = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
         const int prim = hit ? static_cast<int>(rh.hit.primID[i]) : -1;
+        const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
         Eigen::Vector3f n = Eigen::Vector3f::Zero();
         if (hit) {
-          n = Eigen::Vector3f(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]);
-          const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
-          n.normalize();
+          n = impl.normal[prim];
           if (n.dot(d) > 0) n = -n;
         }
         if (centre) {
@@ -204,24 +225,26 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
           }
         }
         if (!shade) continue;
-        Eigen::Vector3f color = sh.background;
-        if (hit) {
+        if (!hit) {
+          accum[y - ty][i] += sh.background;
+          continue;
+        }
+        Eigen::Vector3f albedo = impl.albedo[prim];
+        if (!impl.flat[prim]) {
           const Eigen::Vector3i& tri = mesh.triangles[prim];
           const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
-          const Material& mat = mesh.materials[mesh.triangleMaterial[prim]];
-          Eigen::Vector3f albedo = mat.baseColor.cwiseProduct(
-              w * mesh.colors[tri[0]] + u * mesh.colors[tri[1]] + v * mesh.colors[tri[2]]);
-          if (mat.texture >= 0) {
-            const Eigen::Vector2f uv = w * mesh.uvs[tri[0]] + u * mesh.uvs[tri[1]] + v * mesh.uvs[tri[2]];
-            albedo = albedo.cwiseProduct(mesh.textures[mat.texture].sample(uv.x(), uv.y()));
+          albedo = albedo.cwiseProduct(w * mesh.colors[tri[0]] + u * mesh.colors[tri[1]] +
+                                       v * mesh.colors[tri[2]]);
+          const int tex = mesh.materials[mesh.triangleMaterial[prim]].texture;
+          if (tex >= 0) {
+            const Eigen::Vector2f uv =
+                w * mesh.uvs[tri[0]] + u * mesh.uvs[tri[1]] + v * mesh.uvs[tri[2]];
+            albedo = albedo.cwiseProduct(mesh.textures[tex].sample(uv.x(), uv.y()));
           }
-          const Eigen::Vector3f d =
-              Eigen::Vector3f(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]).normalized();
-          const float light = sh.ambient + sh.headlight * std::abs(n.dot(d)) +
-                              sh.sun * std::max(0.0f, n.dot(sunDir));
-          color = albedo * light;
         }
-        accum[y - ty][i] += color;
+        const float cosView = -n.dot(d) / d.norm();
+        const float light = sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, n.dot(sunDir));
+        accum[y - ty][i] += albedo * light;
       }
     };
 
