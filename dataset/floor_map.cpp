@@ -116,9 +116,10 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
     covered += std::isfinite(headroom);
     open.push_back(candidates[k]);
   }
-  // A scene with ceilings over most of its open floor is an interior: then standing points
-  // with nothing above (roofs, outside) are not inside it.
-  hasCeiling_ = !open.empty() && covered * 2 >= open.size();
+  // A scene with ceilings over a good part (a fifth) of its open floor is an interior: then
+  // standing points with nothing above (roofs, the outside) are not inside it. A roof is about
+  // as large as the floors under it, so "most" would be the wrong test.
+  hasCeiling_ = !open.empty() && covered * 5 >= open.size();
   if (hasCeiling_) {
     open.erase(std::remove_if(open.begin(), open.end(),
                               [](const Candidate& c) { return !std::isfinite(c.headroom); }),

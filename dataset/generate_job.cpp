@@ -163,6 +163,8 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
     throw Error("--shard-index must be in [0, --num-shards)");
   if (!cfg.shards && !cfg.croco) throw Error("--format must be shards, croco or both");
   if (cfg.shardSize < 1) throw Error("--shard-size must be at least 1");
+  if (!(cfg.pair.minCovis >= 0 && cfg.pair.minCovis <= cfg.pair.maxCovis && cfg.pair.maxCovis <= 1))
+    throw Error("the covis band must satisfy 0 <= --min-covis <= --max-covis <= 1");
 
   // Scenes: expand, name uniquely, keep this machine's part.
   const std::vector<std::string> all = expandSceneList(cfg.scenes);
@@ -294,7 +296,7 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
             ++failedPairs;
             nlohmann::json rec = {{"failed", true}, {"scene", job.name}, {"index", item.index},
                                   {"candidate_covis", tried}};
-            writeFileAtomic(recordPath(job, item.index), rec.dump() + "\n");
+            writeFileAtomic(recordPath(job, item.index), rec.dump() + "\n", Durability::NoSync);
             r.skip = true;
           } else {
             auto t0 = Clock::now();
@@ -307,17 +309,17 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
               const std::string stem = crocoStem(job, item.index);
               for (int k = 0; k < 2; ++k) {
                 const std::string view = "_" + std::to_string(k + 1);
-                writeFileAtomic(stem + view + ".jpeg", bytesView(enc.jpeg[k]));
+                writeFileAtomic(stem + view + ".jpeg", bytesView(enc.jpeg[k]), Durability::NoSync);
                 if (cfg.saveDepth) {
-                  writeFileAtomic(stem + view + "_depth.exr", bytesView(enc.depthExr[k]));
+                  writeFileAtomic(stem + view + "_depth.exr", bytesView(enc.depthExr[k]), Durability::NoSync);
                   nlohmann::json cam = cameraToJson(sample->camera[k]);
                   cam.erase("width");
                   cam.erase("height");
-                  writeFileAtomic(stem + view + "_camera_params.json", cam.dump() + "\n");
+                  writeFileAtomic(stem + view + "_camera_params.json", cam.dump() + "\n", Durability::NoSync);
                 }
               }
             }
-            writeFileAtomic(recordPath(job, item.index), enc.record.dump() + "\n");
+            writeFileAtomic(recordPath(job, item.index), enc.record.dump() + "\n", Durability::NoSync);
             {
               std::lock_guard<std::mutex> lock(timeMu);
               tRender += sample->renderSeconds;

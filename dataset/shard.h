@@ -13,6 +13,8 @@
 
 #include "dataset/pair_generator.h"
 
+struct archive;  // libarchive
+
 namespace paircast {
 
 constexpr int kShardVersion = 1;
@@ -51,7 +53,7 @@ class ShardWriter {
  private:
   void addFile(const std::string& name, const void* data, size_t size);
   std::string path_, tmp_;
-  struct archive* archive_ = nullptr;
+  ::archive* archive_ = nullptr;
   size_t samples_ = 0;
   uint64_t bytes_ = 0;
 };

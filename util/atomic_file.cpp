@@ -33,7 +33,7 @@ std::string tempPathFor(const std::string& path) {
       .string();
 }
 
-void writeFileAtomic(const std::string& path, std::string_view data) {
+void writeFileAtomic(const std::string& path, std::string_view data, Durability durability) {
   const std::string tmp = tempPathFor(path);
   int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) throw Error(path, "cannot create temporary file: " + errnoText());
@@ -49,7 +49,8 @@ void writeFileAtomic(const std::string& path, std::string_view data) {
     }
     done += static_cast<size_t>(n);
   }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+  const bool sync = durability == Durability::Sync;
+  if ((sync && ::fsync(fd) != 0) || ::close(fd) != 0) {
     std::string why = errnoText();
     ::unlink(tmp.c_str());
     throw Error(path, "write failed: " + why);
@@ -59,8 +60,9 @@ void writeFileAtomic(const std::string& path, std::string_view data) {
     ::unlink(tmp.c_str());
     throw Error(path, "rename failed: " + why);
   }
-  fsyncPath(fs::path(path).parent_path().empty() ? "." : fs::path(path).parent_path().string(),
-            true);
+  if (sync)
+    fsyncPath(fs::path(path).parent_path().empty() ? "." : fs::path(path).parent_path().string(),
+              true);
 }
 
 void commitFile(const std::string& from, const std::string& to) {

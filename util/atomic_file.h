@@ -9,9 +9,14 @@
 
 namespace paircast {
 
+// Whether a write is flushed to the disk before it is renamed into place. Either way a killed
+// process leaves the old file or the whole new one; only Sync also survives a power loss.
+enum class Durability { Sync, NoSync };
+
 // Writes `data` to `path` atomically. Throws paircast::Error naming `path` on failure (a full
 // disk included) and leaves no temporary file behind.
-void writeFileAtomic(const std::string& path, std::string_view data);
+void writeFileAtomic(const std::string& path, std::string_view data,
+                     Durability durability = Durability::Sync);
 
 // The temporary name used for `path` by this process: "<dir>/.<name>.tmp.<pid>".
 std::string tempPathFor(const std::string& path);

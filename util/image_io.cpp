@@ -39,6 +39,9 @@ std::vector<unsigned char> encode(const Image<T>& image, const std::string& form
     spec.attribute("Compression", "jpeg:" + std::to_string(jpegQuality));
   } else if (format == "exr") {
     spec.attribute("compression", "zip");
+    // OpenEXR output otherwise stamps the current time (capDate): fixed, so equal images give
+    // equal bytes.
+    spec.attribute("DateTime", "1970:01:01 00:00:00");
     if (image.channels == 1) spec.channelnames = {"Y"};
   }
   if (!out->set_ioproxy(&proxy) || !out->open(name, spec))

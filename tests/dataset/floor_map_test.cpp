@@ -42,11 +42,12 @@ TEST(FloorMap, UpAxisOptionFindsTheFloorOfAZUpScene) {
   FloorMap floor(zup, caster);
   ASSERT_FALSE(floor.empty());
   for (const auto& p : floor.points()) ASSERT_NEAR(p.z(), 0.0f, 1e-3f);
-  // Read as y-up, the same file has no floor at all (its "floors" are walls).
+  // Read as y-up, the same file is a room lying on its side: its "floor" is a wall.
   Scene wrong = zup;
   wrong.up = UpAxis::Y;
-  FloorMap none(wrong, caster);
-  EXPECT_TRUE(none.empty());
+  FloorMap sideways(wrong, caster);
+  ASSERT_FALSE(sideways.empty());
+  for (const auto& p : sideways.points()) ASSERT_NEAR(p.y(), -2.5f, 1e-3f);
 }
 
 TEST(FloorMap, SnapReturnsTheNearestWalkablePoint) {

@@ -1,0 +1,281 @@
+#include "dataset/generate_job.h"
+
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <thread>
+
+#include "dataset/shard.h"
+#include "dataset/test_scenes.h"
+#include "test_paths.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+#include "util/image_io.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The room scene, written once per test into its own folder.
+std::string writeRoom(const std::string& dir, const std::string& name = "room") {
+  const std::string path = dir + "/" + name + ".obj";
+  testing::writeBoxesObj(path, testing::roomBoxes());
+  return path;
+}
+
+GenerateConfig smallConfig(const std::vector<std::string>& scenes, const std::string& out) {
+  GenerateConfig c;
+  c.scenes = scenes;
+  c.out = out;
+  c.pairsPerScene = 6;
+  c.pair.resolution = 48;
+  c.shardSize = 4;
+  c.jobs = 2;
+  c.progress = false;
+  return c;
+}
+
+// Every regular file under `dir` (relative path -> bytes), except the run's summary, whose
+// timings differ between runs.
+std::map<std::string, std::string> tree(const std::string& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    if (!e.is_regular_file()) continue;
+    const std::string rel = fs::relative(e.path(), dir).string();
+    if (rel.rfind("summary", 0) == 0) continue;
+    files[rel] = readFile(e.path().string());
+  }
+  return files;
+}
+
+TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
+  const std::string dir = testing::scratchDir("band");
+  GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
+  c.pair.minCovis = 0.4;
+  c.pair.maxCovis = 0.7;
+  c.croco = true;
+  c.saveDepth = true;
+  const nlohmann::json summary = runGenerate(c);
+  EXPECT_EQ(summary["pairs"].get<int>(), 6);
+  EXPECT_GE(summary["candidates"].get<int>(), 6);
+  size_t samples = readShard(dir + "/out/pairs-000000.tar", [&](ShardSample&& s) {
+    const double covis = s.record["covis"];
+    EXPECT_GE(covis, 0.4);
+    EXPECT_LE(covis, 0.7);
+    EXPECT_DOUBLE_EQ(covis, std::min(s.record["v_ij"].get<double>(), s.record["v_ji"].get<double>()));
+    // Cameras stand 1.2 to 1.8 m above the floor (y = 0).
+    for (const char* cam : {"camera1", "camera2"}) {
+      const Camera camera = cameraFromJson(s.record[cam], "record");
+      EXPECT_GE(camera.t_cam2world.y(), 1.2 - 1e-6);
+      EXPECT_LE(camera.t_cam2world.y(), 1.8 + 1e-6);
+    }
+    EXPECT_FALSE(s.depthExr[0].empty());
+  });
+  EXPECT_EQ(samples, 4u);
+}
+
+TEST(GeneratePairs, CrocoLayoutHasTheOfficialNamesAndKeys) {
+  const std::string dir = testing::scratchDir("croco");
+  GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
+  c.shards = false;
+  c.croco = true;
+  c.saveDepth = true;
+  runGenerate(c);
+  const std::string out = dir + "/out";
+  for (int i = 0; i < 6; ++i) {
+    char idx[16];
+    std::snprintf(idx, sizeof idx, "%08d", i);
+    const std::string stem = out + "/room/" + idx;
+    for (const char* suffix : {"_1.jpeg", "_2.jpeg", "_1_depth.exr", "_2_depth.exr",
+                               "_1_camera_params.json", "_2_camera_params.json"})
+      EXPECT_TRUE(fs::exists(std::string(stem) + suffix)) << stem << suffix;
+    const Image8 img = readImage8(std::string(stem) + "_1.jpeg");
+    EXPECT_EQ(img.width, 48);
+    const ImageF depth = readImageF(std::string(stem) + "_2_depth.exr");
+    EXPECT_EQ(depth.channels, 1);
+    auto cam = nlohmann::json::parse(readFile(std::string(stem) + "_1_camera_params.json"));
+    for (const char* key : {"camera_intrinsics", "R_cam2world", "t_cam2world"})
+      EXPECT_TRUE(cam.contains(key)) << key;
+  }
+  auto meta = nlohmann::json::parse(readFile(out + "/room/metadata.json"));
+  ASSERT_TRUE(meta.contains("multiviews"));
+  ASSERT_EQ(meta["multiviews"].size(), 6u);
+  const auto& mv = meta["multiviews"]["00000000"];
+  for (const char* key : {"positions", "orientations", "covisibility_ratios", "valid_fractions",
+                          "pairwise_visibility_ratios"})
+    ASSERT_TRUE(mv.contains(key)) << key;
+  EXPECT_EQ(mv["orientations"][0].size(), 4u);  // wxyz
+  EXPECT_EQ(mv["pairwise_visibility_ratios"].size(), 2u);
+  EXPECT_DOUBLE_EQ(mv["pairwise_visibility_ratios"][0][0].get<double>(), mv["valid_fractions"][0].get<double>());
+  // pairs.txt: one "im1 im2" line per pair, relative to the output folder.
+  std::ifstream pairs(out + "/pairs.txt");
+  std::string a, b;
+  int lines = 0;
+  while (pairs >> a >> b) {
+    EXPECT_TRUE(fs::exists(out + "/" + a)) << a;
+    EXPECT_TRUE(fs::exists(out + "/" + b)) << b;
+    ++lines;
+  }
+  EXPECT_EQ(lines, 6);
+}
+
+TEST(GeneratePairs, ShardsReadBackAndGnuTarListsThem) {
+  const std::string dir = testing::scratchDir("shards");
+  GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
+  runGenerate(c);
+  // 6 pairs in shards of 4: two shards.
+  ASSERT_TRUE(fs::exists(dir + "/out/pairs-000000.tar"));
+  ASSERT_TRUE(fs::exists(dir + "/out/pairs-000001.tar"));
+  auto index = nlohmann::json::parse(readFile(dir + "/out/index.json"));
+  EXPECT_EQ(index["format_version"], kShardVersion);
+  EXPECT_EQ(index["pairs"], 6);
+  EXPECT_EQ(index["shards"][0]["pairs"], 4);
+  EXPECT_EQ(index["shards"][1]["pairs"], 2);
+  std::vector<std::string> keys;
+  readShard(dir + "/out/pairs-000001.tar", [&](ShardSample&& s) {
+    keys.push_back(s.key);
+    const Image8 img = decodeImage8(s.jpeg[1].data(), s.jpeg[1].size(), s.key + ".2.jpg");
+    EXPECT_EQ(img.width, 48);
+  });
+  EXPECT_EQ(keys, (std::vector<std::string>{"room-00000004", "room-00000005"}));
+  if (std::system("tar --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "no GNU tar";
+  const std::string listing = dir + "/list.txt";
+  ASSERT_EQ(std::system(("tar -tf " + dir + "/out/pairs-000000.tar > " + listing).c_str()), 0);
+  const std::string text = readFile(listing);
+  EXPECT_NE(text.find("room-00000000.1.jpg\nroom-00000000.2.jpg\nroom-00000000.json\n"), std::string::npos) << text;
+  ASSERT_EQ(std::system(("mkdir -p " + dir + "/x && tar -xf " + dir + "/out/pairs-000000.tar -C " + dir + "/x").c_str()), 0);
+  EXPECT_TRUE(fs::exists(dir + "/x/room-00000003.json"));
+}
+
+TEST(GeneratePairs, OutputIsIdenticalWhateverTheJobCount) {
+  const std::string dir = testing::scratchDir("jobs");
+  const std::string room = writeRoom(dir);
+  GenerateConfig one = smallConfig({room}, dir + "/one");
+  one.jobs = 1;
+  one.croco = true;
+  GenerateConfig three = smallConfig({room}, dir + "/three");
+  three.jobs = 3;
+  three.croco = true;
+  runGenerate(one);
+  runGenerate(three);
+  const auto a = tree(dir + "/one"), b = tree(dir + "/three");
+  ASSERT_EQ(a.size(), b.size());
+  for (const auto& [name, bytes] : a) {
+    ASSERT_TRUE(b.count(name)) << name;
+    EXPECT_TRUE(bytes == b.at(name)) << name << " differs";
+  }
+}
+
+TEST(GeneratePairs, BadScenesAreSkippedAndListed) {
+  const std::string dir = testing::scratchDir("bad");
+  const std::string room = writeRoom(dir);
+  std::ofstream(dir + "/corrupt.glb") << "glTF garbage";
+  testing::writeBoxesObj(dir + "/nofloor.obj", {{{0, 0, 0}, {0.1f, 3, 4}}});
+  GenerateConfig c = smallConfig({dir + "/corrupt.glb", room, dir + "/nofloor.obj"}, dir + "/out");
+  const nlohmann::json summary = runGenerate(c);
+  EXPECT_EQ(summary["pairs"], 6);
+  ASSERT_EQ(summary["skipped_scenes"].size(), 2u);
+  std::string reasons = summary["skipped_scenes"].dump();
+  EXPECT_NE(reasons.find("corrupt.glb"), std::string::npos);
+  EXPECT_NE(reasons.find("no walkable floor"), std::string::npos);
+  GenerateConfig missing = smallConfig({dir + "/does-not-exist"}, dir + "/out2");
+  EXPECT_THROW(runGenerate(missing), Error);
+}
+
+TEST(GeneratePairs, SceneListsAndShardingSplitScenesDeterministically) {
+  const std::string dir = testing::scratchDir("split");
+  for (const char* n : {"a", "b", "c"}) writeRoom(dir, n);
+  std::ofstream(dir + "/list.txt") << "# scenes\na.obj\nc.obj\n";
+  EXPECT_EQ(expandSceneList({dir + "/list.txt"}),
+            (std::vector<std::string>{dir + "/a.obj", dir + "/c.obj"}));
+  const auto all = expandSceneList({dir});
+  ASSERT_EQ(all.size(), 3u);
+  EXPECT_EQ(fs::path(all[1]).filename(), "b.obj");
+  // Two machines: part 0 takes scenes 0 and 2, part 1 scene 1.
+  GenerateConfig p0 = smallConfig({dir}, dir + "/out"), p1 = p0;
+  p0.pairsPerScene = p1.pairsPerScene = 2;
+  p0.numShards = p1.numShards = 2;
+  p1.shardIndex = 1;
+  runGenerate(p0);
+  runGenerate(p1);
+  EXPECT_EQ(shardKeys(dir + "/out/pairs-0-000000.tar"),
+            (std::vector<std::string>{"a-00000000", "a-00000001", "c-00000000", "c-00000001"}));
+  EXPECT_EQ(shardKeys(dir + "/out/pairs-1-000000.tar"),
+            (std::vector<std::string>{"b-00000000", "b-00000001"}));
+}
+
+// Runs generate_pairs (the real command) and SIGKILLs it after `killAfterMs` (never when < 0).
+int runCommand(const std::vector<std::string>& args, int killAfterMs) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    int devnull = open("/dev/null", O_WRONLY);
+    dup2(devnull, 1);
+    dup2(devnull, 2);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  if (killAfterMs >= 0) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(killAfterMs));
+    kill(pid, SIGKILL);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+}
+
+TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {
+  const std::string dir = testing::scratchDir("resume");
+  const std::string room = writeRoom(dir);
+  const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/generate_pairs";
+  ASSERT_TRUE(fs::exists(tool));
+  auto args = [&](const std::string& out) {
+    return std::vector<std::string>{tool, "--scenes", room, "--out", out, "--pairs-per-scene", "40",
+                                    "--resolution", "64", "--shard-size", "7", "--format", "both",
+                                    "--save-depth", "--seed", "3", "--jobs", "2", "--quiet"};
+  };
+  ASSERT_EQ(runCommand(args(dir + "/clean"), -1), 0);
+  // Kill the second run at several points, resuming each time, then let it finish.
+  int kills = 0;
+  for (int delay : {40, 120, 250, 400}) {
+    if (runCommand(args(dir + "/killed"), delay) < 0) ++kills;
+  }
+  ASSERT_EQ(runCommand(args(dir + "/killed"), -1), 0);
+  EXPECT_GE(kills, 1) << "no run was killed before it finished; the test did not test resuming";
+  const auto a = tree(dir + "/clean"), b = tree(dir + "/killed");
+  ASSERT_EQ(a.size(), b.size());
+  for (const auto& [name, bytes] : a) {
+    ASSERT_TRUE(b.count(name)) << name << " missing after resume";
+    EXPECT_TRUE(bytes == b.at(name)) << name << " differs after resume";
+  }
+}
+
+TEST(GeneratePairs, BadArgumentsAreClearErrors) {
+  const std::string dir = testing::scratchDir("args");
+  GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
+  c.pairsPerScene = 0;
+  EXPECT_THROW(runGenerate(c), Error);
+  c = smallConfig({writeRoom(dir)}, dir + "/out");
+  c.shardIndex = 2;
+  EXPECT_THROW(runGenerate(c), Error);
+  c = smallConfig({writeRoom(dir)}, dir + "/out");
+  c.pair.minCovis = 0.9;
+  c.pair.maxCovis = 0.2;
+  EXPECT_THROW(runGenerate(c), Error);
+  const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/generate_pairs";
+  EXPECT_NE(runCommand({tool, "--scenes", dir, "--out", dir + "/o", "--format", "zip"}, -1), 0);
+  EXPECT_NE(runCommand({tool, "--scenes", dir + "/nothing", "--out", dir + "/o"}, -1), 0);
+}
+
+}  // namespace
+}  // namespace paircast
