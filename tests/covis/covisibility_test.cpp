@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "render/procedural_scene.h"
 #include "render/ray_caster.h"
 #include "util/random.h"
 
@@ -15,18 +16,6 @@ Camera cameraAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, int s
   Camera c = Camera::fromHfov(size, size, hfov);
   c.lookAt(eye, target, Eigen::Vector3d(0, -1, 0));  // image down = +y
   return c;
-}
-
-void addBox(Mesh& m, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int mat) {
-  const Eigen::Vector3f c[8] = {{lo.x(), lo.y(), lo.z()}, {hi.x(), lo.y(), lo.z()},
-                                {hi.x(), hi.y(), lo.z()}, {lo.x(), hi.y(), lo.z()},
-                                {lo.x(), lo.y(), hi.z()}, {hi.x(), lo.y(), hi.z()},
-                                {hi.x(), hi.y(), hi.z()}, {lo.x(), hi.y(), hi.z()}};
-  const int f[6][4] = {{0, 1, 2, 3}, {4, 5, 6, 7}, {0, 1, 5, 4}, {2, 3, 7, 6}, {0, 3, 7, 4}, {1, 2, 6, 5}};
-  for (const auto& q : f) {
-    m.addTriangle(c[q[0]], c[q[1]], c[q[2]], mat);
-    m.addTriangle(c[q[0]], c[q[2]], c[q[3]], mat);
-  }
 }
 
 TEST(Covisibility, IdenticalViewsGiveOne) {

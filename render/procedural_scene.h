@@ -1,0 +1,51 @@
+// Small furnished indoor scenes, generated in code: rooms with textured floors and walls, doors
+// between them, a ceiling, and furniture-like shapes (tables, chairs, sofas, beds, shelves of
+// books, cabinets, lamps, rugs, paintings). Y up, metres. Deterministic for a given seed: the
+// random draws use only integer hashing, so every platform builds the same mesh.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "render/mesh.h"
+
+namespace paircast {
+
+// Box builders shared by the generator and the tests. UVs are in metres times `uvScale`, so
+// textures tile at a fixed size whatever the box.
+void addBox(Mesh& mesh, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int material,
+            float uvScale = 1.0f);
+
+enum class RoomKind { Living, Bedroom, Kitchen, Office, Hall };
+
+struct RoomSpec {
+  float x0, z0, x1, z1;  // floor rectangle, metres
+  RoomKind kind;
+};
+
+struct DoorSpec {
+  int roomA, roomB;  // adjacent rooms sharing a wall
+  float at;          // door centre along the shared wall
+  float width = 0.9f;
+};
+
+struct LayoutSpec {
+  std::string name;
+  std::vector<RoomSpec> rooms;
+  std::vector<DoorSpec> doors;
+  float height = 2.7f;  // floor to ceiling
+  uint64_t seed = 1;
+};
+
+// The scenes paircast ships (scenes/<name>/<name>.obj): "room", "apartment", "studio".
+std::vector<LayoutSpec> shippedLayouts();
+// Builds the mesh of a layout: structure, textures, furniture.
+Mesh buildLayout(const LayoutSpec& layout);
+
+// A procedural texture (8-bit sRGB), by kind: "wood", "tiles", "carpet", "plaster",
+// "wallpaper", "brick", "fabric", "paper", "marble"; `seed` varies it.
+Texture makeTexture(const std::string& kind, uint64_t seed, int size = 256);
+
+}  // namespace paircast
