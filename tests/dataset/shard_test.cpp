@@ -1,0 +1,149 @@
+#include "dataset/shard.h"
+
+#include <archive.h>
+#include <archive_entry.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "test_paths.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+
+PairSample fakePair(uint64_t index, bool depth) {
+  PairSample s;
+  s.scene = "my.scene";
+  s.index = index;
+  s.seed = 5;
+  for (int k = 0; k < 2; ++k) {
+    s.camera[k] = Camera::fromHfov(16, 16, 60);
+    s.camera[k].t_cam2world = Eigen::Vector3d(k, 1.5, index);
+    s.rgb[k] = Image8(16, 16, 3, static_cast<uint8_t>(40 * k + index));
+    if (depth) s.depth[k] = ImageF(16, 16, 1, 2.0f + k);
+  }
+  s.covis.covis = 0.6;
+  s.covis.v_ij = 0.6;
+  s.covis.v_ji = 0.7;
+  return s;
+}
+
+std::string writeShard(const std::string& dir, int n, bool depth) {
+  const std::string path = dir + "/pairs-000000.tar";
+  ShardWriter w(path);
+  for (int i = 0; i < n; ++i) w.add(encodePair(fakePair(i, depth), depth, 90));
+  w.close();
+  return path;
+}
+
+TEST(Shard, RoundTrip) {
+  const std::string path = writeShard(testing::scratchDir("rt"), 3, true);
+  std::vector<ShardSample> got;
+  const size_t n = readShard(path, [&](ShardSample&& s) { got.push_back(std::move(s)); });
+  ASSERT_EQ(n, 3u);
+  EXPECT_EQ(got[2].key, "my_scene-00000002");  // dots are not allowed in keys
+  EXPECT_EQ(got[2].record["index"], 2);
+  EXPECT_EQ(got[2].record["scene"], "my.scene");
+  EXPECT_DOUBLE_EQ(got[1].record["v_ji"].get<double>(), 0.7);
+  const Camera c = cameraFromJson(got[1].record["camera2"], "rec");
+  EXPECT_DOUBLE_EQ(c.t_cam2world.z(), 1.0);
+  EXPECT_FALSE(got[0].depthExr[1].empty());
+  EXPECT_EQ(shardKeys(path), (std::vector<std::string>{"my_scene-00000000", "my_scene-00000001", "my_scene-00000002"}));
+}
+
+TEST(Shard, UnclosedWriterLeavesNothing) {
+  const std::string dir = testing::scratchDir("unclosed");
+  {
+    ShardWriter w(dir + "/pairs-000000.tar");
+    w.add(encodePair(fakePair(0, false), false, 90));
+  }
+  EXPECT_TRUE(fs::is_empty(dir));
+}
+
+TEST(Shard, TruncatedShardDeliversWhatPrecedesTheDamageThenFails) {
+  const std::string dir = testing::scratchDir("trunc");
+  const std::string path = writeShard(dir, 4, true);
+  const std::string bytes = readFile(path);
+  writeFileAtomic(path, bytes.substr(0, bytes.size() * 6 / 10));
+  size_t delivered = 0;
+  try {
+    readShard(path, [&](ShardSample&&) { ++delivered; });
+    FAIL() << "truncation not detected";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("pairs-000000.tar"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+  }
+  EXPECT_GE(delivered, 1u);
+  EXPECT_LT(delivered, 4u);
+  EXPECT_THROW(readShard(dir + "/none.tar", [](ShardSample&&) {}), Error);
+}
+
+// Writes a tar with hand-made entries, for the malformed cases.
+void writeRawTar(const std::string& path, const std::vector<std::pair<std::string, std::string>>& files,
+                 const std::string& symlink = "") {
+  archive* a = archive_write_new();
+  archive_write_set_format_ustar(a);
+  archive_write_open_filename(a, path.c_str());
+  for (const auto& [name, data] : files) {
+    archive_entry* e = archive_entry_new();
+    archive_entry_set_pathname(e, name.c_str());
+    archive_entry_set_size(e, data.size());
+    archive_entry_set_filetype(e, AE_IFREG);
+    archive_entry_set_perm(e, 0644);
+    archive_write_header(a, e);
+    archive_write_data(a, data.data(), data.size());
+    archive_entry_free(e);
+  }
+  if (!symlink.empty()) {
+    archive_entry* e = archive_entry_new();
+    archive_entry_set_pathname(e, symlink.c_str());
+    archive_entry_set_filetype(e, AE_IFLNK);
+    archive_entry_set_symlink(e, "/etc/passwd");
+    archive_write_header(a, e);
+    archive_entry_free(e);
+  }
+  archive_write_close(a);
+  archive_write_free(a);
+}
+
+TEST(Shard, MalformedSamplesAndUnsafeEntriesAreSkippedAndReported) {
+  const std::string dir = testing::scratchDir("bad");
+  const std::string good = encodePair(fakePair(0, false), false, 90).record.dump();
+  writeRawTar(dir + "/bad.tar",
+              {{"a-1.1.jpg", "x"}, {"a-1.2.jpg", "y"}, {"a-1.json", "{not json"},          // bad JSON
+               {"b-1.1.jpg", "x"}, {"b-1.json", good},                                     // missing member
+               {"../evil.1.jpg", "x"}, {"/abs.2.jpg", "x"},                                // unsafe paths
+               {"c-1.1.jpg", "x"}, {"c-1.2.jpg", "y"}, {"c-1.json", R"({"paircast_shard_version": 99})"},
+               {"d-1.1.jpg", "x"}, {"d-1.2.jpg", "y"}, {"d-1.json", good}},
+              "e-1.1.jpg");
+  std::vector<std::string> keys, errors;
+  readShard(dir + "/bad.tar", [&](ShardSample&& s) { keys.push_back(s.key); },
+            [&](const std::string& e) { errors.push_back(e); });
+  EXPECT_EQ(keys, std::vector<std::string>{"d-1"});
+  std::string all;
+  for (const auto& e : errors) all += e + "\n";
+  EXPECT_NE(all.find("'a-1' is incomplete"), std::string::npos) << all;
+  EXPECT_NE(all.find("'b-1' is incomplete"), std::string::npos) << all;
+  EXPECT_NE(all.find("../evil.1.jpg"), std::string::npos) << all;
+  EXPECT_NE(all.find("/abs.2.jpg"), std::string::npos) << all;
+  EXPECT_NE(all.find("unsupported version"), std::string::npos) << all;
+  EXPECT_NE(all.find("e-1.1.jpg"), std::string::npos) << all;
+  EXPECT_FALSE(fs::exists(dir + "/../evil.1.jpg"));
+}
+
+TEST(Shard, OversizedEntriesAreRefusedBeforeAllocation) {
+  const std::string path = writeShard(testing::scratchDir("big"), 1, false);
+  ShardReadOptions small;
+  small.maxEntryBytes = 100;  // the JPEGs are larger
+  std::vector<std::string> errors;
+  const size_t n = readShard(path, [](ShardSample&&) {}, [&](const std::string& e) { errors.push_back(e); }, small);
+  EXPECT_EQ(n, 0u);
+  EXPECT_FALSE(errors.empty());
+}
+
+}  // namespace
+}  // namespace paircast
