@@ -35,9 +35,10 @@ std::string sharedDir() {
 // Parses "SUMMARY ref_covis official: v12=.. v21=.. covis=.. ms=.. | reproj: ..." into numbers.
 nlohmann::json runRefCovis(const std::string& stem) {
   const std::string tool = sharedDir() + "/tools/ref_covis.py";
-  const std::string cmd = "/usr/bin/python3 " + tool + " --depth1 " + stem + "_1_depth.exr --cam1 " +
-                          stem + "_1_camera_params.json --depth2 " + stem + "_2_depth.exr --cam2 " +
-                          stem + "_2_camera_params.json 2>&1 | grep '^SUMMARY' | tail -1";
+  const std::string cmd = "/usr/bin/python3 " + tool + " --depth1 " + stem +
+                          "_1_depth.exr --cam1 " + stem + "_1_camera_params.json --depth2 " + stem +
+                          "_2_depth.exr --cam2 " + stem +
+                          "_2_camera_params.json 2>&1 | grep '^SUMMARY' | tail -1";
   std::string line;
   if (FILE* p = popen(cmd.c_str(), "r")) {
     char buf[2048];
@@ -87,9 +88,11 @@ int main(int argc, char** argv) {
     } else {
       for (const auto& p : expandSceneList(sceneArgs)) scenes.push_back({p, parseUpAxis(up)});
     }
-    const std::string tmp = (fs::temp_directory_path() / ("bench_generate_" + std::to_string(::getpid()))).string();
+    const std::string tmp =
+        (fs::temp_directory_path() / ("bench_generate_" + std::to_string(::getpid()))).string();
     const unsigned threads = jobs > 0 ? jobs : std::max(1u, std::thread::hardware_concurrency());
-    std::printf("threads: %u, %d pairs per scene, 256x256, hfov 60, covis >= 0.5\n", threads, pairs);
+    std::printf("threads: %u, %d pairs per scene, 256x256, hfov 60, covis >= 0.5\n", threads,
+                pairs);
     nlohmann::json results = nlohmann::json::array();
     std::vector<std::string> depthStems;
     for (size_t s = 0; s < scenes.size(); ++s) {
@@ -103,17 +106,22 @@ int main(int argc, char** argv) {
       const nlohmann::json sum = runGenerate(c);
       const std::string name = fs::path(scenes[s].path).filename().string();
       if (!sum["skipped_scenes"].empty()) {
-        std::printf("%-22s skipped: %s\n", name.c_str(), sum["skipped_scenes"][0]["reason"].get<std::string>().c_str());
+        std::printf("%-22s skipped: %s\n", name.c_str(),
+                    sum["skipped_scenes"][0]["reason"].get<std::string>().c_str());
         continue;
       }
       const auto& split = sum["time_split"];
-      std::printf("%-22s %7.1f accepted pairs/s  acceptance %4.1f%%  time: render %4.1f%%  covis "
-                  "%4.1f%%  encode %4.1f%%  write %4.1f%%\n",
-                  name.c_str(), sum["pairs_per_second"].get<double>(), 100 * sum["acceptance"].get<double>(),
-                  100 * split["render"].get<double>(), 100 * split["covis"].get<double>(),
-                  100 * split["encode"].get<double>(), 100 * split["write"].get<double>());
-      results.push_back({{"scene", name}, {"pairs_per_second", sum["pairs_per_second"]},
-                         {"acceptance", sum["acceptance"]}, {"time_split", split}});
+      std::printf(
+          "%-22s %7.1f accepted pairs/s  acceptance %4.1f%%  time: render %4.1f%%  covis "
+          "%4.1f%%  encode %4.1f%%  write %4.1f%%\n",
+          name.c_str(), sum["pairs_per_second"].get<double>(),
+          100 * sum["acceptance"].get<double>(), 100 * split["render"].get<double>(),
+          100 * split["covis"].get<double>(), 100 * split["encode"].get<double>(),
+          100 * split["write"].get<double>());
+      results.push_back({{"scene", name},
+                         {"pairs_per_second", sum["pairs_per_second"]},
+                         {"acceptance", sum["acceptance"]},
+                         {"time_split", split}});
       // A few pairs with depth, for the co-visibility comparison.
       c.out = tmp + "/depth" + std::to_string(s);
       c.pairsPerScene = refPairs;
@@ -124,7 +132,8 @@ int main(int argc, char** argv) {
       for (int k = 0; k < refPairs; ++k) {
         char idx[16];
         std::snprintf(idx, sizeof idx, "%08d", k);
-        const std::string stem = c.out + "/" + sanitizeName(fs::path(scenes[s].path).stem().string()) + "/" + idx;
+        const std::string stem =
+            c.out + "/" + sanitizeName(fs::path(scenes[s].path).stem().string()) + "/" + idx;
         if (fs::exists(stem + "_1_depth.exr")) depthStems.push_back(stem);
       }
     }
@@ -133,10 +142,14 @@ int main(int argc, char** argv) {
     double oursMs = 0, worstDiff = 0, officialMs = 0;
     int compared = 0;
     if (!depthStems.empty()) {
-      struct Pair { Camera c1, c2; ImageF d1, d2; };
+      struct Pair {
+        Camera c1, c2;
+        ImageF d1, d2;
+      };
       std::vector<Pair> loaded;
       for (const auto& stem : depthStems)
-        loaded.push_back({readCameraJson(stem + "_1_camera_params.json"), readCameraJson(stem + "_2_camera_params.json"),
+        loaded.push_back({readCameraJson(stem + "_1_camera_params.json"),
+                          readCameraJson(stem + "_2_camera_params.json"),
                           readImageF(stem + "_1_depth.exr"), readImageF(stem + "_2_depth.exr")});
       double best = 1e30;
       for (int round = 0; round < 5; ++round) {
@@ -144,18 +157,21 @@ int main(int argc, char** argv) {
         double sink = 0;
         for (int rep = 0; rep < 20; ++rep)
           for (const auto& p : loaded) sink += computeCovisibility(p.c1, p.d1, p.c2, p.d2).covis;
-        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count() / (20 * loaded.size());
+        const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count() /
+                          (20 * loaded.size());
         if (sink >= 0) best = std::min(best, ms);
       }
       oursMs = best;
       std::printf("covis (ours, reprojection, 1 core): %.3f ms per 256x256 pair\n", oursMs);
-      const bool haveRef = fs::exists(sharedDir() + "/tools/ref_covis.py") &&
-                           std::system("/usr/bin/python3 -c 'import sklearn, numpy' 2>/dev/null") == 0;
+      const bool haveRef =
+          fs::exists(sharedDir() + "/tools/ref_covis.py") &&
+          std::system("/usr/bin/python3 -c 'import sklearn, numpy' 2>/dev/null") == 0;
       if (haveRef) {
         for (size_t k = 0; k < loaded.size(); ++k) {
           const nlohmann::json ref = runRefCovis(depthStems[k]);
           if (!ref.contains("reproj")) continue;
-          const CovisResult r = computeCovisibility(loaded[k].c1, loaded[k].d1, loaded[k].c2, loaded[k].d2);
+          const CovisResult r =
+              computeCovisibility(loaded[k].c1, loaded[k].d1, loaded[k].c2, loaded[k].d2);
           worstDiff = std::max(worstDiff, std::abs(r.covis - ref["reproj"]["covis"].get<double>()));
           officialMs += ref["official"]["ms"].get<double>();
           ++compared;
@@ -165,10 +181,12 @@ int main(int argc, char** argv) {
         officialMs /= compared;
         std::printf("covis (CroCo kd-tree, ref_covis.py): %.1f ms per pair: ours is %.0fx faster\n",
                     officialMs, officialMs / oursMs);
-        std::printf("agreement with ref_covis.py reprojection over %d pairs: max |covis difference| %.4f\n",
-                    compared, worstDiff);
+        std::printf(
+            "agreement with ref_covis.py reprojection over %d pairs: max |covis difference| %.4f\n",
+            compared, worstDiff);
       } else {
-        std::printf("ref_covis.py comparison skipped (needs ../shared/tools and python3-sklearn)\n");
+        std::printf(
+            "ref_covis.py comparison skipped (needs ../shared/tools and python3-sklearn)\n");
       }
     }
     fs::remove_all(tmp);

@@ -3,16 +3,16 @@
 #include <embree3/rtcore.h>
 #include <omp.h>
 
+#include <unistd.h>
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <sstream>
-#include <unistd.h>
 #include <vector>
 
 #include "util/image_io.h"
@@ -26,7 +26,9 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-double seconds(Clock::time_point a) { return std::chrono::duration<double>(Clock::now() - a).count(); }
+double seconds(Clock::time_point a) {
+  return std::chrono::duration<double>(Clock::now() - a).count();
+}
 
 // Best of `reps` timings of `fn`, each repeated until it ran for at least `minSeconds`.
 template <typename F>
@@ -54,10 +56,10 @@ struct EmbreeBound {
     scene = rtcNewScene(device);
     rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0,
-        RTC_FORMAT_FLOAT3, 12, mesh.numVertices()));
-    auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0,
-        RTC_FORMAT_UINT3, 12, mesh.numTriangles()));
+    auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, mesh.numVertices()));
+    auto* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(
+        g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, mesh.numTriangles()));
     std::memcpy(v, mesh.positions.data(), 12 * mesh.numVertices());
     std::memcpy(idx, mesh.triangles.data(), 12 * mesh.numTriangles());
     rtcCommitGeometry(g);
@@ -120,7 +122,8 @@ Mesh syntheticMesh() {
   const int n = 224;
   for (int j = 0; j <= n; ++j)
     for (int i = 0; i <= n; ++i) {
-      m.positions.emplace_back(0.05f * i, 0.1f * std::sin(0.3f * i) * std::cos(0.2f * j), 0.05f * j);
+      m.positions.emplace_back(0.05f * i, 0.1f * std::sin(0.3f * i) * std::cos(0.2f * j),
+                               0.05f * j);
       m.uvs.emplace_back(0.0f, 0.0f);
       m.colors.emplace_back(1.0f, 1.0f, 1.0f);
     }
@@ -138,16 +141,20 @@ Mesh syntheticMesh() {
 // its agreement with our depth. Returns the SUMMARY fields, or an empty object when unavailable.
 nlohmann::json open3dReference(const std::string& mesh, const Camera& cam, const ImageF& depth) {
   const std::string tool =
-      (std::filesystem::path(PAIRCAST_SOURCE_DIR).parent_path() / "shared/tools/ref_raycast.py").string();
-  if (!std::filesystem::exists(tool) || std::system("/usr/bin/python3 -c 'import open3d' 2>/dev/null") != 0)
+      (std::filesystem::path(PAIRCAST_SOURCE_DIR).parent_path() / "shared/tools/ref_raycast.py")
+          .string();
+  if (!std::filesystem::exists(tool) ||
+      std::system("/usr/bin/python3 -c 'import open3d' 2>/dev/null") != 0)
     return {};
-  const auto dir = std::filesystem::temp_directory_path() / ("bench_render_" + std::to_string(::getpid()));
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("bench_render_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   writeCameraJson((dir / "cam.json").string(), cam);
   writeExr((dir / "ours.exr").string(), depth);
   const std::string cmd = "/usr/bin/python3 " + tool + " --mesh '" + mesh + "' --camera " +
-                          (dir / "cam.json").string() + " --compare " + (dir / "ours.exr").string() +
-                          " --bench --repeat 10 --threads " + std::to_string(omp_get_max_threads()) +
+                          (dir / "cam.json").string() + " --compare " +
+                          (dir / "ours.exr").string() + " --bench --repeat 10 --threads " +
+                          std::to_string(omp_get_max_threads()) +
                           " 2>&1 | grep '^SUMMARY' | tail -1";
   nlohmann::json out;
   if (FILE* p = popen(cmd.c_str(), "r")) {
@@ -183,7 +190,8 @@ int main(int argc, char** argv) {
   app.add_option("--resolution", resolutions, "Image sizes (default 256 512)");
   CLI11_PARSE(app, argc, argv);
   try {
-    if (scenePath.empty()) scenePath = std::string(PAIRCAST_SOURCE_DIR) + "/scenes/apartment/apartment.obj";
+    if (scenePath.empty())
+      scenePath = std::string(PAIRCAST_SOURCE_DIR) + "/scenes/apartment/apartment.obj";
     if (resolutions.empty()) resolutions = {256, 512};
     LoadOptions lo;
     lo.up = parseUpAxis(up);
@@ -228,22 +236,28 @@ int main(int argc, char** argv) {
       for (float d : depth.data) hits += d > 0;
       const double mBound = rays / tBound / 1e6, mDepth = rays / tDepth / 1e6,
                    mRgbd = rays / tRgbd / 1e6;
-      std::printf("%dx%d (%.1f%% hit): embree bound %.2f Mrays/s | depth %.2f Mrays/s (%.1f%% of "
-                  "bound) | rgb+depth %.2f Mrays/s (%.2fx depth time)\n",
-                  cam.width, cam.height, 100.0 * hits / rays, mBound, mDepth,
-                  100.0 * mDepth / mBound, mRgbd, tRgbd / tDepth);
+      std::printf(
+          "%dx%d (%.1f%% hit): embree bound %.2f Mrays/s | depth %.2f Mrays/s (%.1f%% of "
+          "bound) | rgb+depth %.2f Mrays/s (%.2fx depth time)\n",
+          cam.width, cam.height, 100.0 * hits / rays, mBound, mDepth, 100.0 * mDepth / mBound,
+          mRgbd, tRgbd / tDepth);
       const nlohmann::json o3d = open3dReference(scenePath, cam, depth);
       if (o3d.contains("best_Mrays/s")) {
         const double m = o3d["best_Mrays/s"].get<double>();
-        std::printf("  open3d cast_rays %.2f Mrays/s: ours depth-only %.2fx faster; depth agreement "
-                    "within 1 mm: %.4f%% of pixels\n",
-                    m, mDepth / m, 100.0 * o3d.value("agree_1mm", 0.0));
+        std::printf(
+            "  open3d cast_rays %.2f Mrays/s: ours depth-only %.2fx faster; depth agreement "
+            "within 1 mm: %.4f%% of pixels\n",
+            m, mDepth / m, 100.0 * o3d.value("agree_1mm", 0.0));
       } else {
         std::printf("  open3d comparison skipped (needs ../shared/tools and python3-open3d)\n");
       }
-      last = {{"scene", scenePath}, {"resolution", res}, {"mrays_depth", mDepth},
-              {"mrays_rgbd", mRgbd}, {"mrays_embree_bound", mBound},
-              {"build_seconds", build}, {"build_seconds_100k", build100k},
+      last = {{"scene", scenePath},
+              {"resolution", res},
+              {"mrays_depth", mDepth},
+              {"mrays_rgbd", mRgbd},
+              {"mrays_embree_bound", mBound},
+              {"build_seconds", build},
+              {"build_seconds_100k", build100k},
               {"triangles", scene.mesh.numTriangles()}};
       if (o3d.contains("best_Mrays/s")) {
         last["mrays_open3d"] = o3d["best_Mrays/s"];

@@ -28,7 +28,7 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
   PAIRCAST_CHECK(o.cellSize > 0);
   up_ = scene.upVector();
   axisA_ = Eigen::Vector3f::UnitX();  // both up axes (y, z) are perpendicular to x
-  axisB_ = up_.cross(axisA_);  // right-handed (a, b, up)
+  axisB_ = up_.cross(axisA_);         // right-handed (a, b, up)
   cell_ = o.cellSize;
   double aMin = 1e30, aMax = -1e30, bMin = 1e30, bMax = -1e30, hMax = -1e30;
   for (const auto& p : scene.mesh.positions) {
@@ -96,9 +96,8 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
       for (int d = 0; d < kDirs; ++d) {
         const float ang = static_cast<float>(2.0 * M_PI * d / kDirs);
         const Eigen::Vector3f dir = std::cos(ang) * axisA_ + std::sin(ang) * axisB_;
-        rays[k * perCand + 1 + h * kDirs + d] =
-            Ray{candidates[k].point + heights[h] * up_, dir, 0.0f,
-                static_cast<float>(o.wallClearance)};
+        rays[k * perCand + 1 + h * kDirs + d] = Ray{candidates[k].point + heights[h] * up_, dir,
+                                                    0.0f, static_cast<float>(o.wallClearance)};
       }
     }
   }
@@ -158,7 +157,9 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
   }
 }
 
-double FloorMap::area() const { return points_.size() * cell_ * cell_; }
+double FloorMap::area() const {
+  return points_.size() * cell_ * cell_;
+}
 
 Eigen::Vector3f FloorMap::sample(Rng& rng) const {
   PAIRCAST_CHECK(!points_.empty());
@@ -171,7 +172,8 @@ Eigen::Vector3f FloorMap::sample(Rng& rng) const {
 std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double radius) const {
   if (points_.empty() || !p.allFinite()) return std::nullopt;
   const double a = p.dot(axisA_) - origin_.x(), b = p.dot(axisB_) - origin_.y();
-  const int ci = static_cast<int>(std::floor(a / cell_)), cj = static_cast<int>(std::floor(b / cell_));
+  const int ci = static_cast<int>(std::floor(a / cell_)),
+            cj = static_cast<int>(std::floor(b / cell_));
   const int reach = static_cast<int>(std::ceil(radius / cell_));
   float best = std::numeric_limits<float>::infinity();
   int bestIndex = -1;

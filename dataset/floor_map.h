@@ -47,8 +47,8 @@ class FloorMap {
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();  // (a, b) of cell (0, 0)'s corner
   int nA_ = 0, nB_ = 0;
   bool hasCeiling_ = false;
-  std::vector<Eigen::Vector3f> points_;          // walkable points, cell centres on the floor
-  std::vector<std::vector<int>> cellPoints_;     // [nA * nB] indices into points_
+  std::vector<Eigen::Vector3f> points_;       // walkable points, cell centres on the floor
+  std::vector<std::vector<int>> cellPoints_;  // [nA * nB] indices into points_
 };
 
 }  // namespace paircast

@@ -27,7 +27,9 @@ namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 constexpr int kHistogramBins = 20;
 
@@ -66,13 +68,14 @@ struct SceneJob {
 };
 
 struct Result {
-  bool done = false;       // slot filled
-  bool skip = false;       // nothing to write (failed pair or skipped scene)
+  bool done = false;  // slot filled
+  bool skip = false;  // nothing to write (failed pair or skipped scene)
   std::optional<EncodedPair> pair;
 };
 
 // Reads the keys of the shards that already exist, in order, stopping at the first gap.
-std::vector<std::vector<std::string>> completedShards(const std::string& out, const std::string& prefix) {
+std::vector<std::vector<std::string>> completedShards(const std::string& out,
+                                                      const std::string& prefix) {
   std::vector<std::vector<std::string>> shards;
   for (int s = 0;; ++s) {
     char name[64];
@@ -86,8 +89,8 @@ std::vector<std::vector<std::string>> completedShards(const std::string& out, co
 
 void removeTemporaries(const std::string& dir) {
   std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(dir, ec); it != fs::recursive_directory_iterator();
-       it.increment(ec)) {
+  for (auto it = fs::recursive_directory_iterator(dir, ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec)) {
     const std::string name = it->path().filename().string();
     if (it->is_regular_file(ec) && name.size() > 1 && name[0] == '.' &&
         name.find(".tmp.") != std::string::npos)
@@ -97,17 +100,19 @@ void removeTemporaries(const std::string& dir) {
 
 class ProgressLine {
  public:
-  ProgressLine(bool enabled, size_t total) : enabled_(enabled), total_(total), start_(Clock::now()) {}
+  ProgressLine(bool enabled, size_t total)
+      : enabled_(enabled), total_(total), start_(Clock::now()) {}
   void update(size_t done, size_t accepted, size_t candidates, bool force = false) {
     if (!enabled_ || (!force && since(last_) < 0.5)) return;
     last_ = Clock::now();
     const double t = since(start_);
     const double rate = done / std::max(t, 1e-9);
     const double eta = rate > 0 ? (total_ - done) / rate : 0;
-    std::fprintf(stderr, "\r[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds   ",
-                 done, total_, accepted / std::max(t, 1e-9),
-                 candidates ? 100.0 * accepted / candidates : 0.0, static_cast<int>(eta) / 60,
-                 static_cast<int>(eta) % 60);
+    std::fprintf(
+        stderr,
+        "\r[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds   ", done,
+        total_, accepted / std::max(t, 1e-9), candidates ? 100.0 * accepted / candidates : 0.0,
+        static_cast<int>(eta) / 60, static_cast<int>(eta) % 60);
     if (force) std::fprintf(stderr, "\n");
   }
 
@@ -125,8 +130,8 @@ std::vector<std::string> expandSceneList(const std::vector<std::string>& args) {
     std::error_code ec;
     if (fs::is_directory(arg, ec)) {
       std::vector<std::string> found;
-      for (auto it = fs::recursive_directory_iterator(arg, ec); it != fs::recursive_directory_iterator();
-           it.increment(ec)) {
+      for (auto it = fs::recursive_directory_iterator(arg, ec);
+           it != fs::recursive_directory_iterator(); it.increment(ec)) {
         if (!it->is_regular_file(ec)) continue;
         const std::string ext = it->path().extension().string();
         if (ext == ".mtl" || ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".json" ||
@@ -173,7 +178,8 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
   std::set<std::string> names;
   for (size_t i = 0; i < all.size(); ++i) {
     std::string name = sanitizeName(fs::path(all[i]).stem().string());
-    for (int k = 2; names.count(name); ++k) name = sanitizeName(fs::path(all[i]).stem().string()) + "_" + std::to_string(k);
+    for (int k = 2; names.count(name); ++k)
+      name = sanitizeName(fs::path(all[i]).stem().string()) + "_" + std::to_string(k);
     names.insert(name);
     if (static_cast<int>(i % cfg.numShards) != cfg.shardIndex) continue;
     auto job = std::make_unique<SceneJob>();
@@ -222,7 +228,8 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
       const nlohmann::json rec = readRecord(recordPath(*scenes[s], k));
       if (rec.is_object() && rec.value("failed", false)) continue;  // known to have no pair
       const bool shardDone = !cfg.shards || inShards.count(sampleKey(scenes[s]->name, k));
-      const bool crocoDone = !cfg.croco || (rec.is_object() && fs::exists(crocoStem(*scenes[s], k) + "_2.jpeg"));
+      const bool crocoDone =
+          !cfg.croco || (rec.is_object() && fs::exists(crocoStem(*scenes[s], k) + "_2.jpeg"));
       if (!shardDone || !crocoDone) items.push_back({s, k, !shardDone, !crocoDone});
     }
   }
@@ -294,7 +301,9 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
           candidates += tried.size();
           if (!sample) {
             ++failedPairs;
-            nlohmann::json rec = {{"failed", true}, {"scene", job.name}, {"index", item.index},
+            nlohmann::json rec = {{"failed", true},
+                                  {"scene", job.name},
+                                  {"index", item.index},
                                   {"candidate_covis", tried}};
             writeFileAtomic(recordPath(job, item.index), rec.dump() + "\n", Durability::NoSync);
             r.skip = true;
@@ -311,15 +320,18 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
                 const std::string view = "_" + std::to_string(k + 1);
                 writeFileAtomic(stem + view + ".jpeg", bytesView(enc.jpeg[k]), Durability::NoSync);
                 if (cfg.saveDepth) {
-                  writeFileAtomic(stem + view + "_depth.exr", bytesView(enc.depthExr[k]), Durability::NoSync);
+                  writeFileAtomic(stem + view + "_depth.exr", bytesView(enc.depthExr[k]),
+                                  Durability::NoSync);
                   nlohmann::json cam = cameraToJson(sample->camera[k]);
                   cam.erase("width");
                   cam.erase("height");
-                  writeFileAtomic(stem + view + "_camera_params.json", cam.dump() + "\n", Durability::NoSync);
+                  writeFileAtomic(stem + view + "_camera_params.json", cam.dump() + "\n",
+                                  Durability::NoSync);
                 }
               }
             }
-            writeFileAtomic(recordPath(job, item.index), enc.record.dump() + "\n", Durability::NoSync);
+            writeFileAtomic(recordPath(job, item.index), enc.record.dump() + "\n",
+                            Durability::NoSync);
             {
               std::lock_guard<std::mutex> lock(timeMu);
               tRender += sample->renderSeconds;
@@ -355,7 +367,8 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
   std::unique_ptr<ShardWriter> shard;
   int shardNumber = static_cast<int>(doneShards.size());
   std::vector<nlohmann::json> shardList;
-  for (size_t s = 0; s < doneShards.size(); ++s) shardList.push_back({{"pairs", doneShards[s].size()}});
+  for (size_t s = 0; s < doneShards.size(); ++s)
+    shardList.push_back({{"pairs", doneShards[s].size()}});
   auto shardPath = [&](int n) {
     char name[64];
     std::snprintf(name, sizeof name, "%s-%06d.tar", shardPrefix.c_str(), n);
@@ -377,7 +390,8 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
         auto t0 = Clock::now();
         if (!shard) shard = std::make_unique<ShardWriter>(shardPath(shardNumber));
         shard->add(*r.pair);
-        if (static_cast<int>(shard->samples()) >= cfg.shardSize || shard->bytes() >= cfg.shardMaxBytes) {
+        if (static_cast<int>(shard->samples()) >= cfg.shardSize ||
+            shard->bytes() >= cfg.shardMaxBytes) {
           shard->close();
           shardList.push_back({{"pairs", shard->samples()}});
           shard.reset();
@@ -432,38 +446,54 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
       const Camera c2 = cameraFromJson(rec["camera2"], recordPath(job, k));
       const double f1 = rec["valid_fraction1"], f2 = rec["valid_fraction2"];
       multiviews[fmtIndex(k)] = {
-          {"positions", {{c1.t_cam2world.x(), c1.t_cam2world.y(), c1.t_cam2world.z()},
-                         {c2.t_cam2world.x(), c2.t_cam2world.y(), c2.t_cam2world.z()}}},
+          {"positions",
+           {{c1.t_cam2world.x(), c1.t_cam2world.y(), c1.t_cam2world.z()},
+            {c2.t_cam2world.x(), c2.t_cam2world.y(), c2.t_cam2world.z()}}},
           {"orientations", {habitatQuaternion(c1.R_cam2world), habitatQuaternion(c2.R_cam2world)}},
           {"covisibility_ratios", {f1, rec["covis"]}},
           {"valid_fractions", {f1, f2}},
           {"pairwise_visibility_ratios", {{f1, rec["v_ij"]}, {rec["v_ji"], f2}}}};
-      pairsTxt += job.name + "/" + fmtIndex(k) + "_1.jpeg " + job.name + "/" + fmtIndex(k) + "_2.jpeg\n";
+      pairsTxt +=
+          job.name + "/" + fmtIndex(k) + "_1.jpeg " + job.name + "/" + fmtIndex(k) + "_2.jpeg\n";
     }
     perScene[job.name] = scenePairs;
     if (cfg.croco) {
-      nlohmann::json meta = {{"scene", job.path}, {"views_count", 2}, {"size", cfg.pairsPerScene},
-                             {"generate_depth", cfg.saveDepth}, {"resolution", cfg.pair.resolution},
-                             {"hfov", cfg.pair.hfov}, {"minimum_covisibility", cfg.pair.minCovis},
-                             {"maximum_covisibility", cfg.pair.maxCovis}, {"seed", cfg.seed},
-                             {"generator", "paircast"}, {"multiviews", multiviews}};
+      nlohmann::json meta = {{"scene", job.path},
+                             {"views_count", 2},
+                             {"size", cfg.pairsPerScene},
+                             {"generate_depth", cfg.saveDepth},
+                             {"resolution", cfg.pair.resolution},
+                             {"hfov", cfg.pair.hfov},
+                             {"minimum_covisibility", cfg.pair.minCovis},
+                             {"maximum_covisibility", cfg.pair.maxCovis},
+                             {"seed", cfg.seed},
+                             {"generator", "paircast"},
+                             {"multiviews", multiviews}};
       makeDirs((fs::path(cfg.out) / job.name).string());
-      writeFileAtomic((fs::path(cfg.out) / job.name / "metadata.json").string(), meta.dump() + "\n");
+      writeFileAtomic((fs::path(cfg.out) / job.name / "metadata.json").string(),
+                      meta.dump() + "\n");
     }
   }
-  if (cfg.croco) writeFileAtomic((fs::path(cfg.out) / ("pairs" + part + ".txt")).string(), pairsTxt);
+  if (cfg.croco)
+    writeFileAtomic((fs::path(cfg.out) / ("pairs" + part + ".txt")).string(), pairsTxt);
   if (cfg.shards) {
     for (size_t s = 0; s < shardList.size(); ++s) {
       char name[64];
       std::snprintf(name, sizeof name, "%s-%06zu.tar", shardPrefix.c_str(), s);
       shardList[s]["name"] = name;
     }
-    nlohmann::json index = {{"format", "paircast-shards"}, {"format_version", kShardVersion},
-                            {"pairs", pairs}, {"shards", shardList},
-                            {"pairs_per_scene", perScene}, {"covis_histogram", histogram},
-                            {"depth", cfg.saveDepth}, {"resolution", cfg.pair.resolution},
-                            {"hfov", cfg.pair.hfov}, {"seed", cfg.seed}};
-    writeFileAtomic((fs::path(cfg.out) / ("index" + part + ".json")).string(), index.dump(1) + "\n");
+    nlohmann::json index = {{"format", "paircast-shards"},
+                            {"format_version", kShardVersion},
+                            {"pairs", pairs},
+                            {"shards", shardList},
+                            {"pairs_per_scene", perScene},
+                            {"covis_histogram", histogram},
+                            {"depth", cfg.saveDepth},
+                            {"resolution", cfg.pair.resolution},
+                            {"hfov", cfg.pair.hfov},
+                            {"seed", cfg.seed}};
+    writeFileAtomic((fs::path(cfg.out) / ("index" + part + ".json")).string(),
+                    index.dump(1) + "\n");
   }
   const double seconds = since(start);
   const double split = std::max(tRender + tCovis + tEncode + tWrite, 1e-12);
@@ -477,12 +507,17 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
       {"failed_pairs", failedPairs.load()},
       {"covis_histogram", histogram},
       {"candidate_covis_histogram", candidateHistogram},
-      {"time_split", {{"render", tRender / split}, {"covis", tCovis / split},
-                      {"encode", tEncode / split}, {"write", tWrite / split}}},
-      {"time_seconds", {{"render", tRender}, {"covis", tCovis}, {"encode", tEncode}, {"write", tWrite}}},
+      {"time_split",
+       {{"render", tRender / split},
+        {"covis", tCovis / split},
+        {"encode", tEncode / split},
+        {"write", tWrite / split}}},
+      {"time_seconds",
+       {{"render", tRender}, {"covis", tCovis}, {"encode", tEncode}, {"write", tWrite}}},
       {"skipped_scenes", skipped},
       {"jobs", jobs}};
-  writeFileAtomic((fs::path(cfg.out) / ("summary" + part + ".json")).string(), summary.dump(1) + "\n");
+  writeFileAtomic((fs::path(cfg.out) / ("summary" + part + ".json")).string(),
+                  summary.dump(1) + "\n");
   return summary;
 }
 

@@ -18,16 +18,16 @@ struct GenerateConfig {
   std::string out;
   int pairsPerScene = 100;
   uint64_t seed = 0;
-  int jobs = 0;                  // worker threads; 0 = all cores
-  bool shards = true;            // pairs-NNNNNN.tar + index.json
-  bool croco = false;            // <scene>/<idx>_1.jpeg ... + metadata.json + pairs.txt
+  int jobs = 0;        // worker threads; 0 = all cores
+  bool shards = true;  // pairs-NNNNNN.tar + index.json
+  bool croco = false;  // <scene>/<idx>_1.jpeg ... + metadata.json + pairs.txt
   bool saveDepth = false;
-  int shardSize = 1000;          // pairs per shard
+  int shardSize = 1000;  // pairs per shard
   uint64_t shardMaxBytes = 1ull << 30;
   int jpegQuality = 90;
-  int shardIndex = 0;            // this machine's part of the scene list ...
-  int numShards = 1;             // ... of numShards parts
-  bool progress = true;          // progress line on stderr
+  int shardIndex = 0;    // this machine's part of the scene list ...
+  int numShards = 1;     // ... of numShards parts
+  bool progress = true;  // progress line on stderr
   LoadOptions load;
   PairOptions pair;
 };

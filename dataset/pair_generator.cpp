@@ -9,7 +9,9 @@ namespace paircast {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 double validFraction(const ImageF& depth) {
   size_t valid = 0;
@@ -36,7 +38,10 @@ Eigen::Vector3d meanWorldPoint(const Camera& camera, const ImageF& depth) {
 
 PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
                              const ViewpointSampler& sampler, const PairOptions& options)
-    : scene_(scene), caster_(caster), sampler_(sampler), options_(options),
+    : scene_(scene),
+      caster_(caster),
+      sampler_(sampler),
+      options_(options),
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
   if (!(options.minCovis >= 0 && options.maxCovis <= 1 && options.minCovis <= options.maxCovis))
     throw Error("the covis band must satisfy 0 <= min <= max <= 1");
@@ -67,8 +72,8 @@ std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
       s.renderSeconds += since(t0);
       if (validFraction(depth[1]) < options_.minValidFraction) continue;
       t0 = Clock::now();
-      const CovisResult c = computeCovisibility(first.camera, depth[0], second.camera, depth[1],
-                                                options_.covis);
+      const CovisResult c =
+          computeCovisibility(first.camera, depth[0], second.camera, depth[1], options_.covis);
       s.covisSeconds += since(t0);
       s.candidateCovis.push_back(static_cast<float>(c.covis));
       if (c.covis < options_.minCovis || c.covis > options_.maxCovis) continue;

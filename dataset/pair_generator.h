@@ -17,9 +17,9 @@
 namespace paircast {
 
 struct PairOptions {
-  int resolution = 256;           // square images, pixels
-  double hfov = 60.0;             // degrees
-  double minCovis = 0.5;          // keep a pair when covis lies in [minCovis, maxCovis]
+  int resolution = 256;   // square images, pixels
+  double hfov = 60.0;     // degrees
+  double minCovis = 0.5;  // keep a pair when covis lies in [minCovis, maxCovis]
   double maxCovis = 1.0;
   double minValidFraction = 0.7;  // of each view's pixels with depth > 0
   int maxAttempts = 100;          // second views tried per reference view

@@ -24,7 +24,8 @@ PairStream::PairStream(const PairStreamOptions& options)
       s->scene = loadScene(path, options.load);
       s->caster = std::make_unique<RayCaster>(s->scene.mesh);
       s->sampler = std::make_unique<ViewpointSampler>(s->scene, *s->caster, options.pair.sampler);
-      s->generator = std::make_unique<PairGenerator>(s->scene, *s->caster, *s->sampler, options.pair);
+      s->generator =
+          std::make_unique<PairGenerator>(s->scene, *s->caster, *s->sampler, options.pair);
       scenes_.push_back(std::move(s));
     } catch (const Error& e) {
       std::fprintf(stderr, "pair stream: warning: skipping scene %s\n", e.what());

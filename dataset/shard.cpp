@@ -17,7 +17,8 @@ namespace fs = std::filesystem;
 
 std::string sanitizeName(const std::string& name) {
   std::string out;
-  for (char c : name) out += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_') ? c : '_';
+  for (char c : name)
+    out += (std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_') ? c : '_';
   return out.empty() ? "scene" : out;
 }
 
@@ -90,7 +91,8 @@ void ShardWriter::addFile(const std::string& name, const void* data, size_t size
                   archive_write_data(archive_, data, size) == static_cast<la_ssize_t>(size);
   archive_entry_free(entry);
   if (!ok) {
-    std::string why = archive_error_string(archive_) ? archive_error_string(archive_) : "write failed";
+    std::string why =
+        archive_error_string(archive_) ? archive_error_string(archive_) : "write failed";
     archive_write_free(archive_);
     archive_ = nullptr;
     ::unlink(tmp_.c_str());
@@ -176,7 +178,8 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
       return;
     }
     if (!s.record.is_object() || s.record.value("paircast_shard_version", -1) != kShardVersion) {
-      report("sample '" + s.key + "' has an unsupported version (regenerate the shard with "
+      report("sample '" + s.key +
+             "' has an unsupported version (regenerate the shard with "
              "generate_pairs), skipped");
       return;
     }
@@ -189,8 +192,9 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
     if (r == ARCHIVE_EOF) break;
     if (r != ARCHIVE_OK && r != ARCHIVE_WARN) {
       flush();
-      throw Error(path, std::string("shard is truncated or corrupt: ") +
-                            (archive_error_string(reader.a) ? archive_error_string(reader.a) : "?"));
+      throw Error(path,
+                  std::string("shard is truncated or corrupt: ") +
+                      (archive_error_string(reader.a) ? archive_error_string(reader.a) : "?"));
     }
     const std::string name = archive_entry_pathname(entry) ? archive_entry_pathname(entry) : "";
     if (archive_entry_filetype(entry) != AE_IFREG || unsafePath(name)) {
@@ -216,10 +220,14 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
       flush();
       throw Error(path, "shard is truncated or corrupt in entry '" + name + "'");
     }
-    if (member == "1.jpg") current.jpeg[0] = std::move(data);
-    else if (member == "2.jpg") current.jpeg[1] = std::move(data);
-    else if (member == "1.depth.exr") current.depthExr[0] = std::move(data);
-    else if (member == "2.depth.exr") current.depthExr[1] = std::move(data);
+    if (member == "1.jpg")
+      current.jpeg[0] = std::move(data);
+    else if (member == "2.jpg")
+      current.jpeg[1] = std::move(data);
+    else if (member == "1.depth.exr")
+      current.depthExr[0] = std::move(data);
+    else if (member == "2.depth.exr")
+      current.depthExr[1] = std::move(data);
     else if (member == "json") {
       current.record = nlohmann::json::parse(data.begin(), data.end(), nullptr, false);
       if (current.record.is_discarded()) current.record = nullptr;

@@ -17,13 +17,16 @@ Eigen::Matrix3d orientationNoise(double panDeg, double tiltDeg, double rollDeg) 
 
 ViewpointSampler::ViewpointSampler(const Scene& scene, const RayCaster& caster,
                                    const SamplerOptions& options)
-    : options_(options), up_(scene.upVector().cast<double>()), floor_(scene, caster, options.floor) {
+    : options_(options),
+      up_(scene.upVector().cast<double>()),
+      floor_(scene, caster, options.floor) {
   if (!(options.minHeight > 0 && options.maxHeight >= options.minHeight))
     throw Error("camera heights must satisfy 0 < min <= max");
   if (floor_.empty())
-    throw Error(scene.path, "no walkable floor found (is --up right? the scene needs "
-                            "horizontal surfaces with " +
-                                std::to_string(options.floor.headroom) + " m of headroom)");
+    throw Error(scene.path,
+                "no walkable floor found (is --up right? the scene needs "
+                "horizontal surfaces with " +
+                    std::to_string(options.floor.headroom) + " m of headroom)");
 }
 
 Eigen::Matrix3d ViewpointSampler::orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,

@@ -19,9 +19,9 @@ struct SamplerOptions {
   double panDegrees = 3.0;  // orientation noise, uniform in [-x, x]
   double tiltDegrees = 10.0;
   double rollDegrees = 5.0;
-  int walkSteps = 5;        // random walk of the second view
-  double walkScale = 2.0;   // each step: walkScale * N(0, 1) along both floor axes (CroCo's
-                            // random_step_variance)
+  int walkSteps = 5;       // random walk of the second view
+  double walkScale = 2.0;  // each step: walkScale * N(0, 1) along both floor axes (CroCo's
+                           // random_step_variance)
   FloorOptions floor;
 };
 
@@ -52,8 +52,7 @@ class ViewpointSampler {
 
  private:
   // worldFromCamera rotation looking along `forward` (levelled on up), then the noise.
-  Eigen::Matrix3d orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
-                         Rng& rng) const;
+  Eigen::Matrix3d orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, Rng& rng) const;
   SamplerOptions options_;
   Eigen::Vector3d up_;
   FloorMap floor_;

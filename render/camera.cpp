@@ -26,7 +26,9 @@ Eigen::Isometry3d Camera::worldFromCamera() const {
   return T;
 }
 
-Eigen::Isometry3d Camera::cameraFromWorld() const { return worldFromCamera().inverse(); }
+Eigen::Isometry3d Camera::cameraFromWorld() const {
+  return worldFromCamera().inverse();
+}
 
 void Camera::setWorldFromCamera(const Eigen::Isometry3d& T) {
   R_cam2world = T.linear();
@@ -65,7 +67,9 @@ Eigen::Vector2d Camera::project(const Eigen::Vector3d& p) const {
   return q.head<2>() / q.z();
 }
 
-double Camera::hfovDegrees() const { return 2.0 * std::atan(0.5 * width / K(0, 0)) * 180.0 / M_PI; }
+double Camera::hfovDegrees() const {
+  return 2.0 * std::atan(0.5 * width / K(0, 0)) * 180.0 / M_PI;
+}
 
 bool Camera::valid() const {
   if (width <= 0 || height <= 0) return false;
@@ -126,7 +130,8 @@ Camera cameraFromJson(const nlohmann::json& j, const std::string& source) {
   // CroCo's own camera_params.json has no size: fall back to the principal point.
   auto dim = [&](const char* key, double fallback) {
     if (!j.contains(key)) return static_cast<int>(std::lround(fallback));
-    if (!j.at(key).is_number_integer()) throw Error(source, std::string("'") + key + "' is not an integer");
+    if (!j.at(key).is_number_integer())
+      throw Error(source, std::string("'") + key + "' is not an integer");
     return j.at(key).get<int>();
   };
   c.width = dim("width", 2 * c.K(0, 2));
@@ -134,8 +139,9 @@ Camera cameraFromJson(const nlohmann::json& j, const std::string& source) {
   if (c.width <= 0 || c.height <= 0 || c.width > 16384 || c.height > 16384)
     throw Error(source, "camera size must be in 1..16384");
   if (!c.valid())
-    throw Error(source, "invalid camera (K must be upper-triangular with positive focal lengths, "
-                        "R_cam2world a rotation, all values finite)");
+    throw Error(source,
+                "invalid camera (K must be upper-triangular with positive focal lengths, "
+                "R_cam2world a rotation, all values finite)");
   return c;
 }
 

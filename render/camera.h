@@ -27,8 +27,7 @@ struct Camera {
 
   // Places the camera at `eye` looking at `target`, with the image's up along `up`
   // (world). Throws paircast::Error when eye == target or the view is along `up`.
-  void lookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
-              const Eigen::Vector3d& up);
+  void lookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, const Eigen::Vector3d& up);
 
   // Camera-frame direction through pixel coordinates (x, y), with z = 1, so that a hit at ray
   // parameter t has z-depth t.

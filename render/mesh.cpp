@@ -39,24 +39,31 @@ const std::array<uint8_t, 4097> kLinearToSrgb8 = [] {
 
 Eigen::Vector3f Texture::sample(float u, float v) const {
   const auto& lut = srgbTable();
-  // Texel centres at (i + 0.5) / W; image row 0 is v = 1.
-  float x = u * width - 0.5f;
-  float y = (1.0f - v) * height - 0.5f;
-  if (!std::isfinite(x) || !std::isfinite(y)) return Eigen::Vector3f::Zero();
-  float fx = std::floor(x), fy = std::floor(y);
-  float ax = x - fx, ay = y - fy;
-  auto wrap = [](long i, int n) {
-    long r = i % n;
-    return static_cast<int>(r < 0 ? r + n : r);
-  };
-  int x0 = wrap(static_cast<long>(fx), width), x1 = wrap(static_cast<long>(fx) + 1, width);
-  int y0 = wrap(static_cast<long>(fy), height), y1 = wrap(static_cast<long>(fy) + 1, height);
-  auto texel = [&](int tx, int ty) {
-    const uint8_t* p = texels.data() + (static_cast<size_t>(ty) * width + tx) * channels;
-    return Eigen::Vector3f(lut[p[0]], lut[p[1]], lut[p[2]]);
-  };
-  return (1 - ay) * ((1 - ax) * texel(x0, y0) + ax * texel(x1, y0)) +
-         ay * ((1 - ax) * texel(x0, y1) + ax * texel(x1, y1));
+  if (!std::isfinite(u) || !std::isfinite(v)) return Eigen::Vector3f::Zero();
+  // Wrap to [0, 1) first, so that the texel indices below need no modulo. Texel centres are at
+  // (i + 0.5) / W; image row 0 is v = 1.
+  u -= std::floor(u);
+  v -= std::floor(v);
+  const float x = u * width - 0.5f, y = (1.0f - v) * height - 0.5f;
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float ax = x - fx, ay = y - fy;
+  int x0 = static_cast<int>(fx), y0 = static_cast<int>(fy);
+  int x1 = x0 + 1, y1 = y0 + 1;
+  if (x0 < 0) x0 += width;
+  if (y0 < 0) y0 += height;
+  if (x1 >= width) x1 -= width;
+  if (y1 >= height) y1 -= height;
+  const uint8_t* r0 = texels.data() + static_cast<size_t>(y0) * width * channels;
+  const uint8_t* r1 = texels.data() + static_cast<size_t>(y1) * width * channels;
+  const uint8_t* p00 = r0 + x0 * channels;
+  const uint8_t* p10 = r0 + x1 * channels;
+  const uint8_t* p01 = r1 + x0 * channels;
+  const uint8_t* p11 = r1 + x1 * channels;
+  const float w00 = (1 - ax) * (1 - ay), w10 = ax * (1 - ay), w01 = (1 - ax) * ay, w11 = ax * ay;
+  Eigen::Vector3f out;
+  for (int c = 0; c < 3; ++c)
+    out[c] = w00 * lut[p00[c]] + w10 * lut[p10[c]] + w01 * lut[p01[c]] + w11 * lut[p11[c]];
+  return out;
 }
 
 void Mesh::append(const Mesh& other) {
@@ -80,9 +87,9 @@ int Mesh::addMaterial(const Material& m) {
   return static_cast<int>(materials.size()) - 1;
 }
 
-void Mesh::addTriangle(const Eigen::Vector3f& a, const Eigen::Vector3f& b,
-                       const Eigen::Vector3f& c, int material, const Eigen::Vector2f& ta,
-                       const Eigen::Vector2f& tb, const Eigen::Vector2f& tc) {
+void Mesh::addTriangle(const Eigen::Vector3f& a, const Eigen::Vector3f& b, const Eigen::Vector3f& c,
+                       int material, const Eigen::Vector2f& ta, const Eigen::Vector2f& tb,
+                       const Eigen::Vector2f& tc) {
   const int base = static_cast<int>(positions.size());
   positions.insert(positions.end(), {a, b, c});
   uvs.insert(uvs.end(), {ta, tb, tc});
@@ -140,8 +147,8 @@ std::string MeshStats::summary() const {
   std::ostringstream os;
   os << triangles << " triangles, " << vertices << " vertices, " << materials << " materials, "
      << textures << " textures, bounds [" << boundsMin.x() << ", " << boundsMin.y() << ", "
-     << boundsMin.z() << "] .. [" << boundsMax.x() << ", " << boundsMax.y() << ", "
-     << boundsMax.z() << "]";
+     << boundsMin.z() << "] .. [" << boundsMax.x() << ", " << boundsMax.y() << ", " << boundsMax.z()
+     << "]";
   return os.str();
 }
 

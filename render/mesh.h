@@ -16,7 +16,7 @@ struct Texture {
   std::string name;
   int width = 0;
   int height = 0;
-  int channels = 3;            // 3 (RGB) or 4 (RGBA, alpha ignored)
+  int channels = 3;             // 3 (RGB) or 4 (RGBA, alpha ignored)
   std::vector<uint8_t> texels;  // [H, W, channels], row 0 is the top of the image (v = 1)
 
   // Linear RGB at texture coordinates (u, v), glTF/OBJ convention: v = 0 at the bottom.

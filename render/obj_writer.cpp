@@ -20,7 +20,8 @@ void appendf(std::string& out, const char* fmt, double a, double b, double c) {
 }
 
 std::string textureName(const Mesh& mesh, int t) {
-  std::string name = mesh.textures[t].name.empty() ? "texture" + std::to_string(t) : mesh.textures[t].name;
+  std::string name =
+      mesh.textures[t].name.empty() ? "texture" + std::to_string(t) : mesh.textures[t].name;
   for (auto& c : name)
     if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-') c = '_';
   return name + ".png";

@@ -55,7 +55,9 @@ Eigen::Vector3f mix(const Eigen::Vector3f& a, const Eigen::Vector3f& b, float t)
 }
 
 // ---- palette ----
-Eigen::Vector3f srgb(int r, int g, int b) { return Eigen::Vector3f(r, g, b) / 255.0f; }
+Eigen::Vector3f srgb(int r, int g, int b) {
+  return Eigen::Vector3f(r, g, b) / 255.0f;
+}
 
 }  // namespace
 
@@ -75,14 +77,16 @@ Texture makeTexture(const std::string& kind, uint64_t seed, int size) {
         const float offset = hashUnit(seed, plank);
         const float grain = fbm(std::fmod(u + offset, 1.0f), v * 0.25f, 2, seed + plank * 13, 3);
         const float rings = 0.5f + 0.5f * std::sin(40.0f * grain + 6.0f * u);
-        const Eigen::Vector3f base = mix(srgb(120, 78, 45), srgb(181, 134, 88), hashUnit(seed, plank, 3));
+        const Eigen::Vector3f base =
+            mix(srgb(120, 78, 45), srgb(181, 134, 88), hashUnit(seed, plank, 3));
         c = base * (0.75f + 0.3f * rings);
         if (std::fmod(v * 4, 1.0f) < 0.03f || std::fmod(u + offset, 0.5f) < 0.006f) c *= 0.45f;
       } else if (kind == "tiles") {  // 4x4 square tiles with grout and mottling
         const float gu = std::fmod(u * 4, 1.0f), gv = std::fmod(v * 4, 1.0f);
         const int tile = static_cast<int>(u * 4) + 4 * static_cast<int>(v * 4);
         const Eigen::Vector3f base = mix(srgb(200, 196, 186), srgb(120, 140, 150), hue);
-        c = base * (0.85f + 0.2f * fbm(u, v, 8, seed + tile)) * (0.95f + 0.1f * hashUnit(seed, tile));
+        c = base * (0.85f + 0.2f * fbm(u, v, 8, seed + tile)) *
+            (0.95f + 0.1f * hashUnit(seed, tile));
         if (gu < 0.04f || gv < 0.04f) c = srgb(90, 90, 88);
       } else if (kind == "carpet") {
         const Eigen::Vector3f base = mix(srgb(140, 40, 40), srgb(40, 70, 130), hue);
@@ -113,8 +117,10 @@ Texture makeTexture(const std::string& kind, uint64_t seed, int size) {
         const float weave = 0.5f + 0.5f * std::sin(6.283f * 48 * u) * std::sin(6.283f * 48 * v);
         c = base * (0.75f + 0.25f * weave + 0.2f * fbm(u, v, 8, seed, 2));
       } else if (kind == "paper") {  // a painting: smooth colour fields
-        const Eigen::Vector3f a = srgb(40 + 200 * hashUnit(seed, 1), 40 + 200 * hashUnit(seed, 2), 40 + 200 * hashUnit(seed, 3));
-        const Eigen::Vector3f b = srgb(40 + 200 * hashUnit(seed, 4), 40 + 200 * hashUnit(seed, 5), 40 + 200 * hashUnit(seed, 6));
+        const Eigen::Vector3f a = srgb(40 + 200 * hashUnit(seed, 1), 40 + 200 * hashUnit(seed, 2),
+                                       40 + 200 * hashUnit(seed, 3));
+        const Eigen::Vector3f b = srgb(40 + 200 * hashUnit(seed, 4), 40 + 200 * hashUnit(seed, 5),
+                                       40 + 200 * hashUnit(seed, 6));
         c = mix(a, b, fbm(u, v, 2, seed, 4) * 1.6f - 0.3f);
       } else if (kind == "marble") {
         const float n = fbm(u, v, 4, seed, 5);
@@ -124,7 +130,8 @@ Texture makeTexture(const std::string& kind, uint64_t seed, int size) {
         throw Error("unknown texture kind '" + kind + "'");
       }
       uint8_t* p = t.texels.data() + (static_cast<size_t>(y) * size + x) * 3;
-      for (int k = 0; k < 3; ++k) p[k] = static_cast<uint8_t>(std::clamp(c[k], 0.0f, 1.0f) * 255.0f + 0.5f);
+      for (int k = 0; k < 3; ++k)
+        p[k] = static_cast<uint8_t>(std::clamp(c[k], 0.0f, 1.0f) * 255.0f + 0.5f);
     }
   }
   return t;
@@ -136,21 +143,21 @@ void addBox(Mesh& m, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi, int m
   auto face = [&](const Eigen::Vector3f& o, const Eigen::Vector3f& du, const Eigen::Vector3f& dv,
                   const Eigen::Vector2f& uv0) {
     const float lu = du.norm() * uvScale, lv = dv.norm() * uvScale;
-    const Eigen::Vector2f t0 = uv0, t1 = uv0 + Eigen::Vector2f(lu, 0), t2 = uv0 + Eigen::Vector2f(lu, lv),
-                          t3 = uv0 + Eigen::Vector2f(0, lv);
+    const Eigen::Vector2f t0 = uv0, t1 = uv0 + Eigen::Vector2f(lu, 0),
+                          t2 = uv0 + Eigen::Vector2f(lu, lv), t3 = uv0 + Eigen::Vector2f(0, lv);
     m.addTriangle(o, o + du, o + du + dv, material, t0, t1, t2);
     m.addTriangle(o, o + du + dv, o + dv, material, t0, t2, t3);
   };
   const Eigen::Vector3f d = hi - lo;
   const Eigen::Vector3f X(d.x(), 0, 0), Y(0, d.y(), 0), Z(0, 0, d.z());
-  const Eigen::Vector2f uvx(lo.x() * uvScale, lo.y() * uvScale), uvz(lo.z() * uvScale, lo.y() * uvScale),
-      uvy(lo.x() * uvScale, lo.z() * uvScale);
-  face(lo, Y, X, {uvx.y(), uvx.x()});                     // -z
-  face(lo + Z, X, Y, uvx);                                // +z
-  face(lo, Z, Y, uvz);                                    // -x
-  face(lo + X, Y, Z, {uvz.y(), uvz.x()});                 // +x
-  face(lo, X, Z, uvy);                                    // -y
-  face(lo + Y, Z, X, {uvy.y(), uvy.x()});                 // +y
+  const Eigen::Vector2f uvx(lo.x() * uvScale, lo.y() * uvScale),
+      uvz(lo.z() * uvScale, lo.y() * uvScale), uvy(lo.x() * uvScale, lo.z() * uvScale);
+  face(lo, Y, X, {uvx.y(), uvx.x()});      // -z
+  face(lo + Z, X, Y, uvx);                 // +z
+  face(lo, Z, Y, uvz);                     // -x
+  face(lo + X, Y, Z, {uvz.y(), uvz.x()});  // +x
+  face(lo, X, Z, uvy);                     // -y
+  face(lo + Y, Z, X, {uvy.y(), uvy.x()});  // +y
 }
 
 namespace {
@@ -160,7 +167,8 @@ class Builder {
   explicit Builder(uint64_t seed) : seed_(seed) {}
 
   // A material with a procedural texture (-1 kind = plain colour).
-  int textured(const std::string& kind, uint64_t variant, const Eigen::Vector3f& tint = Eigen::Vector3f::Ones()) {
+  int textured(const std::string& kind, uint64_t variant,
+               const Eigen::Vector3f& tint = Eigen::Vector3f::Ones()) {
     mesh.textures.push_back(makeTexture(kind, hash64(seed_ * 131 + variant) % 100000));
     Material m;
     m.name = kind;
@@ -191,22 +199,25 @@ struct Placement {
   bool rotated;  // swap the x and z extents
 };
 
-V3 ext(const Placement& p, float ex, float ez) { return p.rotated ? V3(ez, 0, ex) : V3(ex, 0, ez); }
+V3 ext(const Placement& p, float ex, float ez) {
+  return p.rotated ? V3(ez, 0, ex) : V3(ex, 0, ez);
+}
 
-void box(Builder& b, const Placement& p, float cx, float cz, float y0, float ex, float ey, float ez, int mat,
-         float uvScale = 1.0f) {
+void box(Builder& b, const Placement& p, float cx, float cz, float y0, float ex, float ey, float ez,
+         int mat, float uvScale = 1.0f) {
   // (cx, cz) is an offset in the piece's own frame.
   const float ox = p.rotated ? cz : cx, oz = p.rotated ? cx : cz;
   const V3 e = ext(p, ex, ez);
   const V3 c(p.x + ox, y0, p.z + oz);
-  addBox(b.mesh, V3(c.x() - e.x() / 2, y0, c.z() - e.z() / 2), V3(c.x() + e.x() / 2, y0 + ey, c.z() + e.z() / 2),
-         mat, uvScale);
+  addBox(b.mesh, V3(c.x() - e.x() / 2, y0, c.z() - e.z() / 2),
+         V3(c.x() + e.x() / 2, y0 + ey, c.z() + e.z() / 2), mat, uvScale);
 }
 
 void table(Builder& b, const Placement& p, int wood, float w, float d) {
   box(b, p, 0, 0, 0.72f, w, 0.04f, d, wood, 2.0f);
   for (int sx : {-1, 1})
-    for (int sz : {-1, 1}) box(b, p, sx * (w / 2 - 0.06f), sz * (d / 2 - 0.06f), 0, 0.05f, 0.72f, 0.05f, wood);
+    for (int sz : {-1, 1})
+      box(b, p, sx * (w / 2 - 0.06f), sz * (d / 2 - 0.06f), 0, 0.05f, 0.72f, 0.05f, wood);
 }
 
 void chair(Builder& b, const Placement& p, int wood, int fabric, bool backAtPlusZ) {
@@ -240,8 +251,9 @@ void shelf(Builder& b, const Placement& p, int wood, uint64_t salt) {
     while (x < w / 2 - 0.1f) {
       const float bw = 0.025f + 0.035f * b.rnd(salt, level);
       const float bh = 0.2f + 0.15f * b.rnd(salt + 1, level);
-      const int book = b.plain(V3(0.05f + 0.6f * b.rnd(salt + 2, level), 0.05f + 0.5f * b.rnd(salt + 3, level),
-                                  0.05f + 0.5f * b.rnd(salt + 4, level)));
+      const int book =
+          b.plain(V3(0.05f + 0.6f * b.rnd(salt + 2, level), 0.05f + 0.5f * b.rnd(salt + 3, level),
+                     0.05f + 0.5f * b.rnd(salt + 4, level)));
       box(b, p, x + bw / 2, 0, y + 0.025f, bw, bh, d * 0.8f, book);
       x += bw + 0.004f;
     }
@@ -264,7 +276,8 @@ void lamp(Builder& b, const Placement& p, int metal, int shade) {
 Mesh buildLayout(const LayoutSpec& L) {
   Builder b(L.seed);
   const float H = L.height, T = 0.1f;  // wall thickness
-  const int wallMats[3] = {b.textured("plaster", 1), b.textured("wallpaper", 2), b.textured("brick", 3)};
+  const int wallMats[3] = {b.textured("plaster", 1), b.textured("wallpaper", 2),
+                           b.textured("brick", 3)};
   const int ceiling = b.textured("plaster", 4, V3(1.0f, 1.0f, 1.0f));
   const int wood = b.textured("wood", 5), darkWood = b.textured("wood", 6, V3(0.55f, 0.45f, 0.4f));
   const int fabric = b.textured("fabric", 7), fabric2 = b.textured("fabric", 8);
@@ -291,15 +304,19 @@ Mesh buildLayout(const LayoutSpec& L) {
 
   // Walls: every room edge, split where a door or an already-built shared edge is. Shared edges
   // are built once (by the room with the lower index); door gaps get a lintel.
-  struct Gap { float a, b; };
+  struct Gap {
+    float a, b;
+  };
   auto doorGaps = [&](int room, int edge) {
     std::vector<Gap> gaps;
     for (const auto& d : L.doors) {
       if (d.roomA != room && d.roomB != room) continue;
       const RoomSpec& r = L.rooms[room];
       const RoomSpec& o = L.rooms[d.roomA == room ? d.roomB : d.roomA];
-      const bool shares = (edge == 0 && std::abs(r.z0 - o.z1) < 1e-3f) || (edge == 1 && std::abs(r.z1 - o.z0) < 1e-3f) ||
-                          (edge == 2 && std::abs(r.x0 - o.x1) < 1e-3f) || (edge == 3 && std::abs(r.x1 - o.x0) < 1e-3f);
+      const bool shares = (edge == 0 && std::abs(r.z0 - o.z1) < 1e-3f) ||
+                          (edge == 1 && std::abs(r.z1 - o.z0) < 1e-3f) ||
+                          (edge == 2 && std::abs(r.x0 - o.x1) < 1e-3f) ||
+                          (edge == 3 && std::abs(r.x1 - o.x0) < 1e-3f);
       if (shares) gaps.push_back({d.at - d.width / 2, d.at + d.width / 2});
     }
     return gaps;
@@ -316,11 +333,13 @@ Mesh buildLayout(const LayoutSpec& L) {
       for (size_t j = 0; j < i; ++j) {
         const RoomSpec& o = L.rooms[j];
         const float a = alongX ? o.x0 : o.z0, c = alongX ? o.x1 : o.z1;
-        const bool sameLine = alongX ? (std::abs(o.z0 - fixed) < 1e-3f || std::abs(o.z1 - fixed) < 1e-3f)
-                                     : (std::abs(o.x0 - fixed) < 1e-3f || std::abs(o.x1 - fixed) < 1e-3f);
+        const bool sameLine =
+            alongX ? (std::abs(o.z0 - fixed) < 1e-3f || std::abs(o.z1 - fixed) < 1e-3f)
+                   : (std::abs(o.x0 - fixed) < 1e-3f || std::abs(o.x1 - fixed) < 1e-3f);
         if (sameLine && c > lo && a < hi) covered.push_back({std::max(a, lo), std::min(c, hi)});
       }
-      std::sort(covered.begin(), covered.end(), [](const Gap& a, const Gap& c) { return a.a < c.a; });
+      std::sort(covered.begin(), covered.end(),
+                [](const Gap& a, const Gap& c) { return a.a < c.a; });
       std::vector<Gap> open;  // uncovered parts, extended by half a wall at the edge's ends
       float start = lo;
       for (const Gap& g : covered) {
@@ -333,8 +352,10 @@ Mesh buildLayout(const LayoutSpec& L) {
       std::sort(gaps.begin(), gaps.end(), [](const Gap& a, const Gap& c) { return a.a < c.a; });
       auto segment = [&](float a, float c, float y0, float y1) {
         if (c - a < 1e-3f) return;
-        if (alongX) addBox(b.mesh, V3(a, y0, fixed - T / 2), V3(c, y1, fixed + T / 2), wall, 1.0f);
-        else addBox(b.mesh, V3(fixed - T / 2, y0, a), V3(fixed + T / 2, y1, c), wall, 1.0f);
+        if (alongX)
+          addBox(b.mesh, V3(a, y0, fixed - T / 2), V3(c, y1, fixed + T / 2), wall, 1.0f);
+        else
+          addBox(b.mesh, V3(fixed - T / 2, y0, a), V3(fixed + T / 2, y1, c), wall, 1.0f);
       };
       for (const Gap& part : open) {
         const float from = part.a - (std::abs(part.a - lo) < 1e-3f ? T / 2 : 0.0f);
@@ -354,8 +375,12 @@ Mesh buildLayout(const LayoutSpec& L) {
         const int art = b.textured("paper", 100 + i * 4 + edge);
         const float mid = 0.5f * (from + to), inward = (edge == 0 || edge == 2) ? 1.0f : -1.0f;
         const float w = 0.6f + 0.5f * b.rnd(i, edge + 9), off = fixed + inward * (T / 2 + 0.015f);
-        if (alongX) addBox(b.mesh, V3(mid - w / 2, 1.3f, off - 0.015f), V3(mid + w / 2, 1.3f + 0.7f * w, off + 0.015f), art, 1.0f / w);
-        else addBox(b.mesh, V3(off - 0.015f, 1.3f, mid - w / 2), V3(off + 0.015f, 1.3f + 0.7f * w, mid + w / 2), art, 1.0f / w);
+        if (alongX)
+          addBox(b.mesh, V3(mid - w / 2, 1.3f, off - 0.015f),
+                 V3(mid + w / 2, 1.3f + 0.7f * w, off + 0.015f), art, 1.0f / w);
+        else
+          addBox(b.mesh, V3(off - 0.015f, 1.3f, mid - w / 2),
+                 V3(off + 0.015f, 1.3f + 0.7f * w, mid + w / 2), art, 1.0f / w);
       }
     }
   }
@@ -368,7 +393,8 @@ Mesh buildLayout(const LayoutSpec& L) {
     const uint64_t salt = 1000 + i * 50;
     switch (r.kind) {
       case RoomKind::Living: {
-        addBox(b.mesh, V3(cx - 1.2f, 0.0f, cz - 0.8f), V3(cx + 1.2f, 0.012f, cz + 0.8f), b.textured("carpet", salt), 0.7f);
+        addBox(b.mesh, V3(cx - 1.2f, 0.0f, cz - 0.8f), V3(cx + 1.2f, 0.012f, cz + 0.8f),
+               b.textured("carpet", salt), 0.7f);
         sofa(b, {cx, r.z1 - 0.55f, false}, fabric);
         table(b, {cx, cz - 0.1f, false}, darkWood, 1.1f, 0.6f);
         shelf(b, {r.x0 + 0.25f, cz + 0.3f * d * (b.rnd(salt) - 0.5f), true}, wood, salt);
@@ -385,9 +411,12 @@ Mesh buildLayout(const LayoutSpec& L) {
       }
       case RoomKind::Kitchen: {
         // Counters along two walls, a table with chairs.
-        addBox(b.mesh, V3(r.x0 + 0.05f, 0.0f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 0.88f, r.z0 + 0.65f), darkWood, 2.0f);
-        addBox(b.mesh, V3(r.x0 + 0.03f, 0.88f, r.z0 + 0.03f), V3(r.x1 - 0.03f, 0.92f, r.z0 + 0.68f), marble, 1.0f);
-        addBox(b.mesh, V3(r.x0 + 0.05f, 1.5f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 2.2f, r.z0 + 0.4f), wood, 2.0f);
+        addBox(b.mesh, V3(r.x0 + 0.05f, 0.0f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 0.88f, r.z0 + 0.65f),
+               darkWood, 2.0f);
+        addBox(b.mesh, V3(r.x0 + 0.03f, 0.88f, r.z0 + 0.03f), V3(r.x1 - 0.03f, 0.92f, r.z0 + 0.68f),
+               marble, 1.0f);
+        addBox(b.mesh, V3(r.x0 + 0.05f, 1.5f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 2.2f, r.z0 + 0.4f),
+               wood, 2.0f);
         table(b, {cx, cz + 0.4f, false}, wood, 1.2f, 0.8f);
         chair(b, {cx - 0.35f, cz + 1.05f, false}, wood, fabric, true);
         chair(b, {cx + 0.35f, cz - 0.25f, false}, wood, fabric, false);
@@ -402,7 +431,8 @@ Mesh buildLayout(const LayoutSpec& L) {
       }
       case RoomKind::Hall: {
         cabinet(b, {cx, r.z1 - 0.35f, false}, darkWood, marble, std::min(1.2f, w - 0.8f), 0.9f);
-        addBox(b.mesh, V3(cx - 0.6f, 0.0f, cz - 0.9f), V3(cx + 0.6f, 0.012f, cz + 0.9f), b.textured("carpet", salt), 0.7f);
+        addBox(b.mesh, V3(cx - 0.6f, 0.0f, cz - 0.9f), V3(cx + 0.6f, 0.012f, cz + 0.9f),
+               b.textured("carpet", salt), 0.7f);
         break;
       }
     }

@@ -13,9 +13,9 @@
 namespace paircast {
 namespace {
 
-constexpr int kPacket = 8;    // rays per rtcIntersect8 call: one row of a tile
-constexpr int kTileW = 8;     // tile width in pixels (one packet)
-constexpr int kTileH = 8;     // tile height in pixels (packets per tile)
+constexpr int kPacket = 8;  // rays per rtcIntersect8 call: one row of a tile
+constexpr int kTileW = 8;   // tile width in pixels (one packet)
+constexpr int kTileH = 8;   // tile height in pixels (packets per tile)
 
 void embreeError(void* /*user*/, RTCError code, const char* message) {
   spdlog::error("embree error {}: {}", static_cast<int>(code), message ? message : "");
@@ -25,8 +25,9 @@ void embreeError(void* /*user*/, RTCError code, const char* message) {
 RTCDevice sharedDevice() {
   static RTCDevice device = [] {
     RTCDevice d = rtcNewDevice(nullptr);
-    if (!d) throw Error("cannot create the Embree device (error " +
-                        std::to_string(static_cast<int>(rtcGetDeviceError(nullptr))) + ")");
+    if (!d)
+      throw Error("cannot create the Embree device (error " +
+                  std::to_string(static_cast<int>(rtcGetDeviceError(nullptr))) + ")");
     rtcSetDeviceErrorFunction(d, embreeError, nullptr);
     return d;
   }();
@@ -85,8 +86,9 @@ struct RayCaster::Impl {
   RTCScene scene = nullptr;
   // Per-triangle data precomputed at build time, so that shading a hit is a few loads:
   std::vector<Eigen::Vector3f> normal;  // [T] unit geometric normal
-  std::vector<Eigen::Vector3f> albedo;  // [T] linear albedo when `flat`, else the factor
-  std::vector<uint8_t> flat;            // [T] 1: albedo is constant over the triangle
+  std::vector<Eigen::Vector3f> albedo;  // [T] factor x vertex colour (when uniform), linear
+  std::vector<uint8_t> varying;         // [T] 1: vertex colours differ over the triangle
+  std::vector<int32_t> texture;         // [T] texture index, or -1
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
   }
@@ -122,7 +124,8 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
   const size_t T = mesh.numTriangles();
   impl_->normal.resize(T);
   impl_->albedo.resize(T);
-  impl_->flat.resize(T);
+  impl_->varying.resize(T);
+  impl_->texture.resize(T);
   for (size_t t = 0; t < T; ++t) {
     const Eigen::Vector3i& tri = mesh.triangles[t];
     const Eigen::Vector3f& p0 = mesh.positions[tri[0]];
@@ -130,11 +133,12 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
     Eigen::Vector3f n = (mesh.positions[tri[1]] - p0).cross(mesh.positions[tri[2]] - p0);
     impl_->normal[t] = n.norm() > 0 ? n.normalized() : Eigen::Vector3f::UnitZ();
     const Material& mat = mesh.materials[mesh.triangleMaterial[t]];
-    const bool sameColour = mesh.colors[tri[0]] == mesh.colors[tri[1]] &&
-                            mesh.colors[tri[0]] == mesh.colors[tri[2]];
-    impl_->flat[t] = mat.texture < 0 && sameColour;
-    impl_->albedo[t] = impl_->flat[t] ? mat.baseColor.cwiseProduct(mesh.colors[tri[0]]).eval()
-                                      : mat.baseColor;
+    const bool sameColour =
+        mesh.colors[tri[0]] == mesh.colors[tri[1]] && mesh.colors[tri[0]] == mesh.colors[tri[2]];
+    impl_->varying[t] = !sameColour;
+    impl_->texture[t] = mat.texture;
+    impl_->albedo[t] =
+        sameColour ? mat.baseColor.cwiseProduct(mesh.colors[tri[0]]).eval() : mat.baseColor;
   }
   rtcCommitGeometry(geom);
   rtcAttachGeometry(impl_->scene, geom);
@@ -143,8 +147,7 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
   const RTCError err = rtcGetDeviceError(device);
   if (err != RTC_ERROR_NONE)
     throw Error("Embree failed to build the scene (error " + std::to_string(int(err)) + ")");
-  buildSeconds_ =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  buildSeconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
 RayCaster::~RayCaster() = default;
@@ -230,12 +233,13 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
           continue;
         }
         Eigen::Vector3f albedo = impl.albedo[prim];
-        if (!impl.flat[prim]) {
+        const int tex = impl.texture[prim];
+        if (impl.varying[prim] || tex >= 0) {
           const Eigen::Vector3i& tri = mesh.triangles[prim];
           const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
-          albedo = albedo.cwiseProduct(w * mesh.colors[tri[0]] + u * mesh.colors[tri[1]] +
-                                       v * mesh.colors[tri[2]]);
-          const int tex = mesh.materials[mesh.triangleMaterial[prim]].texture;
+          if (impl.varying[prim])
+            albedo = albedo.cwiseProduct(w * mesh.colors[tri[0]] + u * mesh.colors[tri[1]] +
+                                         v * mesh.colors[tri[2]]);
           if (tex >= 0) {
             const Eigen::Vector2f uv =
                 w * mesh.uvs[tri[0]] + u * mesh.uvs[tri[1]] + v * mesh.uvs[tri[2]];
@@ -243,7 +247,8 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
           }
         }
         const float cosView = -n.dot(d) / d.norm();
-        const float light = sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, n.dot(sunDir));
+        const float light =
+            sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, n.dot(sunDir));
         accum[y - ty][i] += albedo * light;
       }
     };

@@ -22,8 +22,8 @@ struct Ray {
 };
 
 struct Hit {
-  float t = 0.0f;              // ray parameter of the hit; meaningless when triangle < 0
-  int32_t triangle = -1;       // -1 on a miss
+  float t = 0.0f;         // ray parameter of the hit; meaningless when triangle < 0
+  int32_t triangle = -1;  // -1 on a miss
   Eigen::Vector3f normal = Eigen::Vector3f::Zero();  // unit geometric normal (not flipped)
 };
 

@@ -1,9 +1,9 @@
 #include "render/scene_loader.h"
 
-#include <assimp/DefaultLogger.hpp>
-#include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <assimp/DefaultLogger.hpp>
+#include <assimp/Importer.hpp>
 
 #include <filesystem>
 #include <map>
@@ -42,7 +42,10 @@ class MaterialBuilder {
  public:
   MaterialBuilder(const aiScene* scene, const std::string& path, Mesh& mesh,
                   std::vector<std::string>& warnings)
-      : scene_(scene), path_(path), dir_(fs::path(path).parent_path()), mesh_(mesh),
+      : scene_(scene),
+        path_(path),
+        dir_(fs::path(path).parent_path()),
+        mesh_(mesh),
         warnings_(warnings) {}
 
   int build(const aiMaterial* in) {
@@ -75,7 +78,8 @@ class MaterialBuilder {
       Image8 img;
       if (const aiTexture* emb = scene_->GetEmbeddedTexture(ref.c_str())) {
         if (emb->mHeight == 0) {  // compressed (png/jpg) bytes
-          img = decodeImage8(emb->pcData, emb->mWidth, path_ + ":" + ref + "." + emb->achFormatHint);
+          img =
+              decodeImage8(emb->pcData, emb->mWidth, path_ + ":" + ref + "." + emb->achFormatHint);
         } else {  // raw BGRA texels
           img = Image8(emb->mWidth, emb->mHeight, 3);
           for (size_t i = 0; i < size_t(emb->mWidth) * emb->mHeight; ++i) {
@@ -86,7 +90,8 @@ class MaterialBuilder {
         }
       } else {
         std::string rel = ref;
-        for (auto& c : rel) if (c == '\\') c = '/';
+        for (auto& c : rel)
+          if (c == '\\') c = '/';
         img = readImage8((dir_ / rel).string());
       }
       t.width = img.width;
@@ -130,7 +135,8 @@ void appendNode(const aiScene* scene, const aiNode* node, const aiMatrix4x4& par
         const aiColor4D& c = m->mColors[0][i];
         Eigen::Vector3f rgb = Eigen::Vector3f(c.r, c.g, c.b).cwiseMax(0.0f).cwiseMin(1.0f);
         if (!linearVertexColors)
-          rgb = Eigen::Vector3f(srgbToLinear(rgb.x()), srgbToLinear(rgb.y()), srgbToLinear(rgb.z()));
+          rgb =
+              Eigen::Vector3f(srgbToLinear(rgb.x()), srgbToLinear(rgb.y()), srgbToLinear(rgb.z()));
         out.colors.push_back(rgb);
       } else {
         out.colors.emplace_back(1.0f, 1.0f, 1.0f);
@@ -167,9 +173,10 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
                           "' (glb, gltf, obj, ply, fbx, dae, ifc, ... are supported)");
 
   Assimp::Importer importer;
-  const unsigned flags = aiProcess_Triangulate | aiProcess_SortByPType |
-                         aiProcess_ValidateDataStructure;
-  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  const unsigned flags =
+      aiProcess_Triangulate | aiProcess_SortByPType | aiProcess_ValidateDataStructure;
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
+                              aiPrimitiveType_POINT | aiPrimitiveType_LINE);
   const aiScene* scene = nullptr;
   try {
     scene = importer.ReadFile(path, flags);

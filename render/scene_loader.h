@@ -19,9 +19,9 @@ Eigen::Vector3f upVector(UpAxis up);
 
 struct LoadOptions {
   UpAxis up = UpAxis::Y;
-  double scale = 1.0;                    // multiplies every position (file units -> metres)
-  size_t maxTriangles = 50'000'000;      // refuse larger scenes instead of exhausting memory
-  uint64_t maxFileBytes = 4ull << 30;    // refuse larger files
+  double scale = 1.0;                  // multiplies every position (file units -> metres)
+  size_t maxTriangles = 50'000'000;    // refuse larger scenes instead of exhausting memory
+  uint64_t maxFileBytes = 4ull << 30;  // refuse larger files
 };
 
 struct Scene {

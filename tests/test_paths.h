@@ -8,7 +8,9 @@
 
 namespace paircast::testing {
 
-inline std::string sourceDir() { return PAIRCAST_SOURCE_DIR; }
+inline std::string sourceDir() {
+  return PAIRCAST_SOURCE_DIR;
+}
 
 // ../shared/scenes beside the checkout, or "" when it is absent (tests then skip).
 inline std::string sharedScenesDir() {

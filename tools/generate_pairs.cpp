@@ -11,27 +11,38 @@ int main(int argc, char** argv) {
   GenerateConfig cfg;
   std::string up = "y", format = "shards", normalize = "valid";
   CLI::App app{"Render CroCo pre-training pairs (co-visibility in a band) from mesh scenes"};
-  app.add_option("--scenes", cfg.scenes, "Scene files, folders (searched recursively) or .txt lists")
+  app.add_option("--scenes", cfg.scenes,
+                 "Scene files, folders (searched recursively) or .txt lists")
       ->required();
   app.add_option("--out", cfg.out, "Output folder")->required();
   app.add_option("--pairs-per-scene", cfg.pairsPerScene, "Pairs to make in each scene")
       ->check(CLI::Range(1, 100000000));
   app.add_option("--resolution", cfg.pair.resolution, "Image width and height, pixels")
       ->check(CLI::Range(16, 4096));
-  app.add_option("--hfov", cfg.pair.hfov, "Horizontal field of view, degrees")->check(CLI::Range(1.0, 179.0));
-  app.add_option("--min-covis", cfg.pair.minCovis, "Keep pairs with covis >= this")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--max-covis", cfg.pair.maxCovis, "Keep pairs with covis <= this")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--covis-normalize", normalize,
-                 "valid: divide by valid pixels (the paper); all: by all pixels (CroCo's generator)")
+  app.add_option("--hfov", cfg.pair.hfov, "Horizontal field of view, degrees")
+      ->check(CLI::Range(1.0, 179.0));
+  app.add_option("--min-covis", cfg.pair.minCovis, "Keep pairs with covis >= this")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--max-covis", cfg.pair.maxCovis, "Keep pairs with covis <= this")
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option(
+         "--covis-normalize", normalize,
+         "valid: divide by valid pixels (the paper); all: by all pixels (CroCo's generator)")
       ->check(CLI::IsMember({"valid", "all"}));
   app.add_option("--up", up, "Up axis of the scenes: y or z")->check(CLI::IsMember({"y", "z"}));
   app.add_option("--scale", cfg.load.scale, "Multiply scene positions by this (to metres)");
-  app.add_flag("--save-depth", cfg.saveDepth, "Also write z-depth EXR (and camera JSON in croco layout)");
-  app.add_option("--seed", cfg.seed, "Random seed; the output depends only on it and the arguments");
-  app.add_option("--jobs", cfg.jobs, "Worker threads (default: all cores)")->check(CLI::Range(0, 1024));
-  app.add_option("--format", format, "shards, croco or both")->check(CLI::IsMember({"shards", "croco", "both"}));
-  app.add_option("--shard-size", cfg.shardSize, "Pairs per tar shard")->check(CLI::Range(1, 10000000));
-  app.add_option("--shard-index", cfg.shardIndex, "This machine's part of the scene list (0-based)");
+  app.add_flag("--save-depth", cfg.saveDepth,
+               "Also write z-depth EXR (and camera JSON in croco layout)");
+  app.add_option("--seed", cfg.seed,
+                 "Random seed; the output depends only on it and the arguments");
+  app.add_option("--jobs", cfg.jobs, "Worker threads (default: all cores)")
+      ->check(CLI::Range(0, 1024));
+  app.add_option("--format", format, "shards, croco or both")
+      ->check(CLI::IsMember({"shards", "croco", "both"}));
+  app.add_option("--shard-size", cfg.shardSize, "Pairs per tar shard")
+      ->check(CLI::Range(1, 10000000));
+  app.add_option("--shard-index", cfg.shardIndex,
+                 "This machine's part of the scene list (0-based)");
   app.add_option("--num-shards", cfg.numShards, "Number of parts the scene list is split into")
       ->check(CLI::Range(1, 100000));
   app.add_option("--jpeg-quality", cfg.jpegQuality, "JPEG quality")->check(CLI::Range(1, 100));
@@ -47,9 +58,11 @@ int main(int argc, char** argv) {
     cfg.load.up = parseUpAxis(up);
     cfg.shards = format != "croco";
     cfg.croco = format != "shards";
-    cfg.pair.covis.normalize = normalize == "all" ? CovisOptions::Normalize::All : CovisOptions::Normalize::Valid;
+    cfg.pair.covis.normalize =
+        normalize == "all" ? CovisOptions::Normalize::All : CovisOptions::Normalize::Valid;
     cfg.progress = !quiet;
-    if (cfg.pair.minCovis > cfg.pair.maxCovis) throw Error("--min-covis must not exceed --max-covis");
+    if (cfg.pair.minCovis > cfg.pair.maxCovis)
+      throw Error("--min-covis must not exceed --max-covis");
     const nlohmann::json summary = runGenerate(cfg);
     std::printf("%s\n", summary.dump().c_str());
     return 0;

@@ -17,11 +17,13 @@ int main(int argc, char** argv) {
   return runTool("make_scenes", app, argc, argv, [&] {
     for (const LayoutSpec& layout : shippedLayouts()) {
       if (list) {
-        std::printf("%s: %zu rooms, %zu doors\n", layout.name.c_str(), layout.rooms.size(), layout.doors.size());
+        std::printf("%s: %zu rooms, %zu doors\n", layout.name.c_str(), layout.rooms.size(),
+                    layout.doors.size());
         continue;
       }
       const Mesh mesh = buildLayout(layout);
-      const std::string path = (std::filesystem::path(out) / layout.name / (layout.name + ".obj")).string();
+      const std::string path =
+          (std::filesystem::path(out) / layout.name / (layout.name + ".obj")).string();
       writeObj(path, mesh);
       std::printf("%s: %s\n", path.c_str(), computeStats(mesh).summary().c_str());
     }

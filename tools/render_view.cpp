@@ -33,7 +33,8 @@ int run(const Args& a) {
   load.up = parseUpAxis(a.up);
   load.scale = a.scale;
   Scene scene = loadScene(a.scene, load);
-  for (const auto& w : scene.warnings) std::fprintf(stderr, "render_view: warning: %s\n", w.c_str());
+  for (const auto& w : scene.warnings)
+    std::fprintf(stderr, "render_view: warning: %s\n", w.c_str());
   std::printf("%s: %s\n", a.scene.c_str(), computeStats(scene.mesh).summary().c_str());
   RayCaster caster(scene.mesh);
   RenderOptions options;
@@ -77,14 +78,16 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("--up", a.up, "Up axis of the scene: y or z")->check(CLI::IsMember({"y", "z"}));
   app.add_option("--scale", a.scale, "Multiply positions by this (file units to metres)");
-  auto* cam = app.add_option("--camera", a.camera, "Camera JSON (CroCo's camera_params keys + width, height)");
+  auto* cam = app.add_option("--camera", a.camera,
+                             "Camera JSON (CroCo's camera_params keys + width, height)");
   app.add_option("--rgb", a.rgb, "Output RGB (.png or .jpg)");
   app.add_option("--depth", a.depth, "Output z-depth (.exr, float32, 0 on a miss)");
   app.add_option("--normals", a.normals, "Output world normals (.exr)");
   auto* rnd = app.add_option("--random", a.random, "Render N random views inside the scene")
-      ->check(CLI::Range(1, 1000000));
+                  ->check(CLI::Range(1, 1000000));
   app.add_option("--out", a.out, "Output folder for --random");
-  app.add_option("--resolution", a.resolution, "Image size for --random")->check(CLI::Range(8, 8192));
+  app.add_option("--resolution", a.resolution, "Image size for --random")
+      ->check(CLI::Range(8, 8192));
   app.add_option("--hfov", a.hfov, "Horizontal field of view for --random, degrees")
       ->check(CLI::Range(1.0, 179.0));
   app.add_option("--seed", a.seed, "Random seed for --random");

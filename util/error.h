@@ -24,16 +24,16 @@ class Error : public std::runtime_error {
 
 }  // namespace paircast
 
-#define PAIRCAST_CHECK(cond)                                                 \
-  do {                                                                       \
-    if (!(cond)) ::paircast::checkFailed(__FILE__, __LINE__, #cond, "");    \
+#define PAIRCAST_CHECK(cond)                                             \
+  do {                                                                   \
+    if (!(cond)) ::paircast::checkFailed(__FILE__, __LINE__, #cond, ""); \
   } while (0)
 
-#define PAIRCAST_CHECK_MSG(cond, msg)                                        \
-  do {                                                                       \
-    if (!(cond)) {                                                           \
-      std::ostringstream paircast_check_os_;                                 \
-      paircast_check_os_ << msg;                                             \
+#define PAIRCAST_CHECK_MSG(cond, msg)                                               \
+  do {                                                                              \
+    if (!(cond)) {                                                                  \
+      std::ostringstream paircast_check_os_;                                        \
+      paircast_check_os_ << msg;                                                    \
       ::paircast::checkFailed(__FILE__, __LINE__, #cond, paircast_check_os_.str()); \
-    }                                                                        \
+    }                                                                               \
   } while (0)

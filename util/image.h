@@ -14,8 +14,8 @@ struct Image {
   std::vector<T> data;  // [H, W, C]
 
   Image() = default;
-  Image(int w, int h, int c, T fill = T()) : width(w), height(h), channels(c),
-      data(static_cast<size_t>(w) * h * c, fill) {}
+  Image(int w, int h, int c, T fill = T())
+      : width(w), height(h), channels(c), data(static_cast<size_t>(w) * h * c, fill) {}
   void resize(int w, int h, int c) {
     width = w;
     height = h;

@@ -108,20 +108,24 @@ void writeImage(const std::string& path, const Image8& image, int jpegQuality) {
   if (ext != "png" && ext != "jpg" && ext != "jpeg")
     throw Error(path, "unsupported image extension (use .png, .jpg or .jpeg)");
   auto bytes = encodeImage(image, ext, jpegQuality);
-  writeFileAtomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  writeFileAtomic(path,
+                  std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
 }
 
 void writeExr(const std::string& path, const ImageF& image, bool half) {
   if (lowerExt(path) != "exr") throw Error(path, "float maps are written as .exr");
   auto bytes = encodeExr(image, half);
-  writeFileAtomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  writeFileAtomic(path,
+                  std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
 }
 
 Image8 readImage8(const std::string& path, int channels) {
   return readFileImage<uint8_t>(path, channels);
 }
 
-ImageF readImageF(const std::string& path) { return readFileImage<float>(path, 0); }
+ImageF readImageF(const std::string& path) {
+  return readFileImage<float>(path, 0);
+}
 
 Image8 decodeImage8(const void* data, size_t size, const std::string& name, int channels) {
   return readMemImage<uint8_t>(data, size, name, channels);

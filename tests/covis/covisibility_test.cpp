@@ -9,7 +9,9 @@
 namespace paircast {
 namespace {
 
-ImageF constantDepth(int w, int h, float z) { return ImageF(w, h, 1, z); }
+ImageF constantDepth(int w, int h, float z) {
+  return ImageF(w, h, 1, z);
+}
 
 Camera cameraAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, int size = 64,
                 double hfov = 90.0) {
@@ -125,13 +127,15 @@ TEST(Covisibility, SwappingViewsSwapsTheDirections) {
   for (int i = 0; i < 30; ++i) {
     const Eigen::Vector3d e1(rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(-2, 2));
     const Eigen::Vector3d e2(rng.uniform(-2, 2), rng.uniform(-2, 2), rng.uniform(-2, 2));
-    if ((e1.cwiseAbs().maxCoeff() < 0.7) || (e2.cwiseAbs().maxCoeff() < 0.7)) continue;  // inside the box
+    if ((e1.cwiseAbs().maxCoeff() < 0.7) || (e2.cwiseAbs().maxCoeff() < 0.7))
+      continue;  // inside the box
     const Eigen::Vector3d t(rng.normal(), rng.normal(), rng.normal());
     const Camera a = cameraAt(e1, t, 48, 60), b = cameraAt(e2, t, 48, 60);
     ImageF da, db;
     caster.renderDepth(a, da);
     caster.renderDepth(b, db);
-    const CovisResult ab = computeCovisibility(a, da, b, db), ba = computeCovisibility(b, db, a, da);
+    const CovisResult ab = computeCovisibility(a, da, b, db),
+                      ba = computeCovisibility(b, db, a, da);
     EXPECT_DOUBLE_EQ(ab.v_ij, ba.v_ji);
     EXPECT_DOUBLE_EQ(ab.v_ji, ba.v_ij);
     EXPECT_DOUBLE_EQ(ab.covis, ba.covis);

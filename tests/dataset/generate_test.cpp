@@ -1,9 +1,9 @@
 #include "dataset/generate_job.h"
 
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
-#include <fcntl.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -70,7 +70,8 @@ TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
     const double covis = s.record["covis"];
     EXPECT_GE(covis, 0.4);
     EXPECT_LE(covis, 0.7);
-    EXPECT_DOUBLE_EQ(covis, std::min(s.record["v_ij"].get<double>(), s.record["v_ji"].get<double>()));
+    EXPECT_DOUBLE_EQ(covis,
+                     std::min(s.record["v_ij"].get<double>(), s.record["v_ji"].get<double>()));
     // Cameras stand 1.2 to 1.8 m above the floor (y = 0).
     for (const char* cam : {"camera1", "camera2"}) {
       const Camera camera = cameraFromJson(s.record[cam], "record");
@@ -114,7 +115,8 @@ TEST(GeneratePairs, CrocoLayoutHasTheOfficialNamesAndKeys) {
     ASSERT_TRUE(mv.contains(key)) << key;
   EXPECT_EQ(mv["orientations"][0].size(), 4u);  // wxyz
   EXPECT_EQ(mv["pairwise_visibility_ratios"].size(), 2u);
-  EXPECT_DOUBLE_EQ(mv["pairwise_visibility_ratios"][0][0].get<double>(), mv["valid_fractions"][0].get<double>());
+  EXPECT_DOUBLE_EQ(mv["pairwise_visibility_ratios"][0][0].get<double>(),
+                   mv["valid_fractions"][0].get<double>());
   // pairs.txt: one "im1 im2" line per pair, relative to the output folder.
   std::ifstream pairs(out + "/pairs.txt");
   std::string a, b;
@@ -150,8 +152,13 @@ TEST(GeneratePairs, ShardsReadBackAndGnuTarListsThem) {
   const std::string listing = dir + "/list.txt";
   ASSERT_EQ(std::system(("tar -tf " + dir + "/out/pairs-000000.tar > " + listing).c_str()), 0);
   const std::string text = readFile(listing);
-  EXPECT_NE(text.find("room-00000000.1.jpg\nroom-00000000.2.jpg\nroom-00000000.json\n"), std::string::npos) << text;
-  ASSERT_EQ(std::system(("mkdir -p " + dir + "/x && tar -xf " + dir + "/out/pairs-000000.tar -C " + dir + "/x").c_str()), 0);
+  EXPECT_NE(text.find("room-00000000.1.jpg\nroom-00000000.2.jpg\nroom-00000000.json\n"),
+            std::string::npos)
+      << text;
+  ASSERT_EQ(std::system(("mkdir -p " + dir + "/x && tar -xf " + dir + "/out/pairs-000000.tar -C " +
+                         dir + "/x")
+                            .c_str()),
+            0);
   EXPECT_TRUE(fs::exists(dir + "/x/room-00000003.json"));
 }
 
@@ -240,9 +247,16 @@ TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {
   const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/generate_pairs";
   ASSERT_TRUE(fs::exists(tool));
   auto args = [&](const std::string& out) {
-    return std::vector<std::string>{tool, "--scenes", room, "--out", out, "--pairs-per-scene", "40",
-                                    "--resolution", "64", "--shard-size", "7", "--format", "both",
-                                    "--save-depth", "--seed", "3", "--jobs", "2", "--quiet"};
+    return std::vector<std::string>{tool,     "--scenes",
+                                    room,     "--out",
+                                    out,      "--pairs-per-scene",
+                                    "40",     "--resolution",
+                                    "64",     "--shard-size",
+                                    "7",      "--format",
+                                    "both",   "--save-depth",
+                                    "--seed", "3",
+                                    "--jobs", "2",
+                                    "--quiet"};
   };
   ASSERT_EQ(runCommand(args(dir + "/clean"), -1), 0);
   // Kill the second run at several points, resuming each time, then let it finish.

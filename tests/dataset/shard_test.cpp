@@ -52,7 +52,8 @@ TEST(Shard, RoundTrip) {
   const Camera c = cameraFromJson(got[1].record["camera2"], "rec");
   EXPECT_DOUBLE_EQ(c.t_cam2world.z(), 1.0);
   EXPECT_FALSE(got[0].depthExr[1].empty());
-  EXPECT_EQ(shardKeys(path), (std::vector<std::string>{"my_scene-00000000", "my_scene-00000001", "my_scene-00000002"}));
+  EXPECT_EQ(shardKeys(path), (std::vector<std::string>{"my_scene-00000000", "my_scene-00000001",
+                                                       "my_scene-00000002"}));
 }
 
 TEST(Shard, UnclosedWriterLeavesNothing) {
@@ -83,7 +84,8 @@ TEST(Shard, TruncatedShardDeliversWhatPrecedesTheDamageThenFails) {
 }
 
 // Writes a tar with hand-made entries, for the malformed cases.
-void writeRawTar(const std::string& path, const std::vector<std::pair<std::string, std::string>>& files,
+void writeRawTar(const std::string& path,
+                 const std::vector<std::pair<std::string, std::string>>& files,
                  const std::string& symlink = "") {
   archive* a = archive_write_new();
   archive_write_set_format_ustar(a);
@@ -114,15 +116,24 @@ TEST(Shard, MalformedSamplesAndUnsafeEntriesAreSkippedAndReported) {
   const std::string dir = testing::scratchDir("bad");
   const std::string good = encodePair(fakePair(0, false), false, 90).record.dump();
   writeRawTar(dir + "/bad.tar",
-              {{"a-1.1.jpg", "x"}, {"a-1.2.jpg", "y"}, {"a-1.json", "{not json"},          // bad JSON
-               {"b-1.1.jpg", "x"}, {"b-1.json", good},                                     // missing member
-               {"../evil.1.jpg", "x"}, {"/abs.2.jpg", "x"},                                // unsafe paths
-               {"c-1.1.jpg", "x"}, {"c-1.2.jpg", "y"}, {"c-1.json", R"({"paircast_shard_version": 99})"},
-               {"d-1.1.jpg", "x"}, {"d-1.2.jpg", "y"}, {"d-1.json", good}},
+              {{"a-1.1.jpg", "x"},
+               {"a-1.2.jpg", "y"},
+               {"a-1.json", "{not json"},  // bad JSON
+               {"b-1.1.jpg", "x"},
+               {"b-1.json", good},  // missing member
+               {"../evil.1.jpg", "x"},
+               {"/abs.2.jpg", "x"},  // unsafe paths
+               {"c-1.1.jpg", "x"},
+               {"c-1.2.jpg", "y"},
+               {"c-1.json", R"({"paircast_shard_version": 99})"},
+               {"d-1.1.jpg", "x"},
+               {"d-1.2.jpg", "y"},
+               {"d-1.json", good}},
               "e-1.1.jpg");
   std::vector<std::string> keys, errors;
-  readShard(dir + "/bad.tar", [&](ShardSample&& s) { keys.push_back(s.key); },
-            [&](const std::string& e) { errors.push_back(e); });
+  readShard(
+      dir + "/bad.tar", [&](ShardSample&& s) { keys.push_back(s.key); },
+      [&](const std::string& e) { errors.push_back(e); });
   EXPECT_EQ(keys, std::vector<std::string>{"d-1"});
   std::string all;
   for (const auto& e : errors) all += e + "\n";
@@ -140,7 +151,8 @@ TEST(Shard, OversizedEntriesAreRefusedBeforeAllocation) {
   ShardReadOptions small;
   small.maxEntryBytes = 100;  // the JPEGs are larger
   std::vector<std::string> errors;
-  const size_t n = readShard(path, [](ShardSample&&) {}, [&](const std::string& e) { errors.push_back(e); }, small);
+  const size_t n = readShard(
+      path, [](ShardSample&&) {}, [&](const std::string& e) { errors.push_back(e); }, small);
   EXPECT_EQ(n, 0u);
   EXPECT_FALSE(errors.empty());
 }

@@ -66,7 +66,7 @@ TEST(Camera, LookAtIsARotationForRandomPoses) {
     EXPECT_NEAR(R.determinant(), 1.0, 1e-9);
     EXPECT_TRUE(R.col(2).isApprox((target - eye).normalized()));
     EXPECT_NEAR(R.col(0).dot(Eigen::Vector3d::UnitY()), 0.0, 1e-9);  // level: no roll
-    EXPECT_LT(R.col(1).dot(Eigen::Vector3d::UnitY()), 0.0);            // image down is world down
+    EXPECT_LT(R.col(1).dot(Eigen::Vector3d::UnitY()), 0.0);          // image down is world down
   }
 }
 

@@ -61,7 +61,9 @@ TEST(RayCaster, TiltedPlaneDepthMatchesAnalyticZDepth) {
   Mesh mesh;
   int mat = mesh.addMaterial(Material{});
   const Eigen::Vector3d a = n.unitOrthogonal(), b = n.cross(a), p0 = c * n;
-  auto corner = [&](double s, double t) { return (p0 + 500 * s * a + 500 * t * b).cast<float>().eval(); };
+  auto corner = [&](double s, double t) {
+    return (p0 + 500 * s * a + 500 * t * b).cast<float>().eval();
+  };
   mesh.addTriangle(corner(-1, -1), corner(1, -1), corner(1, 1), mat);
   mesh.addTriangle(corner(-1, -1), corner(1, 1), corner(-1, 1), mat);
   RayCaster caster(mesh);
@@ -181,7 +183,8 @@ TEST(RayCaster, TexturedQuadShowsTextureColours) {
   Frame frame;
   caster.render(cam, opt, frame);
   // Project each quadrant's centre and compare.
-  const Eigen::Vector3d centres[4] = {{-0.5, 0.5, 1}, {0.5, 0.5, 1}, {-0.5, -0.5, 1}, {0.5, -0.5, 1}};
+  const Eigen::Vector3d centres[4] = {
+      {-0.5, 0.5, 1}, {0.5, 0.5, 1}, {-0.5, -0.5, 1}, {0.5, -0.5, 1}};
   for (int q = 0; q < 4; ++q) {
     const Eigen::Vector2d px = cam.project(cam.cameraFromWorld() * centres[q]);
     const uint8_t* rgb = frame.rgb.pixel(static_cast<int>(px.x()), static_cast<int>(px.y()));

@@ -2,8 +2,8 @@
 
 #include <gtest/gtest.h>
 
-#include <assimp/Exporter.hpp>
 #include <assimp/scene.h>
+#include <assimp/Exporter.hpp>
 #include <filesystem>
 #include <fstream>
 
@@ -25,7 +25,7 @@ std::unique_ptr<aiScene> makeAssimpScene() {
   auto* child = new aiNode("child");
   child->mTransformation = aiMatrix4x4(1, 0, 0, 10, 0, 1, 0, 20, 0, 0, 1, 30, 0, 0, 0, 1);
   child->mParent = scene->mRootNode;
-  scene->mRootNode->mChildren = new aiNode*[1]{child};
+  scene->mRootNode->mChildren = new aiNode* [1] { child };
   scene->mRootNode->mNumChildren = 1;
   child->mMeshes = new unsigned[1]{0};
   child->mNumMeshes = 1;
@@ -54,7 +54,7 @@ std::unique_ptr<aiScene> makeAssimpScene() {
     mesh->mFaces[f].mIndices = new unsigned[3]{tris[f][0], tris[f][1], tris[f][2]};
   }
   mesh->mMaterialIndex = 0;
-  scene->mMeshes = new aiMesh*[1]{mesh};
+  scene->mMeshes = new aiMesh* [1] { mesh };
   scene->mNumMeshes = 1;
   return scene;
 }
@@ -93,14 +93,12 @@ TEST_P(SceneFormat, LoadsWithNodeTransformsAndMaterial) {
   expectTranslatedQuad(loadScene(path), formatId, ext != "ply");
 }
 
-INSTANTIATE_TEST_SUITE_P(Assimp, SceneFormat,
-                         ::testing::Values(std::make_pair("glb2", "glb"),
-                                           std::make_pair("gltf2", "gltf"),
-                                           std::make_pair("collada", "dae"),
-                                           std::make_pair("fbxa", "fbx"),
-                                           std::make_pair("obj", "obj"),
-                                           std::make_pair("ply", "ply")),
-                         [](const auto& info) { return info.param.second; });
+INSTANTIATE_TEST_SUITE_P(
+    Assimp, SceneFormat,
+    ::testing::Values(std::make_pair("glb2", "glb"), std::make_pair("gltf2", "gltf"),
+                      std::make_pair("collada", "dae"), std::make_pair("fbxa", "fbx"),
+                      std::make_pair("obj", "obj"), std::make_pair("ply", "ply")),
+    [](const auto& info) { return info.param.second; });
 
 TEST(SceneLoader, ObjWithMtlAndTexture) {
   const std::string dir = testing::scratchDir("obj");
