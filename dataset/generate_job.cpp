@@ -1,6 +1,7 @@
 #include "dataset/generate_job.h"
 
 #include <omp.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -101,23 +102,23 @@ void removeTemporaries(const std::string& dir) {
 class ProgressLine {
  public:
   ProgressLine(bool enabled, size_t total)
-      : enabled_(enabled), total_(total), start_(Clock::now()) {}
+      : enabled_(enabled), tty_(isatty(2)), total_(total), start_(Clock::now()) {}
+  // On a terminal the line is redrawn twice a second; in a log, one line every 10 s.
   void update(size_t done, size_t accepted, size_t candidates, bool force = false) {
-    if (!enabled_ || (!force && since(last_) < 0.5)) return;
+    if (!enabled_ || (!force && since(last_) < (tty_ ? 0.5 : 10.0))) return;
     last_ = Clock::now();
     const double t = since(start_);
     const double rate = done / std::max(t, 1e-9);
     const double eta = rate > 0 ? (total_ - done) / rate : 0;
     std::fprintf(
-        stderr,
-        "\r[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds   ", done,
-        total_, accepted / std::max(t, 1e-9), candidates ? 100.0 * accepted / candidates : 0.0,
-        static_cast<int>(eta) / 60, static_cast<int>(eta) % 60);
-    if (force) std::fprintf(stderr, "\n");
+        stderr, "%s[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds%s",
+        tty_ ? "\r" : "", done, total_, accepted / std::max(t, 1e-9),
+        candidates ? 100.0 * accepted / candidates : 0.0, static_cast<int>(eta) / 60,
+        static_cast<int>(eta) % 60, tty_ && !force ? "   " : "\n");
   }
 
  private:
-  bool enabled_;
+  bool enabled_, tty_;
   size_t total_;
   Clock::time_point start_, last_{};
 };
