@@ -1,0 +1,55 @@
+// Checkpoints that Python's torch.load reads, and a loader for ours and the official CroCo
+// .pth files. Files from Python's torch.save are zip archives (data.pkl plus one record per
+// storage) whose state_dict is a collections.OrderedDict, which LibTorch 1.13's unpickler turns
+// into None; so data.pkl is read here by a small pickle reader that only builds values (dicts,
+// lists, tuples, numbers, strings, tensors) and never runs code: an unknown class becomes an
+// inert placeholder holding its state.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "model/croco_config.h"
+#include "model/croco_net.h"
+
+namespace paircast {
+
+struct Checkpoint {
+  std::map<std::string, torch::Tensor> model;  // the state_dict
+  nlohmann::json args;                         // hyper-parameters, when the file has them as a dict
+  bool hasArgs = false;
+  int64_t epoch = -1;
+  // Other tensor-valued entries (optimizer state etc.), flattened as "optimizer/state/3/exp_avg".
+  std::map<std::string, torch::Tensor> extraTensors;
+  nlohmann::json extra;  // other scalar entries (step, data position, ...)
+};
+
+// Writes {'model': state_dict, 'args': {...}, 'epoch': e, ...extra} atomically (temp + rename).
+// `extraTensors` keys "a/b" become nested dicts {'a': {'b': tensor}}.
+void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
+                    const nlohmann::json& extra = nlohmann::json::object(),
+                    const std::map<std::string, torch::Tensor>& extraTensors = {});
+
+// Reads our files and official ones (a plain state_dict, or {'model': ...}). Throws
+// paircast::Error naming the file (and the key, when one is at fault).
+Checkpoint loadCheckpoint(const std::string& path);
+
+// Copies `state` into `model` strictly: every key present, none unexpected, shapes equal.
+// The error lists the missing and unexpected keys and the shape mismatches.
+void loadStateDictStrict(CroCoNet& model, const std::map<std::string, torch::Tensor>& state,
+                         const std::string& source);
+
+// The model's state_dict with the official names.
+std::map<std::string, torch::Tensor> stateDict(CroCoNet& model);
+
+// The configuration a checkpoint's tensors imply, for files without args: widths, depths,
+// patch and image size from the shapes; head counts cannot be read from shapes and come from
+// `heads` (enc, dec). Used to check flags against a foreign checkpoint.
+void checkConfigAgainstState(const CroCoConfig& config,
+                             const std::map<std::string, torch::Tensor>& state,
+                             const std::string& source);
+
+}  // namespace paircast

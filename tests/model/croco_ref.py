@@ -1,0 +1,133 @@
+#!/usr/bin/env python3
+"""An independent CroCo forward pass in plain PyTorch, written from the formulas (not from
+naver/croco's code), used by the tests and by bench_model to check paircast's LibTorch model.
+
+  croco_ref.py forward CKPT INPUTS OUT   # OUT <- OrderedDict(pred=..., loss=...)
+  croco_ref.py bench --preset tiny --batch 8 --threads 2 [--croco-dir DIR]
+
+CKPT is a paircast checkpoint ({'model': state_dict, 'args': {...}}); INPUTS a dict with img1,
+img2 [B,3,S,S] and mask [B,N] bool.
+"""
+import argparse
+import collections
+import math
+import sys
+import time
+
+import torch
+import torch.nn.functional as F
+
+
+def layer_norm(x, sd, name):
+    return F.layer_norm(x, x.shape[-1:], sd[name + ".weight"], sd[name + ".bias"], eps=1e-6)
+
+
+def linear(x, sd, name):
+    return F.linear(x, sd[name + ".weight"], sd[name + ".bias"])
+
+
+def heads_split(x, h):
+    b, n, c = x.shape
+    return x.reshape(b, n, h, c // h).permute(0, 2, 1, 3)
+
+
+def attend(q, k, v):
+    a = torch.softmax(q @ k.transpose(-2, -1) / math.sqrt(q.shape[-1]), dim=-1)
+    b, h, n, d = q.shape
+    return (a @ v).transpose(1, 2).reshape(b, n, h * d)
+
+
+def self_attention(x, sd, name, h):
+    b, n, c = x.shape
+    qkv = linear(x, sd, name + ".qkv").reshape(b, n, 3, h, c // h).permute(2, 0, 3, 1, 4)
+    return linear(attend(qkv[0], qkv[1], qkv[2]), sd, name + ".proj")
+
+
+def cross_attention(x, y, sd, name, h):
+    q = heads_split(linear(x, sd, name + ".projq"), h)
+    k = heads_split(linear(y, sd, name + ".projk"), h)
+    v = heads_split(linear(y, sd, name + ".projv"), h)
+    return linear(attend(q, k, v), sd, name + ".proj")
+
+
+def mlp(x, sd, name):
+    return linear(F.gelu(linear(x, sd, name + ".fc1")), sd, name + ".fc2")
+
+
+def block(x, sd, name, h):
+    x = x + self_attention(layer_norm(x, sd, name + ".norm1"), sd, name + ".attn", h)
+    return x + mlp(layer_norm(x, sd, name + ".norm2"), sd, name + ".mlp")
+
+
+def patchify(img, p):
+    b, c, s, _ = img.shape
+    g = s // p
+    return img.reshape(b, c, g, p, g, p).permute(0, 2, 4, 3, 5, 1).reshape(b, g * g, p * p * c)
+
+
+def forward(sd, a, img1, img2, mask):
+    p = a["patch_size"]
+
+    def encode(img, m):
+        x = F.conv2d(img, sd["patch_embed.proj.weight"], sd["patch_embed.proj.bias"], stride=p)
+        x = x.flatten(2).transpose(1, 2) + sd["enc_pos_embed"][None]
+        b, n, c = x.shape
+        if m is not None:
+            x = x[~m].reshape(b, -1, c)
+        for i in range(a["enc_depth"]):
+            x = block(x, sd, f"enc_blocks.{i}", a["enc_num_heads"])
+        return layer_norm(x, sd, "enc_norm")
+
+    f1 = linear(encode(img1, mask), sd, "decoder_embed")
+    f2 = linear(encode(img2, None), sd, "decoder_embed")
+    b, n = mask.shape
+    full = sd["mask_token"].repeat(b, n, 1)
+    full[~mask] = f1.reshape(-1, f1.shape[-1])
+    x, y = full + sd["dec_pos_embed"], f2 + sd["dec_pos_embed"]
+    h = a["dec_num_heads"]
+    for i in range(a["dec_depth"]):
+        nm = f"dec_blocks.{i}"
+        x = x + self_attention(layer_norm(x, sd, nm + ".norm1"), sd, nm + ".attn", h)
+        mem = layer_norm(y, sd, nm + ".norm_y") if (nm + ".norm_y.weight") in sd else y
+        x = x + cross_attention(layer_norm(x, sd, nm + ".norm2"), mem, sd, nm + ".cross_attn", h)
+        x = x + mlp(layer_norm(x, sd, nm + ".norm3"), sd, nm + ".mlp")
+    pred = linear(layer_norm(x, sd, "dec_norm"), sd, "prediction_head")
+    target = patchify(img1, p)
+    t = (target - target.mean(-1, keepdim=True)) / (target.var(-1, keepdim=True) + 1e-6) ** 0.5
+    per = ((pred - t) ** 2).mean(-1)
+    loss = (per * mask).sum() / mask.sum()
+    return pred, loss
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    f = sub.add_parser("forward")
+    f.add_argument("ckpt")
+    f.add_argument("inputs")
+    f.add_argument("out")
+    o = sub.add_parser("officialize", help="re-save CKPT laid out as official CroCo checkpoints")
+    o.add_argument("ckpt")
+    o.add_argument("out")
+    args = ap.parse_args()
+    if args.cmd == "officialize":
+        import argparse as ap_mod
+        ck = torch.load(args.ckpt, map_location="cpu")
+        sd = collections.OrderedDict((k, v.clone()) for k, v in ck["model"].items())
+        first = next(iter(sd))
+        torch.save({"model": sd, "args": ap_mod.Namespace(**ck["args"]), "epoch": 5,
+                    "optimizer": {"state": {0: {"step": torch.tensor(3.0), "exp_avg": torch.ones(2, 2)}},
+                                  "param_groups": [{"lr": 1e-4, "params": [0]}]},
+                    "scaler": {"scale": 65536.0}}, args.out)
+        print("SUMMARY croco_ref officialize ok first=%s" % first)
+        return 0
+    ck = torch.load(args.ckpt, map_location="cpu")
+    inp = torch.load(args.inputs, map_location="cpu")
+    with torch.no_grad():
+        pred, loss = forward(ck["model"], ck["args"], inp["img1"], inp["img2"], inp["mask"])
+    torch.save(collections.OrderedDict(pred=pred, loss=loss.reshape(1)), args.out)
+    print("SUMMARY croco_ref forward ok keys=%d" % len(ck["model"]))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
