@@ -252,14 +252,15 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
     f1 = f1 + dec_pos_embed;
     f2 = f2 + dec_pos_embed;
   }
-  auto pos = positions_.to(img1.device()).unsqueeze(0).expand({B, -1, 2});
+  torch::Tensor pos;
+  if (config_.rope()) pos = positions_.to(img1.device()).unsqueeze(0).expand({B, -1, 2});
   torch::Tensor out;
   if (config_.decoder == "cross") {
     out = f1;
     for (auto& blk : *dec_blocks) out = blk->as<DecoderBlock>()->forward(out, f2, pos, pos);
   } else {
     out = torch::cat({f1 + view_embed1, f2 + view_embed2}, 1);  // [B, 2N, Dd]
-    auto pos2 = torch::cat({pos, pos}, 1);
+    auto pos2 = pos.defined() ? torch::cat({pos, pos}, 1) : pos;
     for (auto& blk : *dec_blocks) out = blk->as<Block>()->forward(out, pos2);
     out = out.narrow(1, 0, N);  // the first image's tokens
   }

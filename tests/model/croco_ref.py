@@ -99,6 +99,52 @@ def forward(sd, a, img1, img2, mask):
     return pred, loss
 
 
+PRESETS = {
+    "tiny": dict(enc_embed_dim=192, enc_depth=6, enc_num_heads=3, dec_embed_dim=128, dec_depth=2, dec_num_heads=4),
+    "small": dict(enc_embed_dim=384, enc_depth=12, enc_num_heads=6, dec_embed_dim=256, dec_depth=4, dec_num_heads=8),
+    "base": dict(enc_embed_dim=768, enc_depth=12, enc_num_heads=12, dec_embed_dim=512, dec_depth=8, dec_num_heads=16),
+}
+
+
+def bench(args):
+    """Times the official CroCoNet (from --croco-dir) at a preset: forward, forward+backward."""
+    torch.set_num_threads(args.threads)
+    if not args.croco_dir:
+        print("SUMMARY croco_ref bench skipped: no --croco-dir")
+        return 0
+    sys.path.insert(0, args.croco_dir)
+    from models.croco import CroCoNet  # noqa: E402  (the user's checkout of naver/croco)
+    from models.criterion import MaskedMSE  # noqa: E402
+    torch.manual_seed(0)
+    net = CroCoNet(**PRESETS[args.preset])
+    crit = MaskedMSE(norm_pix_loss=True)
+    img1 = torch.randn(args.batch, 3, 224, 224)
+    img2 = torch.randn(args.batch, 3, 224, 224)
+
+    def best(fn):
+        fn()
+        times = []
+        for _ in range(args.repeat):
+            t = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t)
+        return min(times)
+
+    def fwd():
+        with torch.no_grad():
+            net(img1, img2)
+
+    def fwdbwd():
+        out, mask, target = net(img1, img2)
+        loss = crit(out, mask, target)
+        net.zero_grad()
+        loss.backward()
+
+    print("SUMMARY croco_ref bench preset=%s batch=%d threads=%d forward_s=%.4f train_s=%.4f"
+          % (args.preset, args.batch, args.threads, best(fwd), best(fwdbwd)))
+    return 0
+
+
 def main():
     ap = argparse.ArgumentParser()
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -106,10 +152,18 @@ def main():
     f.add_argument("ckpt")
     f.add_argument("inputs")
     f.add_argument("out")
+    b = sub.add_parser("bench", help="time forward and forward+backward")
+    b.add_argument("--preset", default="tiny")
+    b.add_argument("--batch", type=int, default=8)
+    b.add_argument("--threads", type=int, default=2)
+    b.add_argument("--repeat", type=int, default=3)
+    b.add_argument("--croco-dir", default="", help="a checkout of naver/croco: time its CroCoNet")
     o = sub.add_parser("officialize", help="re-save CKPT laid out as official CroCo checkpoints")
     o.add_argument("ckpt")
     o.add_argument("out")
     args = ap.parse_args()
+    if args.cmd == "bench":
+        return bench(args)
     if args.cmd == "officialize":
         import argparse as ap_mod
         ck = torch.load(args.ckpt, map_location="cpu")
