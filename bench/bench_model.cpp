@@ -3,8 +3,8 @@
 // configuration, batch and thread count (when --croco-dir names a checkout of naver/croco).
 #include <CLI/CLI.hpp>
 #include <chrono>
-#include <cstring>
 #include <cstdio>
+#include <cstring>
 #include <nlohmann/json.hpp>
 
 #include "model/croco_net.h"
@@ -27,11 +27,14 @@ double best(F&& fn, int repeat) {
   return b;
 }
 
-nlohmann::json pythonBench(const std::string& crocoDir, const std::string& preset, int batch, int threads, int repeat) {
+nlohmann::json pythonBench(const std::string& crocoDir, const std::string& preset, int batch,
+                           int threads, int repeat) {
   if (crocoDir.empty()) return {};
-  const std::string cmd = "/usr/bin/python3 " + std::string(PAIRCAST_SOURCE_DIR) + "/tests/model/croco_ref.py bench --preset " +
-                          preset + " --batch " + std::to_string(batch) + " --threads " + std::to_string(threads) +
-                          " --repeat " + std::to_string(repeat) + " --croco-dir '" + crocoDir + "' 2>/dev/null | grep ^SUMMARY";
+  const std::string cmd = "/usr/bin/python3 " + std::string(PAIRCAST_SOURCE_DIR) +
+                          "/tests/model/croco_ref.py bench --preset " + preset + " --batch " +
+                          std::to_string(batch) + " --threads " + std::to_string(threads) +
+                          " --repeat " + std::to_string(repeat) + " --croco-dir '" + crocoDir +
+                          "' 2>/dev/null | grep ^SUMMARY";
   std::string line;
   if (FILE* p = popen(cmd.c_str(), "r")) {
     char buf[1024];
@@ -41,7 +44,9 @@ nlohmann::json pythonBench(const std::string& crocoDir, const std::string& prese
   nlohmann::json out;
   for (const char* key : {"forward_s=", "train_s="}) {
     const size_t at = line.find(key);
-    if (at != std::string::npos) out[std::string(key).substr(0, std::string(key).size() - 1)] = std::stod(line.substr(at + std::strlen(key)));
+    if (at != std::string::npos)
+      out[std::string(key).substr(0, std::string(key).size() - 1)] =
+          std::stod(line.substr(at + std::strlen(key)));
   }
   return out;
 }
@@ -57,7 +62,8 @@ int main(int argc, char** argv) {
   app.add_option("--batch", batch, "Batch size");
   app.add_option("--threads", threads, "Intra-op threads (torch::set_num_threads)");
   app.add_option("--repeat", repeat, "Timed repetitions (best is kept)");
-  app.add_option("--croco-dir", crocoDir, "A checkout of naver/croco, to time its CroCoNet alongside");
+  app.add_option("--croco-dir", crocoDir,
+                 "A checkout of naver/croco, to time its CroCoNet alongside");
   CLI11_PARSE(app, argc, argv);
   torch::set_num_threads(threads);
   nlohmann::json rows = nlohmann::json::array();
@@ -68,39 +74,55 @@ int main(int argc, char** argv) {
     CroCoConfig cfg = presetConfig(preset);
     CroCoNet net(cfg);
     auto img1 = torch::randn({batch, 3, 224, 224}), img2 = torch::randn({batch, 3, 224, 224});
-    const double fwd = best([&] {
-      torch::NoGradGuard ng;
-      net->forward(img1, img2);
-    }, repeat);
-    const double train = best([&] {
-      auto out = net->forward(img1, img2);
-      auto loss = maskedMse(out.prediction, out.mask, out.target);
-      net->zero_grad();
-      loss.backward();
-    }, repeat);
+    const double fwd = best(
+        [&] {
+          torch::NoGradGuard ng;
+          net->forward(img1, img2);
+        },
+        repeat);
+    const double train = best(
+        [&] {
+          auto out = net->forward(img1, img2);
+          auto loss = maskedMse(out.prediction, out.mask, out.target);
+          net->zero_grad();
+          loss.backward();
+        },
+        repeat);
     const double flops = countFlops(cfg).flops_full * batch;
-    std::printf("%-6s ours:   forward %7.3f s (%6.1f GFLOP/s)  forward+backward %7.3f s (%6.1f GFLOP/s, 3x forward FLOPs)\n",
-                preset.c_str(), fwd, flops / fwd / 1e9, train, 3 * flops / train / 1e9);
-    nlohmann::json row = {{"preset", preset}, {"forward_s", fwd}, {"train_s", train},
-                          {"gflops_forward", flops / fwd / 1e9}, {"gflops_train", 3 * flops / train / 1e9}};
+    std::printf(
+        "%-6s ours:   forward %7.3f s (%6.1f GFLOP/s)  forward+backward %7.3f s (%6.1f GFLOP/s, 3x "
+        "forward FLOPs)\n",
+        preset.c_str(), fwd, flops / fwd / 1e9, train, 3 * flops / train / 1e9);
+    nlohmann::json row = {{"preset", preset},
+                          {"forward_s", fwd},
+                          {"train_s", train},
+                          {"gflops_forward", flops / fwd / 1e9},
+                          {"gflops_train", 3 * flops / train / 1e9}};
     // Python before and after ours, best of both: the machine's noise then hits both sides.
     nlohmann::json py = pythonBench(crocoDir, preset, batch, threads, repeat);
     const nlohmann::json& py2 = pyBefore;
     for (const char* k : {"forward_s", "train_s"})
-      if (py.contains(k) && py2.contains(k)) py[k] = std::min(py[k].get<double>(), py2[k].get<double>());
+      if (py.contains(k) && py2.contains(k))
+        py[k] = std::min(py[k].get<double>(), py2[k].get<double>());
     if (py.contains("forward_s")) {
       const double pf = py["forward_s"], pt = py["train_s"];
-      std::printf("%-6s official CroCoNet (python3-torch): forward %7.3f s  forward+backward %7.3f s  -> ours %.2fx / %.2fx\n",
-                  preset.c_str(), pf, pt, pf / fwd, pt / train);
+      std::printf(
+          "%-6s official CroCoNet (python3-torch): forward %7.3f s  forward+backward %7.3f s  -> "
+          "ours %.2fx / %.2fx\n",
+          preset.c_str(), pf, pt, pf / fwd, pt / train);
       row["official_forward_s"] = pf;
       row["official_train_s"] = pt;
       row["speedup_forward"] = pf / fwd;
       row["speedup_train"] = pt / train;
     } else {
-      std::printf("%-6s official comparison skipped (give --croco-dir DIR, a checkout of naver/croco)\n", preset.c_str());
+      std::printf(
+          "%-6s official comparison skipped (give --croco-dir DIR, a checkout of naver/croco)\n",
+          preset.c_str());
     }
     rows.push_back(row);
   }
-  std::printf("%s\n", nlohmann::json({{"batch", batch}, {"threads", threads}, {"results", rows}}).dump().c_str());
+  std::printf(
+      "%s\n",
+      nlohmann::json({{"batch", batch}, {"threads", threads}, {"results", rows}}).dump().c_str());
   return 0;
 }

@@ -59,7 +59,9 @@ int64_t params(const CroCoConfig& c) {
   const int64_t D = c.enc_embed_dim, Dd = c.dec_embed_dim, P = c.patchDim(), m = c.mlp_ratio;
   auto lin = [](int64_t in, int64_t out) { return in * out + out; };
   auto ln = [](int64_t d) { return 2 * d; };
-  auto blk = [&](int64_t d) { return ln(d) + lin(d, 3 * d) + lin(d, d) + ln(d) + lin(d, m * d) + lin(m * d, d); };
+  auto blk = [&](int64_t d) {
+    return ln(d) + lin(d, 3 * d) + lin(d, d) + ln(d) + lin(d, m * d) + lin(m * d, d);
+  };
   int64_t n = lin(P, D);  // the patch-embed conv
   n += c.enc_depth * blk(D) + ln(D);
   n += Dd + lin(D, Dd);  // mask token, decoder_embed
@@ -90,7 +92,8 @@ FlopCount countFlops(const CroCoConfig& cfg) {
   c.linear(Nv + N, D, Dd);  // decoder_embed
   c.add(2 * N, Dd);
   if (cfg.decoder == "cross") {
-    for (int i = 0; i < cfg.dec_depth; ++i) crossBlock(c, N, N, Dd, cfg.mlp_ratio, cfg.norm_im2_in_dec);
+    for (int i = 0; i < cfg.dec_depth; ++i)
+      crossBlock(c, N, N, Dd, cfg.mlp_ratio, cfg.norm_im2_in_dec);
   } else {
     c.add(2 * N, Dd);  // view embeddings
     for (int i = 0; i < cfg.dec_depth; ++i) block(c, 2 * N, Dd, cfg.mlp_ratio);

@@ -11,19 +11,28 @@
 namespace paircast {
 
 torch::Tensor imageTensor(const Image8& img, int size) {
-  auto t = torch::from_blob(const_cast<uint8_t*>(img.data.data()), {img.height, img.width, 3}, torch::kUInt8)
-               .permute({2, 0, 1}).unsqueeze(0).to(torch::kFloat32) / 255.0;
+  auto t = torch::from_blob(const_cast<uint8_t*>(img.data.data()), {img.height, img.width, 3},
+                            torch::kUInt8)
+               .permute({2, 0, 1})
+               .unsqueeze(0)
+               .to(torch::kFloat32) /
+           255.0;
   if (img.width != size || img.height != size)
-    t = torch::nn::functional::interpolate(
-        t, torch::nn::functional::InterpolateFuncOptions().size(std::vector<int64_t>{size, size})
-               .mode(torch::kBilinear).align_corners(false));
+    t = torch::nn::functional::interpolate(t, torch::nn::functional::InterpolateFuncOptions()
+                                                  .size(std::vector<int64_t>{size, size})
+                                                  .mode(torch::kBilinear)
+                                                  .align_corners(false));
   return imagenetNormalize(t);
 }
 
 namespace {
 
 Image8 toImage(const torch::Tensor& normed) {  // [1, 3, S, S] normalised -> 8-bit
-  auto t = (imagenetDenormalize(normed).clamp(0, 1) * 255).round().to(torch::kUInt8)[0].permute({1, 2, 0}).contiguous();
+  auto t = (imagenetDenormalize(normed).clamp(0, 1) * 255)
+               .round()
+               .to(torch::kUInt8)[0]
+               .permute({1, 2, 0})
+               .contiguous();
   Image8 img(static_cast<int>(t.size(1)), static_cast<int>(t.size(0)), 3);
   std::memcpy(img.data.data(), t.data_ptr(), img.data.size());
   return img;
@@ -35,12 +44,16 @@ torch::Tensor readMask(const std::string& path, int n) {
   std::vector<uint8_t> values;
   std::string tok;
   while (in >> tok) {
-    if (tok != "0" && tok != "1") throw Error(path, "mask values must be 0 or 1, found '" + tok + "'");
+    if (tok != "0" && tok != "1")
+      throw Error(path, "mask values must be 0 or 1, found '" + tok + "'");
     values.push_back(tok == "1");
   }
   if (static_cast<int>(values.size()) != n)
-    throw Error(path, "mask has " + std::to_string(values.size()) + " values, the model has " + std::to_string(n) + " patches");
-  return torch::tensor(std::vector<int64_t>(values.begin(), values.end())).to(torch::kBool).view({1, n});
+    throw Error(path, "mask has " + std::to_string(values.size()) + " values, the model has " +
+                          std::to_string(n) + " patches");
+  return torch::tensor(std::vector<int64_t>(values.begin(), values.end()))
+      .to(torch::kBool)
+      .view({1, n});
 }
 
 }  // namespace
@@ -54,7 +67,8 @@ CroCoNet modelFromCheckpoint(const std::string& path, const std::optional<CroCoC
     cfg = *fallback;
     checkConfigAgainstState(cfg, ck.model, path);
   } else {
-    throw Error(path, "checkpoint has no paircast hyper-parameters: give --preset or --enc-dim ... flags");
+    throw Error(
+        path, "checkpoint has no paircast hyper-parameters: give --preset or --enc-dim ... flags");
   }
   CroCoNet net(cfg);
   loadStateDictStrict(net, ck.model, path);
@@ -62,8 +76,8 @@ CroCoNet modelFromCheckpoint(const std::string& path, const std::optional<CroCoC
   return net;
 }
 
-Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1, const torch::Tensor& img2,
-                               const torch::Tensor& mask) {
+Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1,
+                               const torch::Tensor& img2, const torch::Tensor& mask) {
   torch::NoGradGuard noGrad;
   const CroCoConfig& c = model->config();
   const CroCoOutput out = model->forward(img1, img2, mask);
@@ -106,7 +120,8 @@ void writeNpy(const std::string& path, const torch::Tensor& t) {
   auto f = t.to(torch::kFloat32).contiguous();
   std::ostringstream shape;
   shape << "(";
-  for (int64_t i = 0; i < f.dim(); ++i) shape << f.size(i) << (f.dim() == 1 || i + 1 < f.dim() ? "," : "");
+  for (int64_t i = 0; i < f.dim(); ++i)
+    shape << f.size(i) << (f.dim() == 1 || i + 1 < f.dim() ? "," : "");
   shape << ")";
   std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': " + shape.str() + ", }";
   // Magic, version 1.0, header length; the header is padded with spaces to a multiple of 64.

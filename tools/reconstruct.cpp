@@ -13,10 +13,12 @@ int main(int argc, char** argv) {
   std::string out, savePrediction, preset;
   CroCoConfig flags;
   CLI::App app{"Cross-view completion of one pair with a CroCo checkpoint"};
-  app.add_option("--checkpoint", o.checkpoint, "Checkpoint (.pth): ours or an official CroCo one")->required();
+  app.add_option("--checkpoint", o.checkpoint, "Checkpoint (.pth): ours or an official CroCo one")
+      ->required();
   app.add_option("--image1", o.image1, "The image to complete (masked)")->required();
   app.add_option("--image2", o.image2, "The reference view")->required();
-  app.add_option("--mask-file", o.maskFile, "0/1 per patch, row-major, 1 = masked (default: random)");
+  app.add_option("--mask-file", o.maskFile,
+                 "0/1 per patch, row-major, 1 = masked (default: random)");
   app.add_option("--seed", o.seed, "Seed of the random mask");
   app.add_option("--out", out, "Output grid (.png)")->required();
   app.add_option("--save-prediction", savePrediction, "Raw head output as float32 .npy [N, p*p*3]");
@@ -30,8 +32,9 @@ int main(int argc, char** argv) {
   auto* img = app.add_option("--img-size", flags.img_size, "Image size");
   auto* patch = app.add_option("--patch-size", flags.patch_size, "Patch size");
   return runTool("reconstruct", app, argc, argv, [&] {
-    const bool explicitFlags = encDim->count() || encDepth->count() || encHeads->count() || decDim->count() ||
-                               decDepth->count() || decHeads->count() || img->count() || patch->count();
+    const bool explicitFlags = encDim->count() || encDepth->count() || encHeads->count() ||
+                               decDim->count() || decDepth->count() || decHeads->count() ||
+                               img->count() || patch->count();
     if (!preset.empty()) {
       CroCoConfig p = presetConfig(preset);
       if (img->count()) p.img_size = flags.img_size;

@@ -1,0 +1,231 @@
+#include "trainer/trainer.h"
+
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "dataset/generate_job.h"
+#include "model/checkpoint.h"
+#include "test_paths.h"
+#include "trainer/augment.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+
+// 32 pairs of the shipped room at 64x64, generated once for all the tests.
+const std::string& pairsDir() {
+  static const std::string dir = [] {
+    const std::string d = (fs::path(::testing::TempDir()) / "paircast" / "trainer_pairs").string();
+    fs::remove_all(d);
+    GenerateConfig g;
+    g.scenes = {testing::sourceDir() + "/scenes/room/room.obj"};
+    g.out = d;
+    g.pairsPerScene = 32;
+    g.pair.resolution = 64;
+    g.shardSize = 16;
+    g.croco = true;
+    g.progress = false;
+    runGenerate(g);
+    return d;
+  }();
+  return dir;
+}
+
+TrainConfig tinyRun(const std::string& out) {
+  TrainConfig c;
+  c.shards = {pairsDir() + "/pairs-*.tar"};
+  c.model = presetConfig("tiny");
+  c.model.img_size = 32;
+  c.model.patch_size = 8;
+  c.batchSize = 4;
+  c.epochs = 4;
+  c.warmupEpochs = 1;
+  c.blr = 1.5e-3;
+  c.out = out;
+  c.workers = 1;
+  c.saveEvery = 1;
+  c.progress = false;
+  return c;
+}
+
+TEST(Schedule, WarmupThenCosine) {
+  const double lr = 1e-3;
+  EXPECT_DOUBLE_EQ(learningRate(lr, 0, 2, 10, 0.0), 0.0);
+  EXPECT_DOUBLE_EQ(learningRate(lr, 0, 2, 10, 1.0), 0.5e-3);
+  EXPECT_DOUBLE_EQ(learningRate(lr, 0, 2, 10, 2.0), 1e-3);
+  EXPECT_NEAR(learningRate(lr, 0, 2, 10, 6.0), 0.5e-3, 1e-15);  // half-way down the cosine
+  EXPECT_NEAR(learningRate(lr, 1e-5, 2, 10, 10.0), 1e-5, 1e-15);
+}
+
+TEST(WeightDecay, NotOnBiasesAndNorms) {
+  CroCoNet net(presetConfig("tiny"));
+  std::vector<std::pair<std::string, torch::Tensor>> named;
+  for (const auto& p : net->named_parameters()) named.emplace_back(p.key(), p.value());
+  const DecayGroups g = weightDecayGroups(named);
+  for (const auto& n : g.noDecay) {
+    const auto& t = net->named_parameters()[n];
+    EXPECT_TRUE(t.dim() <= 1 || n.find(".bias") != std::string::npos) << n;
+  }
+  auto has = [](const std::vector<std::string>& v, const std::string& n) {
+    return std::find(v.begin(), v.end(), n) != v.end();
+  };
+  EXPECT_TRUE(has(g.noDecay, "enc_norm.weight"));
+  EXPECT_TRUE(has(g.noDecay, "enc_blocks.0.attn.qkv.bias"));
+  EXPECT_TRUE(has(g.decay, "enc_blocks.0.attn.qkv.weight"));
+  EXPECT_TRUE(has(g.decay, "mask_token"));  // 3-D, as in timm
+  EXPECT_EQ(g.decay.size() + g.noDecay.size(), named.size());
+}
+
+TEST(Augment, CropSizeJitterRangeAndNormalisation) {
+  Image8 a(80, 70, 3, 128), b(40, 30, 3, 200);  // b is smaller than the crop: resized up
+  Rng rng(1);
+  AugmentOptions o;
+  o.size = 48;
+  auto [x, y] = augmentPair(a, b, o, rng);
+  EXPECT_EQ(x.sizes(), (std::vector<int64_t>{3, 48, 48}));
+  EXPECT_EQ(y.sizes(), (std::vector<int64_t>{3, 48, 48}));
+  // Factors of 1 leave an image unchanged, whatever the order.
+  auto img = torch::rand({3, 8, 8});
+  const int order[3] = {2, 0, 1};
+  EXPECT_TRUE(torch::allclose(colorJitter(img, 1, 1, 1, order), img));
+  // Brightness scales; saturation 0 gives grey.
+  EXPECT_TRUE(torch::allclose(colorJitter(img, 0.5, 1, 1, order), img * 0.5));
+  auto grey = colorJitter(img, 1, 1, 0, order);
+  EXPECT_TRUE(torch::allclose(grey[0], grey[1]));
+}
+
+TEST(Pretrain, ResumeIsExact) {
+  const std::string dir = testing::scratchDir("resume");
+  TrainConfig whole = tinyRun(dir + "/whole");
+  whole.maxSteps = 10;
+  runPretrain(whole);
+  TrainConfig half = tinyRun(dir + "/split");
+  half.maxSteps = 5;
+  runPretrain(half);
+  half.maxSteps = 10;
+  half.resume = true;
+  half.workers = 3;  // the batches do not depend on the number of workers
+  const nlohmann::json s = runPretrain(half);
+  EXPECT_EQ(s["steps"], 10);
+  EXPECT_EQ(s["steps_this_run"], 5);
+  const Checkpoint a = loadCheckpoint(dir + "/whole/checkpoint-last.pth");
+  const Checkpoint b = loadCheckpoint(dir + "/split/checkpoint-last.pth");
+  ASSERT_EQ(a.model.size(), b.model.size());
+  for (const auto& [k, t] : a.model)
+    EXPECT_TRUE(torch::equal(t, b.model.at(k))) << k << " differs after resume";
+  for (const auto& [k, t] : a.extraTensors) EXPECT_TRUE(torch::equal(t, b.extraTensors.at(k))) << k;
+  // The log holds one line per step, without duplicates from the first run.
+  std::ifstream log(dir + "/split/log.jsonl");
+  std::string line;
+  int64_t expected = 0;
+  while (std::getline(log, line)) EXPECT_EQ(nlohmann::json::parse(line)["step"], expected++);
+  EXPECT_EQ(expected, 10);
+}
+
+TEST(Pretrain, LossFallsOnGeneratedPairs) {
+  TrainConfig c = tinyRun(testing::scratchDir("falls"));
+  c.maxSteps = 40;
+  c.saveEvery = 40;
+  c.epochs = 40;
+  c.warmupEpochs = 0.5;
+  runPretrain(c);
+  std::ifstream log(c.out + "/log.jsonl");
+  std::vector<double> losses;
+  std::string line;
+  while (std::getline(log, line)) losses.push_back(nlohmann::json::parse(line)["loss"]);
+  ASSERT_EQ(losses.size(), 40u);
+  const double first = (losses[0] + losses[1] + losses[2] + losses[3] + losses[4]) / 5;
+  const double last = (losses[35] + losses[36] + losses[37] + losses[38] + losses[39]) / 5;
+  EXPECT_LT(last, first * 0.9) << first << " -> " << last;
+  EXPECT_TRUE(fs::exists(c.out + "/loss.svg"));
+}
+
+TEST(Pretrain, NonFiniteLossIsSkippedOrStops) {
+  TrainConfig c = tinyRun(testing::scratchDir("nan"));
+  c.maxSteps = 4;
+  c.debugNanAtStep = 2;
+  const nlohmann::json s = runPretrain(c);
+  EXPECT_EQ(s["skipped_steps"], 1);
+  const Checkpoint ck = loadCheckpoint(c.out + "/checkpoint-last.pth");
+  for (const auto& [k, t] : ck.model) ASSERT_TRUE(torch::isfinite(t).all().item<bool>()) << k;
+
+  TrainConfig strict = tinyRun(testing::scratchDir("nanstop"));
+  strict.maxSteps = 4;
+  strict.debugNanAtStep = 2;
+  strict.maxNanSkips = 0;
+  EXPECT_THROW(runPretrain(strict), Error);
+  // The checkpoint written before the bad step is intact.
+  const Checkpoint before = loadCheckpoint(strict.out + "/checkpoint-last.pth");
+  EXPECT_EQ(before.extra["step"], 2);
+}
+
+TEST(Pretrain, CrocoLayoutAndBadSources) {
+  TrainConfig c = tinyRun(testing::scratchDir("croco"));
+  c.shards.clear();
+  c.crocoDir = pairsDir();
+  c.maxSteps = 2;
+  EXPECT_EQ(runPretrain(c)["steps"], 2);
+  TrainConfig none = tinyRun(testing::scratchDir("none"));
+  none.shards.clear();
+  EXPECT_THROW(runPretrain(none), Error);
+  TrainConfig two = tinyRun(testing::scratchDir("two"));
+  two.crocoDir = pairsDir();
+  EXPECT_THROW(runPretrain(two), Error);
+  TrainConfig missing = tinyRun(testing::scratchDir("missing"));
+  missing.shards = {"/nonexistent/pairs-*.tar"};
+  EXPECT_THROW(runPretrain(missing), Error);
+}
+
+TEST(Pretrain, TruncatedShardKeepsItsWholeSamples) {
+  const std::string dir = testing::scratchDir("trunc");
+  const std::string bytes = readFile(pairsDir() + "/pairs-000000.tar");
+  writeFileAtomic(dir + "/cut.tar", bytes.substr(0, bytes.size() / 2));
+  TrainConfig c = tinyRun(dir + "/out");
+  c.shards = {dir + "/cut.tar"};
+  c.maxSteps = 1;
+  EXPECT_EQ(runPretrain(c)["steps"], 1);
+}
+
+TEST(Pretrain, SigtermSavesACheckpointAndExits) {
+  const std::string dir = testing::scratchDir("sig");
+  const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/pretrain";
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const std::string data = pairsDir() + "/pairs-*.tar";
+    int devnull = open("/dev/null", O_WRONLY);
+    dup2(devnull, 1);
+    dup2(devnull, 2);
+    execl(tool.c_str(), tool.c_str(), "--data", data.c_str(), "--img-size", "32", "--batch-size",
+          "4", "--epochs", "1000", "--save-every", "1000000", "--out", (dir + "/out").c_str(),
+          "--quiet", nullptr);
+    _exit(127);
+  }
+  // Wait for training to start (the log gets its first line), then ask it to stop.
+  for (int i = 0; i < 600 && !(fs::exists(dir + "/out/log.jsonl") &&
+                               fs::file_size(dir + "/out/log.jsonl") > 0);
+       ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  kill(pid, SIGTERM);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0);
+  const Checkpoint ck = loadCheckpoint(dir + "/out/checkpoint-last.pth");
+  EXPECT_GT(ck.extra["step"].get<int64_t>(), 0);
+  const auto summary = nlohmann::json::parse(readFile(dir + "/out/summary.json"));
+  EXPECT_TRUE(summary["interrupted"].get<bool>());
+}
+
+}  // namespace
+}  // namespace paircast

@@ -1,0 +1,53 @@
+// pretrain: CroCo pre-training from shards, a CroCo folder, or pairs rendered live.
+#include <cstdio>
+
+#include "tool_main.h"
+#include "trainer/trainer.h"
+
+using namespace paircast;
+
+int main(int argc, char** argv) {
+  TrainConfig c;
+  std::string preset = "tiny", decoder = "cross";
+  int imgSize = 224;
+  CLI::App app{"Pre-train CroCo on image pairs (checkpoints that PyTorch loads)"};
+  app.add_option("--data", c.shards, "Tar shards or glob patterns");
+  app.add_option("--croco-dir", c.crocoDir, "A CroCo pairs folder (pairs.txt)");
+  app.add_option("--live", c.live, "Scenes: pairs rendered on the fly");
+  app.add_option("--preset", preset, "tiny, small or base")
+      ->check(CLI::IsMember({"tiny", "small", "base"}));
+  app.add_option("--decoder", decoder, "cross or cat")->check(CLI::IsMember({"cross", "cat"}));
+  app.add_option("--img-size", imgSize, "Training crop size (224 as the paper)");
+  app.add_option("--batch-size", c.batchSize, "Pairs per iteration")->check(CLI::Range(1, 65536));
+  app.add_option("--accum-iter", c.accumIter, "Iterations per optimizer step")
+      ->check(CLI::Range(1, 4096));
+  app.add_option("--epochs", c.epochs, "Epochs of the schedule")->check(CLI::Range(1, 100000));
+  app.add_option("--max-steps", c.maxSteps, "Stop after this many iterations");
+  app.add_option("--blr", c.blr, "Base learning rate (lr = blr * effective batch / 256)");
+  app.add_option("--min-lr", c.minLr, "Final learning rate of the cosine");
+  app.add_option("--warmup-epochs", c.warmupEpochs, "Linear warmup, epochs");
+  app.add_option("--weight-decay", c.weightDecay, "AdamW weight decay (not on biases and norms)");
+  app.add_option("--out", c.out, "Output folder")->required();
+  app.add_flag("--resume", c.resume, "Continue from OUT/checkpoint-last.pth");
+  app.add_option("--device", c.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_option("--seed", c.seed, "Random seed");
+  app.add_option("--workers", c.workers, "Data worker threads")->check(CLI::Range(1, 256));
+  app.add_option("--save-every", c.saveEvery, "Iterations between checkpoints");
+  app.add_option("--keep-every", c.keepEvery, "Keep checkpoint-<epoch>.pth every K epochs");
+  app.add_option("--log-every", c.logEvery, "Iterations between log lines")
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--recon-every", c.reconEvery,
+                 "Iterations between reconstruction grids (0: never)");
+  app.add_option("--live-epoch-pairs", c.liveEpochPairs, "Pairs per epoch with --live");
+  bool quiet = false;
+  app.add_flag("--quiet", quiet, "No progress lines");
+  return runTool("pretrain", app, argc, argv, [&] {
+    c.model = presetConfig(preset);
+    c.model.decoder = decoder;
+    c.model.img_size = imgSize;
+    c.progress = !quiet;
+    const nlohmann::json summary = runPretrain(c);
+    std::printf("%s\n", summary.dump().c_str());
+    return 0;
+  });
+}

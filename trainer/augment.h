@@ -1,0 +1,29 @@
+// CroCo's pre-training transforms for a pair (datasets/transforms.py, "crop224+acolor"):
+// an independent random crop of each image to the training size, then asymmetric colour
+// jitter (brightness, contrast and saturation factors in [0.6, 1.4], applied in a random order,
+// drawn separately for each image), then ImageNet mean/std normalisation.
+#pragma once
+
+#include <torch/torch.h>
+
+#include "util/image.h"
+#include "util/random.h"
+
+namespace paircast {
+
+struct AugmentOptions {
+  int size = 224;
+  bool colorJitter = true;
+  double jitterLow = 0.6, jitterHigh = 1.4;
+};
+
+// Returns img1, img2 as normalised [3, S, S] float tensors. Images smaller than the crop are
+// resized up first (bilinear). Deterministic for a given rng state.
+std::pair<torch::Tensor, torch::Tensor> augmentPair(const Image8& a, const Image8& b,
+                                                    const AugmentOptions& o, Rng& rng);
+
+// One image: crop (x0, y0) of size S and the colour jitter, exposed for the tests.
+torch::Tensor colorJitter(const torch::Tensor& rgb01, double brightness, double contrast,
+                          double saturation, const int order[3]);
+
+}  // namespace paircast

@@ -1,0 +1,144 @@
+#include "trainer/pair_dataset.h"
+
+#include <fcntl.h>
+#include <glob.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+
+#include "util/atomic_file.h"
+#include "util/error.h"
+#include "util/image_io.h"
+
+namespace paircast {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::vector<std::string> expandPatterns(const std::vector<std::string>& patterns) {
+  std::vector<std::string> files;
+  for (const auto& p : patterns) {
+    glob_t g{};
+    if (::glob(p.c_str(), 0, nullptr, &g) == 0) {
+      for (size_t i = 0; i < g.gl_pathc; ++i) files.push_back(g.gl_pathv[i]);
+    } else if (fs::exists(p)) {
+      files.push_back(p);
+    } else {
+      globfree(&g);
+      throw Error(p, "no shard matches");
+    }
+    globfree(&g);
+  }
+  return files;
+}
+
+uint64_t octal(const char* p, size_t n) {
+  uint64_t v = 0;
+  for (size_t i = 0; i < n && p[i]; ++i) {
+    if (p[i] == ' ') continue;
+    if (p[i] < '0' || p[i] > '7') return UINT64_MAX;
+    v = v * 8 + (p[i] - '0');
+  }
+  return v;
+}
+
+std::vector<unsigned char> readRange(const std::string& file, uint64_t offset, uint64_t length) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw Error(file, "cannot open");
+  std::vector<unsigned char> data(length);
+  uint64_t done = 0;
+  while (done < length) {
+    const ssize_t n =
+        ::pread(fd, data.data() + done, length - done, static_cast<off_t>(offset + done));
+    if (n <= 0) {
+      ::close(fd);
+      throw Error(file, "short read (file changed or truncated)");
+    }
+    done += static_cast<uint64_t>(n);
+  }
+  ::close(fd);
+  return data;
+}
+
+}  // namespace
+
+PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
+  PairDataset ds;
+  for (const auto& file : expandPatterns(patterns)) {
+    const uint64_t fileSize = fs::file_size(file);
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw Error(file, "cannot open shard");
+    std::map<std::string, std::pair<Member, Member>> open;  // key -> (.1.jpg, .2.jpg)
+    std::vector<std::string> order;
+    uint64_t pos = 0;
+    char h[512];
+    bool truncated = false;
+    while (pos + 512 <= fileSize) {
+      in.seekg(static_cast<std::streamoff>(pos));
+      if (!in.read(h, 512)) break;
+      if (h[0] == '\0') break;  // end-of-archive blocks
+      const std::string name(h, strnlen(h, 100));
+      const uint64_t size = octal(h + 124, 12);
+      if (size == UINT64_MAX || pos + 512 + size > fileSize) {
+        truncated = true;
+        break;
+      }
+      const char type = h[156];
+      const size_t dot = name.find('.');
+      if ((type == '0' || type == '\0') && dot != std::string::npos &&
+          name.find('/') == std::string::npos) {
+        const std::string key = name.substr(0, dot), member = name.substr(dot + 1);
+        if (member == "1.jpg" || member == "2.jpg") {
+          if (!open.count(key)) order.push_back(key);
+          (member == "1.jpg" ? open[key].first : open[key].second) = Member{file, pos + 512, size};
+        }
+      }
+      pos += 512 + (size + 511) / 512 * 512;
+    }
+    if (truncated)
+      std::fprintf(stderr, "pretrain: warning: %s is truncated; its whole samples are used\n",
+                   file.c_str());
+    for (const auto& key : order) {
+      const auto& [a, b] = open[key];
+      if (a.length == 0 || b.length == 0) continue;  // incomplete sample
+      ds.pairs_.push_back({a, b, key});
+    }
+  }
+  if (ds.pairs_.empty())
+    throw Error(patterns.empty() ? "--data" : patterns[0], "no complete pair in the shards");
+  return ds;
+}
+
+PairDataset PairDataset::fromCrocoDir(const std::string& dir) {
+  const std::string list = (fs::path(dir) / "pairs.txt").string();
+  std::ifstream in(list);
+  if (!in) throw Error(list, "cannot read pairs.txt (is this a CroCo pairs folder?)");
+  PairDataset ds;
+  std::string a, b;
+  while (in >> a >> b) {
+    const std::string pa = (fs::path(dir) / a).string(), pb = (fs::path(dir) / b).string();
+    ds.pairs_.push_back({Member{pa, 0, 0}, Member{pb, 0, 0}, a});
+  }
+  if (ds.pairs_.empty()) throw Error(list, "lists no pair");
+  return ds;
+}
+
+std::pair<Image8, Image8> PairDataset::load(size_t i) const {
+  const Pair& p = pairs_.at(i);
+  auto one = [&](const Member& m, const char* which) {
+    if (m.length == 0) return readImage8(m.file);
+    const auto bytes = readRange(m.file, m.offset, m.length);
+    return decodeImage8(bytes.data(), bytes.size(), m.file + ":" + p.key + which);
+  };
+  return {one(p.a, ".1.jpg"), one(p.b, ".2.jpg")};
+}
+
+std::string PairDataset::describe(size_t i) const {
+  return pairs_.at(i).a.file + ":" + pairs_.at(i).key;
+}
+
+}  // namespace paircast

@@ -1,0 +1,516 @@
+#include "trainer/trainer.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+#include <signal.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <numeric>
+#include <thread>
+
+#include "dataset/pair_stream.h"
+#include "model/checkpoint.h"
+#include "model/croco_net.h"
+#include "model/reconstruct.h"
+#include "trainer/augment.h"
+#include "trainer/pair_dataset.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+#include "util/image_io.h"
+
+namespace paircast {
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
+
+std::atomic<int> gSignal{0};
+void onSignal(int sig) {
+  gSignal = sig;
+}
+
+struct Batch {
+  torch::Tensor img1, img2;  // [B, 3, S, S] normalised
+};
+
+// Batches in a fixed order: batch b of epoch e holds the pairs perm_e[b B .. (b+1) B), each
+// augmented with a stream seeded by (seed, epoch, pair), so a batch depends only on its
+// position, whatever the number of workers. Workers prefetch a window ahead.
+class BatchLoader {
+ public:
+  BatchLoader(const PairDataset& ds, const TrainConfig& c, int64_t startIter)
+      : ds_(ds),
+        c_(c),
+        perEpoch_(static_cast<int64_t>(ds.size()) / c.batchSize),
+        next_(startIter),
+        consumed_(startIter) {
+    if (perEpoch_ < 1)
+      throw Error("dataset has " + std::to_string(ds.size()) + " pairs, fewer than one batch of " +
+                  std::to_string(c.batchSize));
+    for (int w = 0; w < std::max(1, c.workers); ++w) threads_.emplace_back([this] { work(); });
+  }
+  ~BatchLoader() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    for (auto& t : threads_) t.join();
+  }
+  int64_t perEpoch() const { return perEpoch_; }
+
+  Batch get(int64_t iter) {
+    std::unique_lock<std::mutex> lock(mu_);
+    cv_.wait(lock, [&] { return ready_.count(iter) || failure_; });
+    if (failure_) std::rethrow_exception(failure_);
+    Batch b = std::move(ready_[iter]);
+    ready_.erase(iter);
+    consumed_ = iter + 1;
+    cv_.notify_all();
+    return b;
+  }
+
+ private:
+  const std::vector<int64_t>& permutation(int64_t epoch) {  // under mu_
+    auto it = perms_.find(epoch);
+    if (it != perms_.end()) return it->second;
+    std::vector<int64_t> p(ds_.size());
+    std::iota(p.begin(), p.end(), 0);
+    Rng rng(mixSeed(c_.seed, "epoch", static_cast<uint64_t>(epoch)));
+    for (size_t i = p.size() - 1; i > 0; --i) std::swap(p[i], p[rng.below(i + 1)]);
+    if (perms_.size() > 4) perms_.erase(perms_.begin());
+    return perms_[epoch] = std::move(p);
+  }
+
+  void work() {
+    while (true) {
+      int64_t iter;
+      std::vector<int64_t> idx;
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        cv_.wait(lock,
+                 [&] { return stop_ || next_ < consumed_ + 2 * std::max(1, c_.workers) + 2; });
+        if (stop_) return;
+        iter = next_++;
+        const int64_t epoch = iter / perEpoch_, b = iter % perEpoch_;
+        const auto& perm = permutation(epoch);
+        idx.assign(perm.begin() + b * c_.batchSize, perm.begin() + (b + 1) * c_.batchSize);
+      }
+      try {
+        std::vector<torch::Tensor> a, b;
+        const int64_t epoch = iter / perEpoch_;
+        for (int64_t i : idx) {
+          // A corrupt pair is reported and replaced by the next one, deterministically.
+          for (int attempt = 0;; ++attempt) {
+            const size_t k = static_cast<size_t>(i + attempt) % ds_.size();
+            try {
+              auto [x, y] = ds_.load(k);
+              Rng rng(mixSeed(c_.seed, "aug" + std::to_string(epoch), k));
+              AugmentOptions ao;
+              ao.size = c_.model.img_size;
+              auto [t1, t2] = augmentPair(x, y, ao, rng);
+              a.push_back(t1);
+              b.push_back(t2);
+              break;
+            } catch (const Error& e) {
+              std::fprintf(stderr, "pretrain: warning: skipping a corrupt pair: %s\n", e.what());
+              if (attempt >= 16) throw;
+            }
+          }
+        }
+        Batch batch{torch::stack(a), torch::stack(b)};
+        std::lock_guard<std::mutex> lock(mu_);
+        ready_[iter] = std::move(batch);
+        cv_.notify_all();
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mu_);
+        failure_ = std::current_exception();
+        cv_.notify_all();
+        return;
+      }
+    }
+  }
+
+  const PairDataset& ds_;
+  const TrainConfig& c_;
+  int64_t perEpoch_, next_, consumed_;
+  std::vector<std::thread> threads_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::map<int64_t, Batch> ready_;
+  std::map<int64_t, std::vector<int64_t>> perms_;
+  std::exception_ptr failure_;
+  bool stop_ = false;
+};
+
+// Live pairs: rendered by a PairStream, augmented like the others.
+class LiveLoader {
+ public:
+  LiveLoader(const TrainConfig& c, uint64_t position) : c_(c) {
+    PairStreamOptions o;
+    o.scenes = c.live;
+    o.seed = c.seed;
+    o.threads = std::max(1, c.workers);
+    o.firstIndex = position;
+    o.pair.resolution = std::max(c.model.img_size, 64);
+    stream_ = std::make_unique<PairStream>(o);
+  }
+  Batch get(int64_t iter) {
+    std::vector<torch::Tensor> a, b;
+    for (int i = 0; i < c_.batchSize; ++i) {
+      auto p = stream_->next();
+      if (!p) throw Error("the live pair stream stopped");
+      Rng rng(mixSeed(c_.seed, "live", static_cast<uint64_t>(iter) * c_.batchSize + i));
+      AugmentOptions ao;
+      ao.size = c_.model.img_size;
+      auto [t1, t2] = augmentPair(p->rgb[0], p->rgb[1], ao, rng);
+      a.push_back(t1);
+      b.push_back(t2);
+    }
+    return {torch::stack(a), torch::stack(b)};
+  }
+  uint64_t position() const { return stream_->position(); }
+
+ private:
+  const TrainConfig& c_;
+  std::unique_ptr<PairStream> stream_;
+};
+
+// AdamW state, by parameter position, as "optimizer/state/<i>/{exp_avg,exp_avg_sq,step}".
+std::string stateKey(const torch::Tensor& p) {
+#if TORCH_VERSION_MAJOR >= 2
+  return c10::guts::to_string(p.unsafeGetTensorImpl());
+#else
+  return c10::guts::to_string(p.unsafeGetTensorImpl());
+#endif
+}
+
+std::map<std::string, torch::Tensor> optimizerTensors(torch::optim::AdamW& opt,
+                                                      const std::vector<torch::Tensor>& params) {
+  std::map<std::string, torch::Tensor> out;
+  auto& state = opt.state();
+  for (size_t i = 0; i < params.size(); ++i) {
+    auto it = state.find(stateKey(params[i]));
+    if (it == state.end()) continue;
+    auto& s = static_cast<torch::optim::AdamWParamState&>(*it->second);
+    const std::string base = "optimizer/state/" + std::to_string(i) + "/";
+    out[base + "exp_avg"] = s.exp_avg();
+    out[base + "exp_avg_sq"] = s.exp_avg_sq();
+    out[base + "step"] = torch::tensor(static_cast<int64_t>(s.step()));
+  }
+  return out;
+}
+
+void restoreOptimizer(torch::optim::AdamW& opt, const std::vector<torch::Tensor>& params,
+                      const std::map<std::string, torch::Tensor>& tensors,
+                      const std::string& source) {
+  auto& state = opt.state();
+  for (size_t i = 0; i < params.size(); ++i) {
+    const std::string base = "optimizer/state/" + std::to_string(i) + "/";
+    auto a = tensors.find(base + "exp_avg"), b = tensors.find(base + "exp_avg_sq"),
+         s = tensors.find(base + "step");
+    if (a == tensors.end() || b == tensors.end() || s == tensors.end()) continue;
+    if (a->second.sizes() != params[i].sizes())
+      throw Error(source, "optimizer state " + base + " has the wrong shape");
+    auto st = std::make_unique<torch::optim::AdamWParamState>();
+    st->step(s->second.item<int64_t>());
+    st->exp_avg(a->second.to(params[i].device()).clone());
+    st->exp_avg_sq(b->second.to(params[i].device()).clone());
+    state[stateKey(params[i])] = std::move(st);
+  }
+}
+
+void writeLossSvg(const std::string& path, const std::vector<std::pair<int64_t, double>>& points) {
+  if (points.size() < 2) return;
+  double lo = 1e30, hi = -1e30;
+  for (const auto& [s, l] : points) lo = std::min(lo, l), hi = std::max(hi, l);
+  if (hi <= lo) hi = lo + 1e-9;
+  const double W = 640, H = 360, m = 40;
+  const double s0 = points.front().first, s1 = std::max<double>(points.back().first, s0 + 1);
+  std::string svg =
+      "<svg xmlns='http://www.w3.org/2000/svg' width='640' height='360'>"
+      "<rect width='640' height='360' fill='white'/><polyline fill='none' stroke='#1f77b4' "
+      "stroke-width='1.5' points='";
+  char buf[64];
+  for (const auto& [s, l] : points) {
+    std::snprintf(buf, sizeof buf, "%.1f,%.1f ", m + (W - 2 * m) * (s - s0) / (s1 - s0),
+                  H - m - (H - 2 * m) * (l - lo) / (hi - lo));
+    svg += buf;
+  }
+  std::snprintf(buf, sizeof buf, "%.4f", hi);
+  svg += "'/><text x='4' y='30' font-size='12'>" + std::string(buf) + "</text>";
+  std::snprintf(buf, sizeof buf, "%.4f", lo);
+  svg += "<text x='4' y='" + std::to_string(static_cast<int>(H - m)) + "' font-size='12'>" + buf +
+         "</text>";
+  svg += "<text x='" + std::to_string(static_cast<int>(W / 2 - 40)) + "' y='" +
+         std::to_string(static_cast<int>(H - 8)) +
+         "' font-size='12'>training loss by step</text></svg>\n";
+  writeFileAtomic(path, svg);
+}
+
+}  // namespace
+
+DecayGroups weightDecayGroups(const std::vector<std::pair<std::string, torch::Tensor>>& named) {
+  DecayGroups g;
+  for (const auto& [name, t] : named) {
+    const bool bias = name.size() >= 5 && name.compare(name.size() - 5, 5, ".bias") == 0;
+    (t.dim() <= 1 || bias ? g.noDecay : g.decay).push_back(name);
+  }
+  return g;
+}
+
+double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs, double e) {
+  if (e < warmupEpochs) return baseLr * e / warmupEpochs;
+  const double span = std::max(1e-12, epochs - warmupEpochs);
+  return minLr +
+         (baseLr - minLr) * 0.5 * (1.0 + std::cos(M_PI * std::min(1.0, (e - warmupEpochs) / span)));
+}
+
+nlohmann::json runPretrain(const TrainConfig& c) {
+  const int sources = !c.shards.empty() + !c.crocoDir.empty() + !c.live.empty();
+  if (sources != 1) throw Error("give exactly one data source: --data, --croco-dir or --live");
+  if (c.out.empty()) throw Error("--out is required");
+  if (c.batchSize < 1 || c.accumIter < 1 || c.epochs < 1)
+    throw Error("batch size, accum-iter and epochs must be >= 1");
+  c.model.validate();
+  torch::Device device(torch::kCPU);
+  if (c.device == "cuda") {
+    if (!torch::cuda::is_available())
+      throw Error("--device cuda, but this LibTorch has no CUDA device");
+    device = torch::Device(torch::kCUDA);
+  } else if (c.device != "cpu") {
+    throw Error("--device must be cpu or cuda");
+  }
+  makeDirs(c.out);
+  const std::string ckptPath = (fs::path(c.out) / "checkpoint-last.pth").string();
+  const std::string logPath = (fs::path(c.out) / "log.jsonl").string();
+
+  // Data.
+  std::unique_ptr<PairDataset> dataset;
+  if (!c.shards.empty()) dataset = std::make_unique<PairDataset>(PairDataset::fromShards(c.shards));
+  if (!c.crocoDir.empty())
+    dataset = std::make_unique<PairDataset>(PairDataset::fromCrocoDir(c.crocoDir));
+
+  // Model and optimizer: no weight decay on biases and 1-D parameters (norms).
+  torch::manual_seed(c.seed);
+  CroCoNet model(c.model);
+  std::vector<std::pair<std::string, torch::Tensor>> named;
+  for (const auto& p : model->named_parameters()) named.emplace_back(p.key(), p.value());
+  const DecayGroups names = weightDecayGroups(named);
+  std::vector<torch::Tensor> decay, noDecay, ordered;
+  for (const auto& [name, t] : named) {
+    ordered.push_back(t);
+    const bool isDecay =
+        std::find(names.decay.begin(), names.decay.end(), name) != names.decay.end();
+    (isDecay ? decay : noDecay).push_back(t);
+  }
+  const int effBatch = c.batchSize * c.accumIter;
+  const double lr = c.blr * effBatch / 256.0;
+  std::vector<torch::optim::OptimizerParamGroup> groups;
+  groups.emplace_back(
+      decay, std::make_unique<torch::optim::AdamWOptions>(
+                 torch::optim::AdamWOptions(lr).betas({0.9, 0.95}).weight_decay(c.weightDecay)));
+  groups.emplace_back(noDecay,
+                      std::make_unique<torch::optim::AdamWOptions>(
+                          torch::optim::AdamWOptions(lr).betas({0.9, 0.95}).weight_decay(0.0)));
+  torch::optim::AdamW opt(groups, torch::optim::AdamWOptions(lr).betas({0.9, 0.95}));
+
+  // Resume.
+  int64_t iter = 0;
+  uint64_t livePosition = 0;
+  std::vector<std::pair<int64_t, double>> curve;
+  if (c.resume && fs::exists(ckptPath)) {
+    const Checkpoint ck = loadCheckpoint(ckptPath);
+    if (ck.hasArgs && configFromJson(ck.args, ckptPath).enc_embed_dim != c.model.enc_embed_dim)
+      throw Error(ckptPath, "checkpoint was trained with other hyper-parameters than --preset");
+    loadStateDictStrict(model, ck.model, ckptPath);
+    restoreOptimizer(opt, ordered, ck.extraTensors, ckptPath);
+    iter = ck.extra.value("step", int64_t{0});
+    livePosition = ck.extra.value("live_position", uint64_t{0});
+    auto rng = ck.extraTensors.find("rng/torch");
+    if (rng != ck.extraTensors.end()) {
+      auto gen = at::detail::getDefaultCPUGenerator();
+      std::lock_guard<std::mutex> lock(gen.mutex());
+      gen.set_state(rng->second);
+    }
+    // Keep the log up to the checkpoint: lines a killed run wrote after it are dropped.
+    std::ifstream in(logPath);
+    std::string line, kept;
+    while (std::getline(in, line)) {
+      auto j = nlohmann::json::parse(line, nullptr, false);
+      if (j.is_object() && j.value("step", int64_t{-1}) < iter) {
+        kept += line + "\n";
+        curve.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
+      }
+    }
+    writeFileAtomic(logPath, kept);
+    std::fprintf(stderr, "pretrain: resumed from %s at step %lld\n", ckptPath.c_str(),
+                 static_cast<long long>(iter));
+  } else if (!c.resume) {
+    writeFileAtomic(logPath, "");
+  }
+  model->to(device);
+
+  std::unique_ptr<BatchLoader> loader;
+  std::unique_ptr<LiveLoader> live;
+  int64_t perEpoch;
+  if (dataset) {
+    loader = std::make_unique<BatchLoader>(*dataset, c, iter);
+    perEpoch = loader->perEpoch();
+  } else {
+    live = std::make_unique<LiveLoader>(c, livePosition);
+    perEpoch = std::max(1, c.liveEpochPairs / c.batchSize);
+  }
+  const int64_t total = static_cast<int64_t>(c.epochs) * perEpoch;
+  const int64_t stopAt = c.maxSteps >= 0 ? std::min(total, c.maxSteps) : total;
+  const int64_t saveEvery =
+      std::max<int64_t>(c.accumIter, (c.saveEvery + c.accumIter - 1) / c.accumIter * c.accumIter);
+
+  auto save = [&](const std::string& path, int64_t step) {
+    for (const auto& p : model->parameters())
+      if (!torch::isfinite(p).all().item<bool>())
+        throw Error(path, "weights are not finite at step " + std::to_string(step) +
+                              ": checkpoint not written");
+    auto tensors = optimizerTensors(opt, ordered);
+    {
+      auto gen = at::detail::getDefaultCPUGenerator();
+      std::lock_guard<std::mutex> lock(gen.mutex());
+      tensors["rng/torch"] = gen.get_state();
+    }
+    nlohmann::json extra = {{"step", step},
+                            {"live_position", live ? live->position() : 0},
+                            {"seed", c.seed},
+                            {"batch_size", c.batchSize},
+                            {"accum_iter", c.accumIter}};
+    saveCheckpoint(path, model, step / perEpoch, extra, tensors);
+  };
+
+  gSignal = 0;
+  auto oldInt = signal(SIGINT, onSignal), oldTerm = signal(SIGTERM, onSignal);
+  std::ofstream log(logPath, std::ios::app);
+  const auto start = Clock::now();
+  double waitTotal = 0, stepTotal = 0, lastLoss = NAN;
+  int nanRun = 0, skipped = 0;
+  int64_t firstIter = iter;
+  bool interrupted = false;
+  model->train();
+  auto lastPrint = Clock::now();
+  while (iter < stopAt) {
+    const auto t0 = Clock::now();
+    const Batch batch = loader ? loader->get(iter) : live->get(iter);
+    const double wait = since(t0);
+    const double epochF = static_cast<double>(iter) / perEpoch;
+    if (iter % c.accumIter == 0) {
+      const double l = learningRate(lr, c.minLr, c.warmupEpochs, c.epochs, epochF);
+      for (auto& g : opt.param_groups())
+        static_cast<torch::optim::AdamWOptions&>(g.options()).lr(l);
+    }
+    auto out = model->forward(batch.img1.to(device), batch.img2.to(device));
+    auto loss = maskedMse(out.prediction, out.mask, out.target);
+    if (iter == c.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
+    const double lossValue = loss.item<double>();
+    if (!std::isfinite(lossValue)) {
+      ++skipped;
+      if (++nanRun > c.maxNanSkips)
+        throw Error(c.out, "loss is not finite for " + std::to_string(nanRun) +
+                               " steps in a row (step " + std::to_string(iter) +
+                               "); stopped, the last checkpoint is kept");
+      std::fprintf(stderr, "pretrain: warning: non-finite loss at step %lld, step skipped\n",
+                   static_cast<long long>(iter));
+      opt.zero_grad();
+    } else {
+      nanRun = 0;
+      (loss / c.accumIter).backward();
+      if ((iter + 1) % c.accumIter == 0) {
+        opt.step();
+        opt.zero_grad();
+      }
+      lastLoss = lossValue;
+    }
+    ++iter;
+    const double stepTime = since(t0);
+    waitTotal += wait;
+    stepTotal += stepTime;
+    const double curLr =
+        static_cast<torch::optim::AdamWOptions&>(opt.param_groups()[0].options()).lr();
+    if (std::isfinite(lossValue) && ((iter - 1) % c.logEvery == 0 || iter == stopAt)) {
+      nlohmann::json j = {{"step", iter - 1},
+                          {"epoch", epochF},
+                          {"loss", lossValue},
+                          {"lr", curLr},
+                          {"pairs_per_s", c.batchSize / stepTime},
+                          {"data_wait", wait / stepTime}};
+      log << j.dump() << "\n";
+      log.flush();
+      curve.emplace_back(iter - 1, lossValue);
+    }
+    if (c.progress && (since(lastPrint) > 1.0 || iter == stopAt)) {
+      lastPrint = Clock::now();
+      const double rate = (iter - firstIter) / std::max(1e-9, since(start));
+      std::fprintf(stderr,
+                   "[pretrain] step %lld/%lld  epoch %.2f  loss %.4f  lr %.2e  %.1f pairs/s  "
+                   "data-wait %.1f%%  ETA %.0fs\n",
+                   static_cast<long long>(iter), static_cast<long long>(stopAt), epochF, lossValue,
+                   curLr, rate * c.batchSize, 100 * waitTotal / std::max(1e-9, stepTotal),
+                   (stopAt - iter) / std::max(rate, 1e-9));
+    }
+    const bool boundary = iter % c.accumIter == 0;
+    if (boundary && (iter % saveEvery == 0 || iter % perEpoch == 0 || iter == stopAt || gSignal)) {
+      save(ckptPath, iter);
+      writeLossSvg((fs::path(c.out) / "loss.svg").string(), curve);
+      if (c.keepEvery > 0 && iter % perEpoch == 0 && (iter / perEpoch) % c.keepEvery == 0)
+        save(
+            (fs::path(c.out) / ("checkpoint-" + std::to_string(iter / perEpoch) + ".pth")).string(),
+            iter);
+      if (gSignal) {
+        interrupted = true;
+        std::fprintf(stderr, "pretrain: signal %d: checkpoint saved at step %lld, exiting\n",
+                     gSignal.load(), static_cast<long long>(iter));
+        break;
+      }
+    }
+    if (c.reconEvery > 0 && iter % c.reconEvery == 0 && dataset) {
+      torch::NoGradGuard ng;
+      model->eval();
+      auto [x, y] = dataset->load(0);
+      // A fixed mask from its own generator: training's random stream is left untouched.
+      auto gen = at::make_generator<at::CPUGeneratorImpl>(c.seed);
+      auto mask = torch::argsort(torch::rand({1, c.model.numPatches()}, gen), 1, false) <
+                  c.model.numMasked();
+      const Reconstruction r =
+          reconstructWith(model, imageTensor(x, c.model.img_size).to(device),
+                          imageTensor(y, c.model.img_size).to(device), mask.to(device));
+      writeImage((fs::path(c.out) / "recon-latest.png").string(), r.grid);
+      model->train();
+    }
+  }
+  signal(SIGINT, oldInt);
+  signal(SIGTERM, oldTerm);
+  const double seconds = since(start);
+  nlohmann::json summary = {
+      {"steps", iter},
+      {"steps_this_run", iter - firstIter},
+      {"loss", lastLoss},
+      {"seconds", seconds},
+      {"pairs_per_s", (iter - firstIter) * c.batchSize / std::max(seconds, 1e-9)},
+      {"data_wait", waitTotal / std::max(stepTotal, 1e-9)},
+      {"skipped_steps", skipped},
+      {"interrupted", interrupted},
+      {"checkpoint", ckptPath}};
+  writeFileAtomic((fs::path(c.out) / "summary.json").string(), summary.dump(1) + "\n");
+  return summary;
+}
+
+}  // namespace paircast

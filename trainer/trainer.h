@@ -1,0 +1,60 @@
+// The CroCo pre-trainer: data in worker threads, AdamW with CroCo's schedule, atomic
+// checkpoints that resume exactly, NaN guards, signals, a JSONL log and a loss curve.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "model/croco_config.h"
+
+namespace paircast {
+
+struct TrainConfig {
+  // Data: exactly one of these.
+  std::vector<std::string> shards;  // tar shards or glob patterns
+  std::string crocoDir;             // CroCo layout with pairs.txt
+  std::vector<std::string> live;    // scenes: pairs rendered on the fly
+  int liveEpochPairs = 1000;        // pairs per "epoch" with --live
+
+  CroCoConfig model = presetConfig("tiny");
+  int batchSize = 16;
+  int accumIter = 1;
+  int epochs = 10;        // the schedule's length
+  int64_t maxSteps = -1;  // stop after this many iterations (all epochs counted); -1: never
+  double blr = 1.5e-4;    // lr = blr * effective batch / 256
+  double minLr = 0.0;
+  double warmupEpochs = 1.0;
+  double weightDecay = 0.05;
+  std::string out;
+  bool resume = false;
+  std::string device = "cpu";
+  uint64_t seed = 0;
+  int workers = 2;
+  int64_t saveEvery = 100;  // iterations between checkpoints (rounded up to accumIter)
+  int keepEvery = 0;        // keep checkpoint-<epoch>.pth every K epochs (0: never)
+  int64_t logEvery = 1;
+  int64_t reconEvery = 0;  // write recon-latest.png every N iterations (0: never)
+  int maxNanSkips = 5;     // consecutive non-finite losses before stopping
+  bool progress = true;
+  int64_t debugNanAtStep = -1;  // fault injection for tests: this iteration's loss becomes NaN
+};
+
+// lr at fractional epoch `e`: linear warmup, then half-cosine to minLr (CroCo's pretrain.py).
+double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs, double e);
+
+// Parameter names with and without weight decay: none on biases and 1-D parameters (norms),
+// as timm's param_groups_weight_decay, which CroCo's pretrain.py uses.
+struct DecayGroups {
+  std::vector<std::string> decay, noDecay;
+};
+DecayGroups weightDecayGroups(
+    const std::vector<std::pair<std::string, torch::Tensor>>& namedParameters);
+
+// Trains and returns the summary (also written to <out>/summary.json). Throws paircast::Error on
+// bad input or when the loss stays non-finite (no checkpoint is written from poisoned weights).
+nlohmann::json runPretrain(const TrainConfig& config);
+
+}  // namespace paircast
