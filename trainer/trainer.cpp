@@ -21,6 +21,7 @@
 #include "model/croco_net.h"
 #include "model/reconstruct.h"
 #include "trainer/augment.h"
+#include "trainer/distributed.h"
 #include "trainer/pair_dataset.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -43,17 +44,38 @@ void onSignal(int sig) {
 
 struct Batch {
   torch::Tensor img1, img2;  // [B, 3, S, S] normalised
+  torch::Tensor mask;        // [B, N] bool, true = masked
 };
+
+// CroCo's RandomMask (argsort(noise) < num_mask) with the noise drawn from a stream keyed by
+// the sample, so that masks do not depend on how samples are split over batches and ranks.
+torch::Tensor sampleMask(const CroCoConfig& m, uint64_t seed, const std::string& stream,
+                         uint64_t key) {
+  Rng rng(mixSeed(seed, stream, key));
+  const int n = m.numPatches();
+  std::vector<double> noise(n);
+  for (auto& x : noise) x = rng.uniform();
+  std::vector<int64_t> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int64_t a, int64_t b) { return noise[a] < noise[b]; });
+  auto mask = torch::empty({n}, torch::kBool);
+  for (int i = 0; i < n; ++i) mask[i] = order[i] < m.numMasked();
+  return mask;
+}
 
 // Batches in a fixed order: batch b of epoch e holds the pairs perm_e[b B .. (b+1) B), each
 // augmented with a stream seeded by (seed, epoch, pair), so a batch depends only on its
 // position, whatever the number of workers. Workers prefetch a window ahead.
 class BatchLoader {
  public:
-  BatchLoader(const PairDataset& ds, const TrainConfig& c, int64_t startIter)
+  // Rank `rank` of `world` reads slice `rank` of each global batch of world x batchSize pairs.
+  BatchLoader(const PairDataset& ds, const TrainConfig& c, int64_t startIter, int rank, int world)
       : ds_(ds),
         c_(c),
-        perEpoch_(static_cast<int64_t>(ds.size()) / c.batchSize),
+        rank_(rank),
+        world_(world),
+        perEpoch_(static_cast<int64_t>(ds.size()) / (static_cast<int64_t>(c.batchSize) * world)),
         next_(startIter),
         consumed_(startIter) {
     if (perEpoch_ < 1)
@@ -106,10 +128,11 @@ class BatchLoader {
         iter = next_++;
         const int64_t epoch = iter / perEpoch_, b = iter % perEpoch_;
         const auto& perm = permutation(epoch);
-        idx.assign(perm.begin() + b * c_.batchSize, perm.begin() + (b + 1) * c_.batchSize);
+        const int64_t first = (b * world_ + rank_) * c_.batchSize;
+        idx.assign(perm.begin() + first, perm.begin() + first + c_.batchSize);
       }
       try {
-        std::vector<torch::Tensor> a, b;
+        std::vector<torch::Tensor> a, b, masks;
         const int64_t epoch = iter / perEpoch_;
         for (int64_t i : idx) {
           // A corrupt pair is reported and replaced by the next one, deterministically.
@@ -123,6 +146,7 @@ class BatchLoader {
               auto [t1, t2] = augmentPair(x, y, ao, rng);
               a.push_back(t1);
               b.push_back(t2);
+              masks.push_back(sampleMask(c_.model, c_.seed, "mask" + std::to_string(epoch), k));
               break;
             } catch (const Error& e) {
               std::fprintf(stderr, "pretrain: warning: skipping a corrupt pair: %s\n", e.what());
@@ -130,7 +154,7 @@ class BatchLoader {
             }
           }
         }
-        Batch batch{torch::stack(a), torch::stack(b)};
+        Batch batch{torch::stack(a), torch::stack(b), torch::stack(masks)};
         std::lock_guard<std::mutex> lock(mu_);
         ready_[iter] = std::move(batch);
         cv_.notify_all();
@@ -145,6 +169,7 @@ class BatchLoader {
 
   const PairDataset& ds_;
   const TrainConfig& c_;
+  int rank_, world_;
   int64_t perEpoch_, next_, consumed_;
   std::vector<std::thread> threads_;
   std::mutex mu_;
@@ -158,8 +183,10 @@ class BatchLoader {
 // Live pairs: rendered by a PairStream, augmented like the others.
 class LiveLoader {
  public:
-  LiveLoader(const TrainConfig& c, uint64_t position) : c_(c) {
+  LiveLoader(const TrainConfig& c, uint64_t position, int rank, int world) : c_(c) {
     PairStreamOptions o;
+    o.partIndex = rank;
+    o.partCount = world;
     o.scenes = c.live;
     o.seed = c.seed;
     o.threads = std::max(1, c.workers);
@@ -168,7 +195,7 @@ class LiveLoader {
     stream_ = std::make_unique<PairStream>(o);
   }
   Batch get(int64_t iter) {
-    std::vector<torch::Tensor> a, b;
+    std::vector<torch::Tensor> a, b, masks;
     for (int i = 0; i < c_.batchSize; ++i) {
       auto p = stream_->next();
       if (!p) throw Error("the live pair stream stopped");
@@ -178,8 +205,10 @@ class LiveLoader {
       auto [t1, t2] = augmentPair(p->rgb[0], p->rgb[1], ao, rng);
       a.push_back(t1);
       b.push_back(t2);
+      masks.push_back(sampleMask(c_.model, c_.seed, "livemask",
+                                 static_cast<uint64_t>(iter) * c_.batchSize + i));
     }
-    return {torch::stack(a), torch::stack(b)};
+    return {torch::stack(a), torch::stack(b), torch::stack(masks)};
   }
   uint64_t position() const { return stream_->position(); }
 
@@ -285,13 +314,16 @@ nlohmann::json runPretrain(const TrainConfig& c) {
   if (c.batchSize < 1 || c.accumIter < 1 || c.epochs < 1)
     throw Error("batch size, accum-iter and epochs must be >= 1");
   c.model.validate();
+  if (c.device != "cpu" && c.device != "cuda") throw Error("--device must be cpu or cuda");
+  const std::unique_ptr<Distributed> dist = Distributed::fromEnvironment(c.device);
+  const int rank = dist ? dist->rank() : 0, world = dist ? dist->worldSize() : 1;
+  const bool lead = rank == 0;  // writes checkpoints, logs and images
   torch::Device device(torch::kCPU);
   if (c.device == "cuda") {
     if (!torch::cuda::is_available())
       throw Error("--device cuda, but this LibTorch has no CUDA device");
-    device = torch::Device(torch::kCUDA);
-  } else if (c.device != "cpu") {
-    throw Error("--device must be cpu or cuda");
+    device =
+        torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
   }
   makeDirs(c.out);
   const std::string ckptPath = (fs::path(c.out) / "checkpoint-last.pth").string();
@@ -316,7 +348,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
         std::find(names.decay.begin(), names.decay.end(), name) != names.decay.end();
     (isDecay ? decay : noDecay).push_back(t);
   }
-  const int effBatch = c.batchSize * c.accumIter;
+  const int effBatch = c.batchSize * c.accumIter * world;
   const double lr = c.blr * effBatch / 256.0;
   std::vector<torch::optim::OptimizerParamGroup> groups;
   groups.emplace_back(
@@ -355,22 +387,23 @@ nlohmann::json runPretrain(const TrainConfig& c) {
         curve.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
       }
     }
-    writeFileAtomic(logPath, kept);
+    if (lead) writeFileAtomic(logPath, kept);
     std::fprintf(stderr, "pretrain: resumed from %s at step %lld\n", ckptPath.c_str(),
                  static_cast<long long>(iter));
-  } else if (!c.resume) {
+  } else if (!c.resume && lead) {
     writeFileAtomic(logPath, "");
   }
   model->to(device);
+  if (dist) dist->broadcast(ordered);  // every rank starts from rank 0's weights
 
   std::unique_ptr<BatchLoader> loader;
   std::unique_ptr<LiveLoader> live;
   int64_t perEpoch;
   if (dataset) {
-    loader = std::make_unique<BatchLoader>(*dataset, c, iter);
+    loader = std::make_unique<BatchLoader>(*dataset, c, iter, rank, world);
     perEpoch = loader->perEpoch();
   } else {
-    live = std::make_unique<LiveLoader>(c, livePosition);
+    live = std::make_unique<LiveLoader>(c, livePosition, rank, world);
     perEpoch = std::max(1, c.liveEpochPairs / c.batchSize);
   }
   const int64_t total = static_cast<int64_t>(c.epochs) * perEpoch;
@@ -399,7 +432,8 @@ nlohmann::json runPretrain(const TrainConfig& c) {
 
   gSignal = 0;
   auto oldInt = signal(SIGINT, onSignal), oldTerm = signal(SIGTERM, onSignal);
-  std::ofstream log(logPath, std::ios::app);
+  std::ofstream log;
+  if (lead) log.open(logPath, std::ios::app);
   const auto start = Clock::now();
   double waitTotal = 0, stepTotal = 0, lastLoss = NAN;
   int nanRun = 0, skipped = 0;
@@ -417,10 +451,13 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       for (auto& g : opt.param_groups())
         static_cast<torch::optim::AdamWOptions&>(g.options()).lr(l);
     }
-    auto out = model->forward(batch.img1.to(device), batch.img2.to(device));
+    auto out = model->forward(batch.img1.to(device), batch.img2.to(device), batch.mask.to(device));
     auto loss = maskedMse(out.prediction, out.mask, out.target);
     if (iter == c.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
-    const double lossValue = loss.item<double>();
+    // The ranks agree on the loss (and so on skipping a non-finite one).
+    auto lossAll = loss.detach().to(torch::kCPU, torch::kFloat64).reshape({1});
+    if (dist) dist->allReduceMean({lossAll});
+    const double lossValue = lossAll.item<double>();
     if (!std::isfinite(lossValue)) {
       ++skipped;
       if (++nanRun > c.maxNanSkips)
@@ -434,6 +471,12 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       nanRun = 0;
       (loss / c.accumIter).backward();
       if ((iter + 1) % c.accumIter == 0) {
+        if (dist) {
+          std::vector<torch::Tensor> grads;
+          for (auto& p : ordered)
+            if (p.grad().defined()) grads.push_back(p.grad());
+          dist->allReduceMean(grads);
+        }
         opt.step();
         opt.zero_grad();
       }
@@ -445,7 +488,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
     stepTotal += stepTime;
     const double curLr =
         static_cast<torch::optim::AdamWOptions&>(opt.param_groups()[0].options()).lr();
-    if (std::isfinite(lossValue) && ((iter - 1) % c.logEvery == 0 || iter == stopAt)) {
+    if (lead && std::isfinite(lossValue) && ((iter - 1) % c.logEvery == 0 || iter == stopAt)) {
       nlohmann::json j = {{"step", iter - 1},
                           {"epoch", epochF},
                           {"loss", lossValue},
@@ -456,7 +499,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       log.flush();
       curve.emplace_back(iter - 1, lossValue);
     }
-    if (c.progress && (since(lastPrint) > 1.0 || iter == stopAt)) {
+    if (lead && c.progress && (since(lastPrint) > 1.0 || iter == stopAt)) {
       lastPrint = Clock::now();
       const double rate = (iter - firstIter) / std::max(1e-9, since(start));
       std::fprintf(stderr,
@@ -467,21 +510,30 @@ nlohmann::json runPretrain(const TrainConfig& c) {
                    (stopAt - iter) / std::max(rate, 1e-9));
     }
     const bool boundary = iter % c.accumIter == 0;
-    if (boundary && (iter % saveEvery == 0 || iter % perEpoch == 0 || iter == stopAt || gSignal)) {
-      save(ckptPath, iter);
-      writeLossSvg((fs::path(c.out) / "loss.svg").string(), curve);
-      if (c.keepEvery > 0 && iter % perEpoch == 0 && (iter / perEpoch) % c.keepEvery == 0)
-        save(
-            (fs::path(c.out) / ("checkpoint-" + std::to_string(iter / perEpoch) + ".pth")).string(),
-            iter);
-      if (gSignal) {
+    bool stopNow = gSignal != 0;
+    if (dist && boundary) {  // a signal to any rank stops them all at the same step
+      auto flag = torch::tensor({stopNow ? 1.0 : 0.0}, torch::kFloat64);
+      dist->allReduceMean({flag});
+      stopNow = flag.item<double>() > 0;
+    }
+    if (boundary && (iter % saveEvery == 0 || iter % perEpoch == 0 || iter == stopAt || stopNow)) {
+      if (lead) {
+        save(ckptPath, iter);
+        writeLossSvg((fs::path(c.out) / "loss.svg").string(), curve);
+        if (c.keepEvery > 0 && iter % perEpoch == 0 && (iter / perEpoch) % c.keepEvery == 0)
+          save((fs::path(c.out) / ("checkpoint-" + std::to_string(iter / perEpoch) + ".pth"))
+                   .string(),
+               iter);
+      }
+      if (stopNow) {
         interrupted = true;
-        std::fprintf(stderr, "pretrain: signal %d: checkpoint saved at step %lld, exiting\n",
-                     gSignal.load(), static_cast<long long>(iter));
+        if (lead)
+          std::fprintf(stderr, "pretrain: signal: checkpoint saved at step %lld, exiting\n",
+                       static_cast<long long>(iter));
         break;
       }
     }
-    if (c.reconEvery > 0 && iter % c.reconEvery == 0 && dataset) {
+    if (lead && c.reconEvery > 0 && iter % c.reconEvery == 0 && dataset) {
       torch::NoGradGuard ng;
       model->eval();
       auto [x, y] = dataset->load(0);
@@ -509,7 +561,9 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       {"skipped_steps", skipped},
       {"interrupted", interrupted},
       {"checkpoint", ckptPath}};
-  writeFileAtomic((fs::path(c.out) / "summary.json").string(), summary.dump(1) + "\n");
+  summary["world_size"] = world;
+  if (lead) writeFileAtomic((fs::path(c.out) / "summary.json").string(), summary.dump(1) + "\n");
+  if (dist) dist->barrier();
   return summary;
 }
 

@@ -227,5 +227,66 @@ TEST(Pretrain, SigtermSavesACheckpointAndExits) {
   EXPECT_TRUE(summary["interrupted"].get<bool>());
 }
 
+pid_t spawn(const std::vector<std::string>& args, const std::vector<std::string>& env) {
+  const pid_t pid = fork();
+  if (pid == 0) {
+    for (const auto& e : env) putenv(const_cast<char*>(e.c_str()));
+    std::vector<char*> argv;
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    int devnull = open("/dev/null", O_WRONLY);
+    dup2(devnull, 1);
+    dup2(devnull, 2);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+
+int waitExit(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+TEST(Pretrain, TwoGlooProcessesEqualOneWithTheDoubledBatch) {
+  const std::string dir = testing::scratchDir("gloo");
+  const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/pretrain";
+  auto args = [&](const std::string& out, int batch) {
+    return std::vector<std::string>{tool,
+                                    "--data",
+                                    pairsDir() + "/pairs-*.tar",
+                                    "--img-size",
+                                    "32",
+                                    "--batch-size",
+                                    std::to_string(batch),
+                                    "--max-steps",
+                                    "3",
+                                    "--epochs",
+                                    "4",
+                                    "--seed",
+                                    "4",
+                                    "--out",
+                                    out,
+                                    "--quiet"};
+  };
+  ASSERT_EQ(waitExit(spawn(args(dir + "/one", 4), {})), 0);
+  const std::string port = "MASTER_PORT=" + std::to_string(20000 + getpid() % 20000);
+  std::vector<pid_t> ranks;
+  for (int r = 0; r < 2; ++r)
+    ranks.push_back(spawn(args(dir + "/two", 2),
+                          {"WORLD_SIZE=2", "RANK=" + std::to_string(r),
+                           "LOCAL_RANK=" + std::to_string(r), "MASTER_ADDR=127.0.0.1", port}));
+  for (pid_t p : ranks) ASSERT_EQ(waitExit(p), 0);
+  const Checkpoint a = loadCheckpoint(dir + "/one/checkpoint-last.pth");
+  const Checkpoint b = loadCheckpoint(dir + "/two/checkpoint-last.pth");
+  double worst = 0;
+  for (const auto& [k, t] : a.model)
+    worst = std::max(worst, (t - b.model.at(k)).abs().max().item<double>());
+  EXPECT_LT(worst, 1e-5);
+  const auto s = nlohmann::json::parse(readFile(dir + "/two/summary.json"));
+  EXPECT_EQ(s["world_size"], 2);
+}
+
 }  // namespace
 }  // namespace paircast

@@ -1,0 +1,120 @@
+#include "trainer/distributed.h"
+
+#include <cstdlib>
+
+#include "util/error.h"
+
+#if defined(PAIRCAST_HAVE_GLOO)
+#include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
+#include <torch/csrc/distributed/c10d/TCPStore.hpp>
+#endif
+#if defined(PAIRCAST_HAVE_NCCL)
+#include <torch/csrc/distributed/c10d/ProcessGroupNCCL.hpp>
+#endif
+
+namespace paircast {
+
+namespace {
+
+int envInt(const char* name, int fallback) {
+  const char* v = std::getenv(name);
+  if (!v || !*v) return fallback;
+  try {
+    return std::stoi(v);
+  } catch (...) {
+    throw Error(std::string("environment variable ") + name + "='" + v + "' is not an integer");
+  }
+}
+
+}  // namespace
+
+#if defined(PAIRCAST_HAVE_GLOO)
+struct Distributed::Impl {
+  c10::intrusive_ptr<c10d::Store> store;
+  c10::intrusive_ptr<c10d::ProcessGroup> group;
+};
+#else
+struct Distributed::Impl {};
+#endif
+
+Distributed::~Distributed() = default;
+
+std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& device) {
+  const int world = envInt("WORLD_SIZE", 1);
+  if (world <= 1) return nullptr;
+#if !defined(PAIRCAST_HAVE_GLOO)
+  (void)device;
+  throw Error(
+      "WORLD_SIZE > 1, but paircast was built without c10d Gloo (install libgloo-dev and rebuild)");
+#else
+  auto d = std::unique_ptr<Distributed>(new Distributed());
+  d->world_ = world;
+  d->rank_ = envInt("RANK", -1);
+  d->localRank_ = envInt("LOCAL_RANK", 0);
+  if (d->rank_ < 0 || d->rank_ >= world) throw Error("RANK must be set and in [0, WORLD_SIZE)");
+  const char* addr = std::getenv("MASTER_ADDR");
+  const std::string host = addr && *addr ? addr : "127.0.0.1";
+  const int port = envInt("MASTER_PORT", 29500);
+  c10d::TCPStoreOptions opts;
+  opts.port = static_cast<uint16_t>(port);
+  opts.isServer = d->rank_ == 0;
+  opts.numWorkers = static_cast<size_t>(world);
+  opts.timeout = std::chrono::seconds(envInt("PAIRCAST_DIST_TIMEOUT", 300));
+  d->impl_ = std::make_unique<Impl>();
+  d->impl_->store = c10::make_intrusive<c10d::TCPStore>(host, opts);
+  if (device == "cuda") {
+#if defined(PAIRCAST_HAVE_NCCL)
+    d->impl_->group = c10::make_intrusive<c10d::ProcessGroupNCCL>(d->impl_->store, d->rank_, world);
+    return d;
+#else
+    throw Error("--device cuda with WORLD_SIZE > 1 needs a LibTorch built with NCCL");
+#endif
+  }
+  auto options = c10d::ProcessGroupGloo::Options::create(opts.timeout);
+  const char* ifname = std::getenv("GLOO_SOCKET_IFNAME");
+  options->devices.push_back(ifname && *ifname
+                                 ? c10d::ProcessGroupGloo::createDeviceForInterface(ifname)
+                                 : c10d::ProcessGroupGloo::createDeviceForHostname(host));
+  options->threads = 2;
+  d->impl_->group =
+      c10::make_intrusive<c10d::ProcessGroupGloo>(d->impl_->store, d->rank_, world, options);
+  return d;
+#endif
+}
+
+void Distributed::allReduceMean(const std::vector<torch::Tensor>& tensors) {
+#if defined(PAIRCAST_HAVE_GLOO)
+  std::vector<torch::Tensor> flat;
+  for (const auto& t : tensors) flat.push_back(t.reshape({-1}));
+  std::vector<torch::Tensor> bucket = {torch::cat(flat)};
+  impl_->group->allreduce(bucket)->wait();
+  bucket[0].div_(world_);
+  int64_t offset = 0;
+  for (const auto& t : tensors) {
+    t.copy_(bucket[0].narrow(0, offset, t.numel()).view_as(t));
+    offset += t.numel();
+  }
+#else
+  (void)tensors;
+#endif
+}
+
+void Distributed::broadcast(const std::vector<torch::Tensor>& tensors) {
+#if defined(PAIRCAST_HAVE_GLOO)
+  std::vector<torch::Tensor> ts(tensors.begin(), tensors.end());
+  for (auto& t : ts) {
+    std::vector<torch::Tensor> one = {t};
+    impl_->group->broadcast(one)->wait();
+  }
+#else
+  (void)tensors;
+#endif
+}
+
+void Distributed::barrier() {
+#if defined(PAIRCAST_HAVE_GLOO)
+  impl_->group->barrier()->wait();
+#endif
+}
+
+}  // namespace paircast

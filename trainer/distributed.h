@@ -1,0 +1,35 @@
+// Data-parallel training through torch's own c10d: a TCPStore rendezvous from the usual
+// environment (MASTER_ADDR, MASTER_PORT, RANK, WORLD_SIZE, LOCAL_RANK: torchrun, Slurm and
+// Kubernetes set them), ProcessGroupGloo on CPU (ProcessGroupNCCL when built with it, on CUDA).
+#pragma once
+
+#include <torch/torch.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace paircast {
+
+class Distributed {
+ public:
+  // nullptr when WORLD_SIZE is unset or 1. Throws paircast::Error on a bad environment.
+  static std::unique_ptr<Distributed> fromEnvironment(const std::string& device);
+  ~Distributed();
+
+  int rank() const { return rank_; }
+  int worldSize() const { return world_; }
+  int localRank() const { return localRank_; }
+  // Averages the tensors over the ranks, in place (one flattened all-reduce).
+  void allReduceMean(const std::vector<torch::Tensor>& tensors);
+  // Rank 0's values to every rank, in place.
+  void broadcast(const std::vector<torch::Tensor>& tensors);
+  void barrier();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  int rank_ = 0, world_ = 1, localRank_ = 0;
+};
+
+}  // namespace paircast
