@@ -7,6 +7,7 @@
 #include <cstring>
 #include <nlohmann/json.hpp>
 
+#include "model/autocast.h"
 #include "model/croco_net.h"
 #include "model/flops.h"
 
@@ -56,8 +57,14 @@ nlohmann::json pythonBench(const std::string& crocoDir, const std::string& prese
 int main(int argc, char** argv) {
   std::vector<std::string> presets = {"tiny", "small", "base"};
   int batch = 8, threads = 2, repeat = 3;
-  std::string crocoDir;
-  CLI::App app{"CroCo forward / forward+backward speed on CPU"};
+  std::string crocoDir, deviceName = "cpu";
+  bool bf16 = false;
+  double peakTflops = 800.0;
+  CLI::App app{"CroCo forward / forward+backward speed"};
+  app.add_option("--device", deviceName, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_flag("--bf16", bf16, "Autocast to bf16 (CUDA), with TF32 matmuls");
+  app.add_option("--peak-tflops", peakTflops,
+                 "The device's dense bf16 peak, for the utilisation (H100: ~800)");
   app.add_option("--presets", presets, "Presets to time");
   app.add_option("--batch", batch, "Batch size");
   app.add_option("--threads", threads, "Intra-op threads (torch::set_num_threads)");
@@ -66,26 +73,46 @@ int main(int argc, char** argv) {
                  "A checkout of naver/croco, to time its CroCoNet alongside");
   CLI11_PARSE(app, argc, argv);
   torch::set_num_threads(threads);
+  const bool cuda = deviceName == "cuda";
+  if (cuda && !torch::cuda::is_available()) {
+    std::fprintf(stderr, "bench_model: no CUDA device\n");
+    return 1;
+  }
+  const torch::Device device = cuda ? torch::Device(torch::kCUDA) : torch::Device(torch::kCPU);
+  if (cuda) allowTf32();
+  auto sync = [&] {
+    if (cuda) torch::cuda::synchronize();
+  };
   nlohmann::json rows = nlohmann::json::array();
-  std::printf("batch %d, %d threads, 224x224, 90%% masking, CPU\n", batch, threads);
+  std::printf("batch %d, %d threads, 224x224, 90%% masking, %s%s\n", batch, threads,
+              cuda ? "CUDA" : "CPU", bf16 ? ", bf16 autocast" : "");
   for (const auto& preset : presets) {
     const nlohmann::json pyBefore = pythonBench(crocoDir, preset, batch, threads, repeat);
     torch::manual_seed(0);
     CroCoConfig cfg = presetConfig(preset);
     CroCoNet net(cfg);
-    auto img1 = torch::randn({batch, 3, 224, 224}), img2 = torch::randn({batch, 3, 224, 224});
+    net->to(device);
+    auto img1 = torch::randn({batch, 3, 224, 224}, device);
+    auto img2 = torch::randn({batch, 3, 224, 224}, device);
     const double fwd = best(
         [&] {
           torch::NoGradGuard ng;
+          AutocastGuard ac(cuda && bf16);
           net->forward(img1, img2);
+          sync();
         },
         repeat);
     const double train = best(
         [&] {
-          auto out = net->forward(img1, img2);
-          auto loss = maskedMse(out.prediction, out.mask, out.target);
+          torch::Tensor loss;
+          {
+            AutocastGuard ac(cuda && bf16);
+            auto out = net->forward(img1, img2);
+            loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
+          }
           net->zero_grad();
           loss.backward();
+          sync();
         },
         repeat);
     const double flops = countFlops(cfg).flops_full * batch;
@@ -97,7 +124,15 @@ int main(int argc, char** argv) {
                           {"forward_s", fwd},
                           {"train_s", train},
                           {"gflops_forward", flops / fwd / 1e9},
-                          {"gflops_train", 3 * flops / train / 1e9}};
+                          {"gflops_train", 3 * flops / train / 1e9},
+                          {"pairs_per_s_train", batch / train}};
+    if (cuda) {
+      // Model FLOP utilisation of the train step, with the paper's FLOP convention (weight layers).
+      const double mfu = 3 * countFlops(cfg).flops * batch / train / (peakTflops * 1e12);
+      std::printf("%-6s train step: %.1f pairs/s, model FLOP utilisation %.1f%% of %.0f TFLOP/s\n",
+                  preset.c_str(), batch / train, 100 * mfu, peakTflops);
+      row["mfu"] = mfu;
+    }
     // Python before and after ours, best of both: the machine's noise then hits both sides.
     nlohmann::json py = pythonBench(crocoDir, preset, batch, threads, repeat);
     const nlohmann::json& py2 = pyBefore;

@@ -1,63 +1,118 @@
 #include "covis/covisibility.h"
 
+#include <algorithm>
 #include <cmath>
 
+#include "covis/unproject.h"
 #include "util/error.h"
 
 namespace paircast {
+namespace {
 
-VisibleCount countVisible(const Camera& ci, const ImageF& depthI, const Camera& cj,
-                          const ImageF& depthJ, const CovisOptions& o) {
-  PAIRCAST_CHECK_MSG(depthI.width == ci.width && depthI.height == ci.height && depthI.channels == 1,
-                     "depth i does not match its camera");
-  PAIRCAST_CHECK_MSG(depthJ.width == cj.width && depthJ.height == cj.height && depthJ.channels == 1,
-                     "depth j does not match its camera");
-  // Pixel (u, v) of i with depth z maps to homogeneous pixel coordinates of j:
-  //   q = z * M (u + 0.5, v + 0.5, 1) + b,  M = Kj R_ji Ki^-1,  b = Kj t_ji,
-  // where (R_ji, t_ji) = jFromWorld * worldFromI; q.z is the z-depth in j.
-  const Eigen::Isometry3d jFromI = cj.cameraFromWorld() * ci.worldFromCamera();
-  const Eigen::Matrix3f M = (cj.K * jFromI.linear() * ci.K.inverse()).cast<float>();
-  const Eigen::Vector3f b = (cj.K * jFromI.translation()).cast<float>();
-  const int Wi = ci.width, Hi = ci.height, Wj = cj.width, Hj = cj.height;
+// Points nearer than this to camera j's plane (metres) count as behind it.
+constexpr float kMinDepth = 1e-6f;
+// Pixels per chunk of a row: the projection pass runs over fixed-size stack arrays, so the
+// compiler vectorises it, and the lookup pass that follows is a short scalar gather.
+constexpr int kChunk = 64;
+
+// The kernel: counts over the sampled pixels of i. `m` maps (u, v, z) of i to homogeneous pixel
+// coordinates of j.
+VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI, const ImageF& depthJ,
+                                float absTol, float relTol, int stride) {
+  const int Wi = depthI.width, Hi = depthI.height, Wj = depthJ.width;
+  const float maxX = static_cast<float>(depthJ.width), maxY = static_cast<float>(depthJ.height);
+  const float lastX = maxX - 1.0f, lastY = maxY - 1.0f;
   const float* dj = depthJ.data.data();
-  const float absTol = o.absTol, relTol = o.relTol;
+  const float ax = m.A(0, 0), ay = m.A(1, 0), az = m.A(2, 0);  // d q / d(z u)
+  const float bx = m.b.x(), by = m.b.y(), bz = m.b.z();
   VisibleCount count;
-  for (int v = 0; v < Hi; ++v) {
+  alignas(32) float z[kChunk], qz[kChunk];  // [chunk]
+  alignas(32) int32_t index[kChunk], ok[kChunk], valid[kChunk];
+  for (int v = 0; v < Hi; v += stride) {
     const float* row = depthI.data.data() + static_cast<size_t>(v) * Wi;
-    const Eigen::Vector3f rowBase = M * Eigen::Vector3f(0.5f, v + 0.5f, 1.0f);
-    const Eigen::Vector3f step = M.col(0);
-    for (int u = 0; u < Wi; ++u) {
-      const float z = row[u];
-      if (!(z > 0.0f)) continue;
-      ++count.valid;
-      const Eigen::Vector3f q = z * (rowBase + static_cast<float>(u) * step) + b;
-      if (!(q.z() > 1e-6f)) continue;  // behind view j
-      const float inv = 1.0f / q.z();
-      const float x = q.x() * inv, y = q.y() * inv;
-      if (!(x >= 0.0f && y >= 0.0f && x < Wj && y < Hj)) continue;
-      const float d = dj[static_cast<size_t>(y) * Wj + static_cast<size_t>(x)];
-      if (d > 0.0f && std::abs(q.z() - d) <= absTol + relTol * d) ++count.visible;
+    // A (0, v, 1): the part of A (u, v, 1) that is constant along the row.
+    const float rx = m.A(0, 1) * v + m.A(0, 2), ry = m.A(1, 1) * v + m.A(1, 2),
+                rz = m.A(2, 1) * v + m.A(2, 2);
+    for (int u0 = 0; u0 < Wi; u0 += kChunk * stride) {
+      const int n = std::min(kChunk, (Wi - u0 + stride - 1) / stride);
+      for (int k = 0; k < n; ++k) z[k] = row[u0 + k * stride];
+      // Projection pass: branch-free, so that it vectorises. Rejected lanes are clamped into
+      // the frame and masked out in the lookup pass.
+      for (int k = 0; k < n; ++k) {
+        const float u = static_cast<float>(u0 + k * stride), d = z[k];
+        const float px = d * (rx + u * ax) + bx, py = d * (ry + u * ay) + by,
+                    pz = d * (rz + u * az) + bz;
+        const float inv = 1.0f / pz;
+        const float x = px * inv, y = py * inv;
+        const int32_t good = validDepth(d);
+        ok[k] = good & (pz > kMinDepth) & (x >= 0.0f) & (x < maxX) & (y >= 0.0f) & (y < maxY);
+        // max/min in this operand order map NaN to 0 (maxps), so the conversion is defined.
+        const float xc = std::min(x > 0.0f ? x : 0.0f, lastX);
+        const float yc = std::min(y > 0.0f ? y : 0.0f, lastY);
+        index[k] = static_cast<int32_t>(yc) * Wj + static_cast<int32_t>(xc);
+        qz[k] = pz;
+        valid[k] = good;
+      }
+      // Lookup pass: the depth test against j's nearest pixel.
+      size_t visible = 0, nValid = 0;
+      for (int k = 0; k < n; ++k) {
+        const float d = dj[index[k]];
+        visible += ok[k] & validDepth(d) & (std::abs(qz[k] - d) <= absTol + relTol * d);
+        nValid += valid[k];
+      }
+      count.visible += visible;
+      count.valid += nValid;
+      count.total += n;
     }
   }
   return count;
+}
+
+double fraction(const VisibleCount& c, CovisOptions::Normalize normalize) {
+  const size_t den = normalize == CovisOptions::Normalize::All ? c.total : c.valid;
+  return den > 0 ? static_cast<double>(c.visible) / static_cast<double>(den) : 0.0;
+}
+
+}  // namespace
+
+VisibleCount countVisible(const Camera& ci, const ImageF& depthI, const Camera& cj,
+                          const ImageF& depthJ, const CovisOptions& o) {
+  checkDepthMatches(ci, depthI);
+  checkDepthMatches(cj, depthJ);
+  if (o.stride < 1) throw Error("covis stride must be >= 1, got " + std::to_string(o.stride));
+  if (!(o.absTol >= 0.0f && o.relTol >= 0.0f))
+    throw Error("covis tolerances must be >= 0 (absTol " + std::to_string(o.absTol) + ", relTol " +
+                std::to_string(o.relTol) + ")");
+  return countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, depthJ, o.absTol, o.relTol,
+                            o.stride);
+}
+
+double visibleFraction(const Camera& ci, const ImageF& depthI, const Camera& cj,
+                       const ImageF& depthJ, const CovisOptions& o) {
+  return fraction(countVisible(ci, depthI, cj, depthJ, o), o.normalize);
 }
 
 CovisResult computeCovisibility(const Camera& ci, const ImageF& depthI, const Camera& cj,
                                 const ImageF& depthJ, const CovisOptions& o) {
   const VisibleCount ij = countVisible(ci, depthI, cj, depthJ, o);
   const VisibleCount ji = countVisible(cj, depthJ, ci, depthI, o);
-  const double allI = static_cast<double>(ci.width) * ci.height;
-  const double allJ = static_cast<double>(cj.width) * cj.height;
   CovisResult r;
-  r.valid_i = ij.valid / allI;
-  r.valid_j = ji.valid / allJ;
-  const bool all = o.normalize == CovisOptions::Normalize::All;
-  const double denI = all ? allI : static_cast<double>(ij.valid);
-  const double denJ = all ? allJ : static_cast<double>(ji.valid);
-  r.v_ij = denI > 0 ? ij.visible / denI : 0.0;
-  r.v_ji = denJ > 0 ? ji.visible / denJ : 0.0;
+  r.valid_i = ij.total ? static_cast<double>(ij.valid) / ij.total : 0.0;
+  r.valid_j = ji.total ? static_cast<double>(ji.valid) / ji.total : 0.0;
+  r.v_ij = fraction(ij, o.normalize);
+  r.v_ji = fraction(ji, o.normalize);
   r.covis = std::min(r.v_ij, r.v_ji);
   return r;
+}
+
+CovisOptions::Normalize parseCovisNormalize(const std::string& text) {
+  if (text == "valid") return CovisOptions::Normalize::Valid;
+  if (text == "all") return CovisOptions::Normalize::All;
+  throw Error("covis normalisation must be 'valid' or 'all', got '" + text + "'");
+}
+
+const char* toString(CovisOptions::Normalize normalize) {
+  return normalize == CovisOptions::Normalize::All ? "all" : "valid";
 }
 
 }  // namespace paircast

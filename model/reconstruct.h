@@ -13,15 +13,15 @@ namespace paircast {
 
 struct ReconstructOptions {
   std::string checkpoint, image1, image2;
-  std::string maskFile;                    // 0/1 per patch, row-major, 1 = masked; empty: random
+  std::string maskFile;  // 0/1 per patch, row-major, 1 = masked; empty: random
   uint64_t seed = 0;
-  std::optional<CroCoConfig> config;       // for checkpoints without our args (official ones)
+  std::optional<CroCoConfig> config;  // for checkpoints without our args (official ones)
 };
 
 struct Reconstruction {
-  Image8 grid;              // [S, 4 S, 3]: reference | masked input | reconstruction | target
-  torch::Tensor prediction; // [N, P] raw head output
-  double loss = 0;          // masked MSE (norm_pix) of this pair
+  Image8 grid;               // [S, 4 S, 3]: reference | masked input | reconstruction | target
+  torch::Tensor prediction;  // [N, P] raw head output
+  double loss = 0;           // masked MSE (norm_pix) of this pair
 };
 
 // Loads the checkpoint, runs the model on the pair and builds the grid. Images are resized to
@@ -29,8 +29,8 @@ struct Reconstruction {
 // bad file (checkpoint, image, mask) on bad input.
 Reconstruction reconstruct(const ReconstructOptions& options);
 // The same on a model in hand, images already [1, 3, S, S] normalised, mask [1, N] bool.
-Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1, const torch::Tensor& img2,
-                               const torch::Tensor& mask);
+Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1,
+                               const torch::Tensor& img2, const torch::Tensor& mask);
 
 // The model a checkpoint describes: its own args (ours), else `fallback` checked against the
 // tensor shapes. Throws when neither applies.

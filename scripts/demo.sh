@@ -12,14 +12,23 @@ echo "== rendering views of the shipped apartment"
 build/tools/render_view --scene scenes/apartment/apartment.obj --random 4 --out "$OUT/views" \
   --resolution 256 --seed 1
 
-if [[ -x build/tools/generate_pairs ]]; then
-  echo "== generating CroCo pairs from scenes/"
-  build/tools/generate_pairs --scenes scenes --out "$OUT/pairs" --pairs-per-scene 50 \
-    --resolution 256 --hfov 60 --min-covis 0.5 --seed 0 --jobs "$(nproc)" --format both \
-    --save-depth
+echo "== generating CroCo pairs from scenes/"
+build/tools/generate_pairs --scenes scenes --out "$OUT/pairs" --pairs-per-scene 200 \
+  --resolution 256 --hfov 60 --min-covis 0.5 --seed 0 --jobs "$(nproc)" --format both --save-depth
+
+if [[ -x build/tools/pretrain ]]; then
+  echo "== pre-training CroCo (tiny) on them for a few minutes (CPU)"
+  # 128x128 crops keep the demo short on a laptop; the paper trains at 224.
+  build/tools/pretrain --data "$OUT/pairs/pairs-*.tar" --preset tiny --img-size 128 \
+    --batch-size 16 --epochs 20 --warmup-epochs 2 --blr 1.5e-3 --max-steps "${DEMO_STEPS:-600}" \
+    --out "$OUT/train" --save-every 100 --log-every 5 --recon-every 100 --resume
+  build/tools/reconstruct --checkpoint "$OUT/train/checkpoint-last.pth" \
+    --image1 "$OUT/pairs/apartment/00000000_1.jpeg" --image2 "$OUT/pairs/apartment/00000000_2.jpeg" \
+    --seed 1 --out "$OUT/train/reconstruction.png"
 fi
 echo
 echo "demo outputs:"
 echo "  views (PNG, depth EXR, normals EXR, camera JSON): $OUT/views"
-[[ -d "$OUT/pairs" ]] && echo "  pairs (shards, CroCo layout, summary.json): $OUT/pairs"
+echo "  pairs (shards, CroCo layout, summary.json): $OUT/pairs"
+[[ -d "$OUT/train" ]] && echo "  training (checkpoint-last.pth, log.jsonl, loss.svg, reconstruction.png): $OUT/train"
 exit 0

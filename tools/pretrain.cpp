@@ -39,6 +39,7 @@ int main(int argc, char** argv) {
   app.add_option("--recon-every", c.reconEvery,
                  "Iterations between reconstruction grids (0: never)");
   app.add_option("--live-epoch-pairs", c.liveEpochPairs, "Pairs per epoch with --live");
+  app.add_option("--max-nan-skips", c.maxNanSkips, "Non-finite losses in a row before stopping");
   bool quiet = false;
   app.add_flag("--quiet", quiet, "No progress lines");
   return runTool("pretrain", app, argc, argv, [&] {

@@ -4,9 +4,13 @@
 
 #include "util/error.h"
 
+#if defined(PAIRCAST_HAVE_GLOO) || defined(PAIRCAST_HAVE_NCCL)
+#define PAIRCAST_HAVE_C10D 1
+#include <torch/csrc/distributed/c10d/Backend.hpp>
+#include <torch/csrc/distributed/c10d/TCPStore.hpp>
+#endif
 #if defined(PAIRCAST_HAVE_GLOO)
 #include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
-#include <torch/csrc/distributed/c10d/TCPStore.hpp>
 #endif
 #if defined(PAIRCAST_HAVE_NCCL)
 #include <torch/csrc/distributed/c10d/ProcessGroupNCCL.hpp>
@@ -28,10 +32,14 @@ int envInt(const char* name, int fallback) {
 
 }  // namespace
 
-#if defined(PAIRCAST_HAVE_GLOO)
+#if defined(PAIRCAST_HAVE_C10D)
 struct Distributed::Impl {
   c10::intrusive_ptr<c10d::Store> store;
+#if TORCH_VERSION_MAJOR >= 2
+  c10::intrusive_ptr<c10d::Backend> group;  // Gloo and NCCL are Backends since 2.0
+#else
   c10::intrusive_ptr<c10d::ProcessGroup> group;
+#endif
 };
 #else
 struct Distributed::Impl {};
@@ -42,10 +50,10 @@ Distributed::~Distributed() = default;
 std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& device) {
   const int world = envInt("WORLD_SIZE", 1);
   if (world <= 1) return nullptr;
-#if !defined(PAIRCAST_HAVE_GLOO)
+#if !defined(PAIRCAST_HAVE_C10D)
   (void)device;
   throw Error(
-      "WORLD_SIZE > 1, but paircast was built without c10d Gloo (install libgloo-dev and rebuild)");
+      "WORLD_SIZE > 1, but paircast was built without c10d (install libgloo-dev and rebuild)");
 #else
   auto d = std::unique_ptr<Distributed>(new Distributed());
   d->world_ = world;
@@ -70,6 +78,9 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
     throw Error("--device cuda with WORLD_SIZE > 1 needs a LibTorch built with NCCL");
 #endif
   }
+#if !defined(PAIRCAST_HAVE_GLOO)
+  throw Error("WORLD_SIZE > 1 on CPU needs c10d Gloo (install libgloo-dev and rebuild)");
+#else
   auto options = c10d::ProcessGroupGloo::Options::create(opts.timeout);
   const char* ifname = std::getenv("GLOO_SOCKET_IFNAME");
   options->devices.push_back(ifname && *ifname
@@ -79,11 +90,12 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
   d->impl_->group =
       c10::make_intrusive<c10d::ProcessGroupGloo>(d->impl_->store, d->rank_, world, options);
   return d;
-#endif
+#endif  // PAIRCAST_HAVE_GLOO
+#endif  // PAIRCAST_HAVE_C10D
 }
 
 void Distributed::allReduceMean(const std::vector<torch::Tensor>& tensors) {
-#if defined(PAIRCAST_HAVE_GLOO)
+#if defined(PAIRCAST_HAVE_C10D)
   std::vector<torch::Tensor> flat;
   for (const auto& t : tensors) flat.push_back(t.reshape({-1}));
   std::vector<torch::Tensor> bucket = {torch::cat(flat)};
@@ -100,7 +112,7 @@ void Distributed::allReduceMean(const std::vector<torch::Tensor>& tensors) {
 }
 
 void Distributed::broadcast(const std::vector<torch::Tensor>& tensors) {
-#if defined(PAIRCAST_HAVE_GLOO)
+#if defined(PAIRCAST_HAVE_C10D)
   std::vector<torch::Tensor> ts(tensors.begin(), tensors.end());
   for (auto& t : ts) {
     std::vector<torch::Tensor> one = {t};
@@ -112,7 +124,7 @@ void Distributed::broadcast(const std::vector<torch::Tensor>& tensors) {
 }
 
 void Distributed::barrier() {
-#if defined(PAIRCAST_HAVE_GLOO)
+#if defined(PAIRCAST_HAVE_C10D)
   impl_->group->barrier()->wait();
 #endif
 }

@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "dataset/pair_stream.h"
+#include "model/autocast.h"
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
 #include "model/reconstruct.h"
@@ -218,13 +219,15 @@ class LiveLoader {
 };
 
 // AdamW state, by parameter position, as "optimizer/state/<i>/{exp_avg,exp_avg_sq,step}".
-std::string stateKey(const torch::Tensor& p) {
 #if TORCH_VERSION_MAJOR >= 2
-  return c10::guts::to_string(p.unsafeGetTensorImpl());
-#else
-  return c10::guts::to_string(p.unsafeGetTensorImpl());
-#endif
+void* stateKey(const torch::Tensor& p) {
+  return p.unsafeGetTensorImpl();
 }
+#else
+std::string stateKey(const torch::Tensor& p) {
+  return c10::guts::to_string(p.unsafeGetTensorImpl());
+}
+#endif
 
 std::map<std::string, torch::Tensor> optimizerTensors(torch::optim::AdamW& opt,
                                                       const std::vector<torch::Tensor>& params) {
@@ -451,8 +454,14 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       for (auto& g : opt.param_groups())
         static_cast<torch::optim::AdamWOptions&>(g.options()).lr(l);
     }
-    auto out = model->forward(batch.img1.to(device), batch.img2.to(device), batch.mask.to(device));
-    auto loss = maskedMse(out.prediction, out.mask, out.target);
+    torch::Tensor loss;
+    {
+      // On CUDA: bf16 autocast (no loss scaling needed); the loss itself in float32.
+      AutocastGuard autocast(device.is_cuda());
+      auto out =
+          model->forward(batch.img1.to(device), batch.img2.to(device), batch.mask.to(device));
+      loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
+    }
     if (iter == c.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
     // The ranks agree on the loss (and so on skipping a non-finite one).
     auto lossAll = loss.detach().to(torch::kCPU, torch::kFloat64).reshape({1});
