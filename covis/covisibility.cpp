@@ -13,11 +13,11 @@ namespace {
 constexpr float kMinDepth = 1e-6f;
 // Pixels per chunk of a row: the projection pass runs over fixed-size stack arrays, so the
 // compiler vectorises it, and the lookup pass that follows is a short scalar gather.
-constexpr int kChunk = 64;
+constexpr int kChunk = 128;
 
 // The kernel: counts over the sampled pixels of i. `m` maps (u, v, z) of i to homogeneous pixel
 // coordinates of j.
-VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI, const ImageF& depthJ,
+__attribute__((target_clones("avx2", "default"))) VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI, const ImageF& depthJ,
                                 float absTol, float relTol, int stride) {
   const int Wi = depthI.width, Hi = depthI.height, Wj = depthJ.width;
   const float maxX = static_cast<float>(depthJ.width), maxY = static_cast<float>(depthJ.height);

@@ -227,6 +227,31 @@ TEST(Pretrain, SigtermSavesACheckpointAndExits) {
   EXPECT_TRUE(summary["interrupted"].get<bool>());
 }
 
+TEST(Pretrain, PythonLoadsTheCheckpoint) {
+  if (std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") != 0)
+    GTEST_SKIP() << "python3-torch not installed";
+  TrainConfig c = tinyRun(testing::scratchDir("py"));
+  c.maxSteps = 2;
+  runPretrain(c);
+  const std::string cmd = "/usr/bin/python3 -c \"import torch; ck = torch.load('" + c.out +
+                          "/checkpoint-last.pth'); "
+                          "assert ck['step'] == 2, ck['step']; assert 'mask_token' in ck['model']; "
+                          "st = ck['optimizer']['state']; assert len(st) > 0; "
+                          "shapes = {tuple(v.shape) for v in ck['model'].values()}; "
+                          "assert all(tuple(x['exp_avg'].shape) in shapes for x in st.values())\"";
+  EXPECT_EQ(std::system(cmd.c_str()), 0) << cmd;
+}
+
+TEST(Pretrain, CudaStep) {
+  if (!torch::cuda::is_available()) GTEST_SKIP() << "no CUDA device";
+  TrainConfig c = tinyRun(testing::scratchDir("cuda"));
+  c.device = "cuda";
+  c.maxSteps = 3;
+  const nlohmann::json s = runPretrain(c);
+  EXPECT_EQ(s["steps"], 3);
+  EXPECT_TRUE(std::isfinite(s["loss"].get<double>()));
+}
+
 pid_t spawn(const std::vector<std::string>& args, const std::vector<std::string>& env) {
   const pid_t pid = fork();
   if (pid == 0) {
