@@ -21,16 +21,15 @@
 #include "dataset/shard.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/timer.h"
 
 namespace paircast {
 namespace fs = std::filesystem;
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
+using Clock = SteadyClock;
+constexpr auto since = secondsSince;
 
 constexpr int kHistogramBins = 20;
 

@@ -3,15 +3,14 @@
 #include <chrono>
 
 #include "util/error.h"
+#include "util/timer.h"
 #include "util/random.h"
 
 namespace paircast {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
+using Clock = SteadyClock;
+constexpr auto since = secondsSince;
 
 double validFraction(const ImageF& depth) {
   size_t valid = 0;

@@ -22,12 +22,17 @@ struct Counter {
   void add(double tokens, double dim) { other += tokens * dim; }
 };
 
-void block(Counter& c, double n, double d, int mlp) {
+// Pre-norm self-attention sub-block with its residual.
+void selfAttention(Counter& c, double n, double d) {
   c.norm(n, d);
   c.linear(n, d, 3 * d);
   c.attention(n, n, d);
   c.linear(n, d, d);
   c.add(n, d);
+}
+
+// Pre-norm GELU MLP sub-block with its residual.
+void mlpBlock(Counter& c, double n, double d, int mlp) {
   c.norm(n, d);
   c.linear(n, d, mlp * d);
   c.other += kGelu * n * mlp * d;
@@ -35,12 +40,13 @@ void block(Counter& c, double n, double d, int mlp) {
   c.add(n, d);
 }
 
+void block(Counter& c, double n, double d, int mlp) {
+  selfAttention(c, n, d);
+  mlpBlock(c, n, d, mlp);
+}
+
 void crossBlock(Counter& c, double n, double m, double d, int mlp, bool normMem) {
-  c.norm(n, d);
-  c.linear(n, d, 3 * d);
-  c.attention(n, n, d);
-  c.linear(n, d, d);
-  c.add(n, d);
+  selfAttention(c, n, d);
   if (normMem) c.norm(m, d);
   c.norm(n, d);
   c.linear(n, d, d);      // projq
@@ -48,11 +54,7 @@ void crossBlock(Counter& c, double n, double m, double d, int mlp, bool normMem)
   c.attention(n, m, d);
   c.linear(n, d, d);
   c.add(n, d);
-  c.norm(n, d);
-  c.linear(n, d, mlp * d);
-  c.other += kGelu * n * mlp * d;
-  c.linear(n, mlp * d, d);
-  c.add(n, d);
+  mlpBlock(c, n, d, mlp);
 }
 
 int64_t params(const CroCoConfig& c) {

@@ -26,6 +26,7 @@
 #include "trainer/pair_dataset.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/timer.h"
 #include "util/image_io.h"
 
 namespace paircast {
@@ -33,10 +34,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t) {
-  return std::chrono::duration<double>(Clock::now() - t).count();
-}
+using Clock = SteadyClock;
+constexpr auto since = secondsSince;
 
 std::atomic<int> gSignal{0};
 void onSignal(int sig) {
