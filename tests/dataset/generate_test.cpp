@@ -15,6 +15,7 @@
 #include "dataset/shard.h"
 #include "dataset/test_scenes.h"
 #include "test_paths.h"
+#include "test_process.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
@@ -219,26 +220,8 @@ TEST(GeneratePairs, SceneListsAndShardingSplitScenesDeterministically) {
             (std::vector<std::string>{"b-00000000", "b-00000001"}));
 }
 
-// Runs generate_pairs (the real command) and SIGKILLs it after `killAfterMs` (never when < 0).
 int runCommand(const std::vector<std::string>& args, int killAfterMs) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    int devnull = open("/dev/null", O_WRONLY);
-    dup2(devnull, 1);
-    dup2(devnull, 2);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
-  if (killAfterMs >= 0) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(killAfterMs));
-    kill(pid, SIGKILL);
-  }
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
+  return testing::runProcess(args, killAfterMs);
 }
 
 TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {

@@ -14,6 +14,7 @@
 #include "dataset/generate_job.h"
 #include "model/checkpoint.h"
 #include "test_paths.h"
+#include "test_process.h"
 #include "trainer/augment.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -200,27 +201,16 @@ TEST(Pretrain, TruncatedShardKeepsItsWholeSamples) {
 TEST(Pretrain, SigtermSavesACheckpointAndExits) {
   const std::string dir = testing::scratchDir("sig");
   const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/pretrain";
-  const pid_t pid = fork();
-  if (pid == 0) {
-    const std::string data = pairsDir() + "/pairs-*.tar";
-    int devnull = open("/dev/null", O_WRONLY);
-    dup2(devnull, 1);
-    dup2(devnull, 2);
-    execl(tool.c_str(), tool.c_str(), "--data", data.c_str(), "--img-size", "32", "--batch-size",
-          "4", "--epochs", "1000", "--save-every", "1000000", "--out", (dir + "/out").c_str(),
-          "--quiet", nullptr);
-    _exit(127);
-  }
+  const pid_t pid = testing::spawnProcess(
+      {tool, "--data", pairsDir() + "/pairs-*.tar", "--img-size", "32", "--batch-size", "4",
+       "--epochs", "1000", "--save-every", "1000000", "--out", dir + "/out", "--quiet"});
   // Wait for training to start (the log gets its first line), then ask it to stop.
   for (int i = 0; i < 600 && !(fs::exists(dir + "/out/log.jsonl") &&
                                fs::file_size(dir + "/out/log.jsonl") > 0);
        ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   kill(pid, SIGTERM);
-  int status = 0;
-  waitpid(pid, &status, 0);
-  ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 0);
+  EXPECT_EQ(testing::waitProcess(pid), 0);
   const Checkpoint ck = loadCheckpoint(dir + "/out/checkpoint-last.pth");
   EXPECT_GT(ck.extra["step"].get<int64_t>(), 0);
   const auto summary = nlohmann::json::parse(readFile(dir + "/out/summary.json"));
@@ -252,28 +242,6 @@ TEST(Pretrain, CudaStep) {
   EXPECT_TRUE(std::isfinite(s["loss"].get<double>()));
 }
 
-pid_t spawn(const std::vector<std::string>& args, const std::vector<std::string>& env) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    for (const auto& e : env) putenv(const_cast<char*>(e.c_str()));
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    int devnull = open("/dev/null", O_WRONLY);
-    dup2(devnull, 1);
-    dup2(devnull, 2);
-    execv(argv[0], argv.data());
-    _exit(127);
-  }
-  return pid;
-}
-
-int waitExit(pid_t pid) {
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
 TEST(Pretrain, TwoGlooProcessesEqualOneWithTheDoubledBatch) {
   const std::string dir = testing::scratchDir("gloo");
   const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/pretrain";
@@ -295,14 +263,14 @@ TEST(Pretrain, TwoGlooProcessesEqualOneWithTheDoubledBatch) {
                                     out,
                                     "--quiet"};
   };
-  ASSERT_EQ(waitExit(spawn(args(dir + "/one", 4), {})), 0);
+  ASSERT_EQ(testing::waitProcess(testing::spawnProcess(args(dir + "/one", 4), {})), 0);
   const std::string port = "MASTER_PORT=" + std::to_string(20000 + getpid() % 20000);
   std::vector<pid_t> ranks;
   for (int r = 0; r < 2; ++r)
-    ranks.push_back(spawn(args(dir + "/two", 2),
-                          {"WORLD_SIZE=2", "RANK=" + std::to_string(r),
-                           "LOCAL_RANK=" + std::to_string(r), "MASTER_ADDR=127.0.0.1", port}));
-  for (pid_t p : ranks) ASSERT_EQ(waitExit(p), 0);
+    ranks.push_back(testing::spawnProcess(
+        args(dir + "/two", 2), {"WORLD_SIZE=2", "RANK=" + std::to_string(r),
+                                "LOCAL_RANK=" + std::to_string(r), "MASTER_ADDR=127.0.0.1", port}));
+  for (pid_t p : ranks) ASSERT_EQ(testing::waitProcess(p), 0);
   const Checkpoint a = loadCheckpoint(dir + "/one/checkpoint-last.pth");
   const Checkpoint b = loadCheckpoint(dir + "/two/checkpoint-last.pth");
   double worst = 0;
