@@ -27,7 +27,10 @@ namespace fs = std::filesystem;
 // 32 pairs of the shipped room at 64x64, generated once for all the tests.
 const std::string& pairsDir() {
   static const std::string dir = [] {
-    const std::string d = (fs::path(::testing::TempDir()) / "paircast" / "trainer_pairs").string();
+    // One folder per test process: ctest runs the tests of this file in parallel processes.
+    const std::string d = (fs::path(::testing::TempDir()) / "paircast" /
+                           ("trainer_pairs." + std::to_string(getpid())))
+                              .string();
     fs::remove_all(d);
     GenerateConfig g;
     g.scenes = {testing::sourceDir() + "/scenes/room/room.obj"};
@@ -40,6 +43,9 @@ const std::string& pairsDir() {
     runGenerate(g);
     return d;
   }();
+  static const struct Cleanup {
+    ~Cleanup() { fs::remove_all(dir); }
+  } cleanup;
   return dir;
 }
 
