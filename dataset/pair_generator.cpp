@@ -3,8 +3,8 @@
 #include <chrono>
 
 #include "util/error.h"
-#include "util/timer.h"
 #include "util/random.h"
+#include "util/timer.h"
 
 namespace paircast {
 namespace {

@@ -26,8 +26,8 @@
 #include "trainer/pair_dataset.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
-#include "util/timer.h"
 #include "util/image_io.h"
+#include "util/timer.h"
 
 namespace paircast {
 namespace fs = std::filesystem;
