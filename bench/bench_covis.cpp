@@ -10,10 +10,10 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
@@ -28,10 +28,10 @@
 #include "util/error.h"
 #include "util/image_io.h"
 #include "util/random.h"
+#include "util/timer.h"
 
 using namespace paircast;
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 
 namespace {
 
@@ -47,6 +47,7 @@ struct Config {
   CovisOptions covis;
   std::string normalize = "valid";
   std::string jsonOut;  // optional: per-pair values and the summary
+  bool sweep = false;   // compare tolerances against exact visibility (rendered pairs only)
 };
 
 struct Pair {
@@ -56,9 +57,8 @@ struct Pair {
   std::string files[4];  // depth1, cam1, depth2, cam2 on disk (for ref_covis.py)
 };
 
-double seconds(Clock::time_point a) {
-  return std::chrono::duration<double>(Clock::now() - a).count();
-}
+// The absolute-only tolerance of the implementation check against ref_covis.py, metres.
+constexpr float kSameTestTol = 0.05f;
 
 // Best of `rounds` timings of fn, each round repeating it until it ran at least `minSeconds`.
 template <typename F>
@@ -66,12 +66,12 @@ double bestSecondsPerCall(F&& fn, int rounds, double minSeconds) {
   double best = 1e30;
   for (int r = 0; r < rounds; ++r) {
     int calls = 0;
-    const auto start = Clock::now();
+    const auto start = SteadyClock::now();
     do {
       fn();
       ++calls;
-    } while (seconds(start) < minSeconds);
-    best = std::min(best, seconds(start) / calls);
+    } while (secondsSince(start) < minSeconds);
+    best = std::min(best, secondsSince(start) / calls);
   }
   return best;
 }
@@ -103,13 +103,28 @@ Pair loadPair(const Config& c) {
   return p;
 }
 
-// Pairs inside the procedural living room (Y up): a first view from a random eye at head
-// height, and a second one moved up to 1.2 m and aimed near the mean point the first view
-// sees, as CroCo's sampler does, so that the overlaps spread over [0, 1].
-std::vector<Pair> renderPairs(const Config& c, const std::string& dir) {
-  const LayoutSpec layout = shippedLayouts().front();
-  const Mesh mesh = buildLayout(layout);
-  const RayCaster caster(mesh);
+// The procedural living room (Y up) and its BVH.
+struct RoomScene {
+  LayoutSpec layout;
+  Mesh mesh;
+  std::unique_ptr<RayCaster> caster;
+
+  RoomScene() {
+    const std::vector<LayoutSpec> layouts = shippedLayouts();
+    layout = layouts.front();
+    for (const LayoutSpec& l : layouts)
+      if (l.name == "room") layout = l;
+    mesh = buildLayout(layout);
+    caster = std::make_unique<RayCaster>(mesh);
+  }
+};
+
+// Pairs inside the room: a first view from a random eye at head height, and a second one moved
+// up to 1.2 m and aimed near the mean point the first view sees, as CroCo's sampler does, so
+// that the overlaps spread over [0, 1].
+std::vector<Pair> renderPairs(const Config& c, const RoomScene& scene, const std::string& dir) {
+  const RayCaster& caster = *scene.caster;
+  const LayoutSpec& layout = scene.layout;
   const RoomSpec& room = layout.rooms.front();
   const Eigen::Vector3d up(0, 1, 0);
   Rng rng(c.seed);
@@ -160,6 +175,84 @@ std::vector<Pair> renderPairs(const Config& c, const std::string& dir) {
   return pairs;
 }
 
+// The exact share of view i's valid pixels that view j sees: the pixel's surface point lies in
+// j's frame, in front of it, and nothing is on the segment to j's centre (shadow rays).
+double exactVisibleFraction(const RayCaster& caster, const Camera& ci, const ImageF& di,
+                            const Camera& cj) {
+  std::vector<Ray> rays;  // [valid pixels of i in j's frame]
+  size_t valid = 0;
+  const PixelDepthMap world = worldFromPixelDepth(ci);
+  for (int v = 0; v < ci.height; ++v)
+    for (int u = 0; u < ci.width; ++u) {
+      const float z = di.data[static_cast<size_t>(v) * ci.width + u];
+      if (!validDepth(z)) continue;
+      ++valid;
+      const Eigen::Vector3d p = world.apply(u, v, z).cast<double>();
+      const Eigen::Vector3d q = cj.cameraFromWorld() * p;
+      if (q.z() <= 0) continue;
+      const Eigen::Vector2d x = cj.project(q);
+      if (!(x.x() >= 0 && x.y() >= 0 && x.x() < cj.width && x.y() < cj.height)) continue;
+      // t in units of the segment; 1e-3 of it (a few mm) keeps the ray off its own surface.
+      rays.push_back(Ray{p.cast<float>(), (cj.t_cam2world - p).cast<float>(), 1e-3f, 1.0f - 1e-3f});
+    }
+  std::vector<Hit> hits(rays.size());
+  caster.intersect(rays.data(), hits.data(), rays.size());
+  size_t visible = 0;
+  for (const Hit& h : hits) visible += h.triangle < 0;
+  return valid ? static_cast<double>(visible) / valid : 0.0;
+}
+
+// How far v_ij and v_ji land from the exact visibility, over a grid of tolerances, and for the
+// kd-tree test (normalised by valid pixels, so that it measures the same thing).
+nlohmann::json toleranceSweep(const RoomScene& scene, const std::vector<Pair>& pairs) {
+  std::vector<double> exact;  // [2 * pairs]: v_ij, v_ji
+  for (const Pair& p : pairs) {
+    exact.push_back(exactVisibleFraction(*scene.caster, p.cam[0], p.depth[0], p.cam[1]));
+    exact.push_back(exactVisibleFraction(*scene.caster, p.cam[1], p.depth[1], p.cam[0]));
+  }
+  auto errors = [&](auto&& fn) {
+    double sum = 0, worst = 0;
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      const CovisResult r = fn(pairs[k]);
+      for (const double e :
+           {std::abs(r.v_ij - exact[2 * k]), std::abs(r.v_ji - exact[2 * k + 1])}) {
+        sum += e;
+        worst = std::max(worst, e);
+      }
+    }
+    return std::make_pair(sum / exact.size(), worst);
+  };
+  std::printf(
+      "\ntolerance sweep against exact visibility (shadow rays), %zu pairs, both directions:\n",
+      pairs.size());
+  std::printf("%-28s %12s %12s\n", "method", "mean |err|", "max |err|");
+  nlohmann::json out = nlohmann::json::array();
+  for (const float absTol : {0.0f, 0.01f, 0.03f, 0.05f, 0.1f})
+    for (const float relTol : {0.0f, 0.01f, 0.03f, 0.05f, 0.1f}) {
+      CovisOptions o;
+      o.absTol = absTol;
+      o.relTol = relTol;
+      const auto [mean, worst] = errors([&](const Pair& p) {
+        return computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], o);
+      });
+      char name[64];
+      std::snprintf(name, sizeof name, "reproj %.2f m + %.2f x depth", absTol, relTol);
+      std::printf("%-28s %12.4f %12.4f\n", name, mean, worst);
+      out.push_back({{"abs_tol", absTol},
+                     {"rel_tol", relTol},
+                     {"mean_abs_err", mean},
+                     {"max_abs_err", worst}});
+    }
+  PointCloudCovisOptions kd;
+  kd.normalize = CovisOptions::Normalize::Valid;
+  const auto [mean, worst] = errors([&](const Pair& p) {
+    return computePointCloudCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], kd);
+  });
+  std::printf("%-28s %12.4f %12.4f\n", "kd-tree < 5 cm (/ valid)", mean, worst);
+  out.push_back({{"method", "kdtree"}, {"mean_abs_err", mean}, {"max_abs_err", worst}});
+  return out;
+}
+
 std::string shellQuote(const std::string& s) {
   std::string out = "'";
   for (char ch : s) out += ch == '\'' ? std::string("'\\''") : std::string(1, ch);
@@ -172,14 +265,16 @@ bool haveReference(const std::string& script) {
 }
 
 // Runs ref_covis.py on one pair, on one thread, and parses its line
-// "SUMMARY ref_covis official: v12=.. v21=.. covis=.. ms=.. | reproj: v12=.. ...".
-nlohmann::json runReference(const Config& c, const std::string& script, const Pair& p) {
+// "SUMMARY ref_covis official: v12=.. v21=.. covis=.. ms=.. | reproj: v12=.. ..." into
+// {"official": {...}, "reproj": {...}} (the parts its --method asked for).
+nlohmann::json runReference(const std::string& script, const Pair& p, const std::string& method,
+                            float absTol, float relTol, int repeat) {
   std::ostringstream cmd;
   cmd << "OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 /usr/bin/python3 "
       << shellQuote(script) << " --depth1 " << shellQuote(p.files[0]) << " --cam1 "
       << shellQuote(p.files[1]) << " --depth2 " << shellQuote(p.files[2]) << " --cam2 "
-      << shellQuote(p.files[3]) << " --abs-tol " << c.covis.absTol << " --rel-tol "
-      << c.covis.relTol << " --repeat " << c.refRepeat << " 2>&1";
+      << shellQuote(p.files[3]) << " --method " << method << " --abs-tol " << absTol
+      << " --rel-tol " << relTol << " --repeat " << repeat << " 2>&1";
   std::string output, summary;
   if (FILE* f = popen(cmd.str().c_str(), "r")) {
     char buf[4096];
@@ -188,24 +283,23 @@ nlohmann::json runReference(const Config& c, const std::string& script, const Pa
   }
   std::istringstream lines(output);
   for (std::string line; std::getline(lines, line);)
-    if (line.rfind("SUMMARY ref_covis", 0) == 0) summary = line;
-  nlohmann::json out;
-  const size_t bar = summary.find('|');
-  if (bar == std::string::npos) {
-    std::fprintf(stderr, "ref_covis.py gave no SUMMARY line:\n%s\n", output.c_str());
-    return out;
-  }
-  auto parse = [](const std::string& part) {
-    nlohmann::json j;
+    if (line.rfind("SUMMARY ref_covis", 0) == 0) summary = line.substr(17);
+  nlohmann::json out = nlohmann::json::object();
+  std::istringstream parts(summary);
+  for (std::string part; std::getline(parts, part, '|');) {
     std::istringstream is(part);
-    for (std::string tok; is >> tok;) {
+    std::string name, tok;
+    is >> name;  // "official:" or "reproj:"
+    if (name.empty() || name.back() != ':') continue;
+    nlohmann::json j;
+    while (is >> tok) {
       const size_t eq = tok.find('=');
       if (eq != std::string::npos) j[tok.substr(0, eq)] = std::stod(tok.substr(eq + 1));
     }
-    return j;
-  };
-  out["official"] = parse(summary.substr(0, bar));
-  out["reproj"] = parse(summary.substr(bar + 1));
+    if (j.contains("covis")) out[name.substr(0, name.size() - 1)] = j;
+  }
+  if (out.empty())
+    std::fprintf(stderr, "ref_covis.py gave no usable SUMMARY:\n%s\n", output.c_str());
   return out;
 }
 
@@ -215,17 +309,29 @@ double maxAbsDiff(const CovisResult& r, const nlohmann::json& ref) {
                    std::abs(r.covis - ref["covis"].get<double>())});
 }
 
-int run(const Config& c) {
-  const std::string tmp =
+// A scratch folder for the rendered pairs, removed on every way out.
+struct ScratchDir {
+  std::string path =
       (fs::temp_directory_path() / ("bench_covis_" + std::to_string(::getpid()))).string();
-  fs::create_directories(tmp);
+  ScratchDir() { fs::create_directories(path); }
+  ~ScratchDir() {
+    std::error_code ignored;
+    fs::remove_all(path, ignored);
+  }
+};
+
+int run(const Config& c) {
+  const ScratchDir scratch;
+  const std::string& tmp = scratch.path;
   std::vector<Pair> pairs;
+  std::unique_ptr<RoomScene> scene;
   if (!c.depth1.empty()) {
     pairs.push_back(loadPair(c));
   } else {
     std::printf("rendering %d pairs of the procedural room at %dx%d, hfov %.0f...\n", c.pairs,
                 c.size, c.size, c.hfov);
-    pairs = renderPairs(c, tmp);
+    scene = std::make_unique<RoomScene>();
+    pairs = renderPairs(c, *scene, tmp);
   }
   const std::string script =
       c.refScript.empty()
@@ -240,7 +346,7 @@ int run(const Config& c) {
               "covis", "ms", "kd covis", "kd ms", "speedup");
 
   double sumOurs = 0, sumKd = 0, sumRefKd = 0, sumRefReproj = 0;
-  double worstReproj = 0, worstKd = 0;
+  double worstReproj = 0, worstCovis = 0, worstSame = 0, worstKd = 0;
   int refCount = 0;
   nlohmann::json perPair = nlohmann::json::array();
   for (const Pair& p : pairs) {
@@ -275,27 +381,44 @@ int run(const Config& c) {
                           {"covis", r.covis}, {"ms", ours},          {"kd_covis", kd.covis},
                           {"kd_ms", kdMs},    {"valid1", r.valid_i}, {"valid2", r.valid_j}};
     if (ref) {
-      const nlohmann::json rr = runReference(c, script, p);
-      if (rr.contains("reproj") && rr["reproj"].contains("covis")) {
-        // Ours normalised by valid pixels against the script's reprojection (which is), and our
-        // kd-tree (by all pixels) against its CroCo kd-tree.
+      // 1. The script with our tolerance values. Its test is max(abs, rel * z), ours abs + rel *
+      //    d, so grazing pixels may differ: this is the agreement of the two definitions.
+      const nlohmann::json rr =
+          runReference(script, p, "both", c.covis.absTol, c.covis.relTol, c.refRepeat);
+      // 2. An absolute tolerance only, where both tests are |z - d| <= abs: the agreement of
+      //    the implementations.
+      const nlohmann::json ra = runReference(script, p, "reproj", kSameTestTol, 0.0f, 1);
+      if (rr.contains("reproj") && rr.contains("official") && ra.contains("reproj")) {
+        // Ours normalised by valid pixels, as the script's reprojection is; our kd-tree (by all
+        // pixels) against its CroCo kd-tree.
         CovisOptions byValid = c.covis;
         byValid.normalize = CovisOptions::Normalize::Valid;
         const CovisResult rv =
             computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], byValid);
+        byValid.absTol = kSameTestTol;
+        byValid.relTol = 0.0f;
+        const CovisResult rs =
+            computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], byValid);
         const double dReproj = maxAbsDiff(rv, rr["reproj"]), dKd = maxAbsDiff(kd, rr["official"]);
+        const double dSame = maxAbsDiff(rs, ra["reproj"]);
+        const double dCovis = std::abs(rv.covis - rr["reproj"]["covis"].get<double>());
         worstReproj = std::max(worstReproj, dReproj);
+        worstCovis = std::max(worstCovis, dCovis);
+        worstSame = std::max(worstSame, dSame);
         worstKd = std::max(worstKd, dKd);
         sumRefKd += rr["official"]["ms"].get<double>();
         sumRefReproj += rr["reproj"]["ms"].get<double>();
         ++refCount;
         std::printf(
-            "  ref_covis.py: reproj v12 %.4f v21 %.4f covis %.4f in %.1f ms (|diff| %.4f); "
-            "CroCo kd-tree covis %.4f in %.1f ms (|diff| vs our kd-tree %.4f)\n",
+            "  ref_covis.py reproj: v12 %.4f v21 %.4f covis %.4f, %.1f ms; |diff| covis %.4f, "
+            "any %.4f; with |dz| <= %.2f m alone %.5f\n"
+            "  ref_covis.py CroCo kd-tree: covis %.4f, %.1f ms; |diff| with our kd-tree %.5f\n",
             rr["reproj"]["v12"].get<double>(), rr["reproj"]["v21"].get<double>(),
-            rr["reproj"]["covis"].get<double>(), rr["reproj"]["ms"].get<double>(), dReproj,
-            rr["official"]["covis"].get<double>(), rr["official"]["ms"].get<double>(), dKd);
+            rr["reproj"]["covis"].get<double>(), rr["reproj"]["ms"].get<double>(), dCovis, dReproj,
+            kSameTestTol, dSame, rr["official"]["covis"].get<double>(),
+            rr["official"]["ms"].get<double>(), dKd);
         row["ref"] = rr;
+        row["ref_abs_only"] = ra;
       }
     }
     perPair.push_back(row);
@@ -319,25 +442,35 @@ int run(const Config& c) {
         "%.0fx faster), numpy reprojection %.1f ms (ours %.0fx faster)\n",
         refCount, c.refRepeat, refKd, refKd / msOurs, refReproj, refReproj / msOurs);
     std::printf(
-        "agreement: max |difference| of v12, v21, covis: ours vs its reprojection %.4f; "
-        "our kd-tree vs its CroCo kd-tree %.4f\n",
-        worstReproj, worstKd);
+        "agreement, max |difference| over the pairs: ours vs its reprojection: covis %.4f, any "
+        "of v12/v21/covis %.4f (same numbers, abs + rel vs max(abs, rel)); with the same test "
+        "(|dz| <= %.2f m) %.5f. Our kd-tree vs its CroCo kd-tree: %.5f\n",
+        worstCovis, worstReproj, kSameTestTol, worstSame, worstKd);
     last["ms_ref_kdtree"] = refKd;
     last["ms_ref_reproj"] = refReproj;
     last["speedup_vs_ref_kdtree"] = refKd / msOurs;
+    last["max_diff_ref_reproj_covis"] = worstCovis;
     last["max_diff_ref_reproj"] = worstReproj;
+    last["max_diff_ref_reproj_same_test"] = worstSame;
     last["max_diff_ref_kdtree"] = worstKd;
   } else {
     std::printf("ref_covis.py comparison skipped (%s)\n",
                 c.ref ? "needs ../shared/tools/ref_covis.py and python3-sklearn" : "--no-ref");
   }
+  nlohmann::json sweep;
+  if (c.sweep) {
+    if (!scene) throw Error("--tolerance-sweep needs rendered pairs (it casts shadow rays)");
+    sweep = toleranceSweep(*scene, pairs);
+  }
   if (!c.jsonOut.empty()) {
     std::FILE* f = std::fopen(c.jsonOut.c_str(), "w");
     if (!f) throw Error(c.jsonOut, "cannot write");
-    std::fprintf(f, "%s\n", nlohmann::json{{"summary", last}, {"pairs", perPair}}.dump(1).c_str());
+    std::fprintf(f, "%s\n",
+                 nlohmann::json{{"summary", last}, {"pairs", perPair}, {"tolerance_sweep", sweep}}
+                     .dump(1)
+                     .c_str());
     std::fclose(f);
   }
-  fs::remove_all(tmp);
   std::printf("%s\n", last.dump().c_str());
   return 0;
 }
@@ -366,6 +499,8 @@ int main(int argc, char** argv) {
   app.add_option("--ref-repeat", c.refRepeat, "ref_covis.py: best of N runs per method")
       ->check(CLI::Range(1, 100));
   app.add_flag("!--no-ref", c.ref, "Skip ref_covis.py");
+  app.add_flag("--tolerance-sweep", c.sweep,
+               "Rendered pairs: error of several tolerances against exact visibility");
   app.add_option("--json", c.jsonOut, "Also write per-pair values and the summary here");
   CLI11_PARSE(app, argc, argv);
   try {

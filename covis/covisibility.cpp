@@ -6,19 +6,35 @@
 #include "covis/unproject.h"
 #include "util/error.h"
 
+// With GCC or Clang on x86-64 the kernel is also compiled for AVX-512 and AVX2 (16 and 8 lanes
+// against SSE2's 4, and hardware gathers); the loader picks the clone the CPU runs. Measured side
+// by side on 256x256 pairs: docs/covis.md. -DPAIRCAST_COVIS_CLONES= turns the clones off.
+#ifndef PAIRCAST_COVIS_CLONES
+#if defined(__x86_64__) && defined(__has_attribute)
+#if __has_attribute(target_clones)
+#define PAIRCAST_COVIS_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#endif
+#endif
+#endif
+#ifndef PAIRCAST_COVIS_CLONES
+#define PAIRCAST_COVIS_CLONES
+#endif
+
 namespace paircast {
 namespace {
 
 // Points nearer than this to camera j's plane (metres) count as behind it.
 constexpr float kMinDepth = 1e-6f;
 // Pixels per chunk of a row: the projection pass runs over fixed-size stack arrays, so the
-// compiler vectorises it, and the lookup pass that follows is a short scalar gather.
-constexpr int kChunk = 128;
+// compiler vectorises it, and the lookup pass that follows is a short gather. A 256-pixel row
+// is one chunk; smaller chunks measured no faster.
+constexpr int kChunk = 256;
 
 // The kernel: counts over the sampled pixels of i. `m` maps (u, v, z) of i to homogeneous pixel
 // coordinates of j.
-__attribute__((target_clones("avx2", "default"))) VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI, const ImageF& depthJ,
-                                float absTol, float relTol, int stride) {
+PAIRCAST_COVIS_CLONES VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI,
+                                                      const ImageF& depthJ, float absTol,
+                                                      float relTol, int stride) {
   const int Wi = depthI.width, Hi = depthI.height, Wj = depthJ.width;
   const float maxX = static_cast<float>(depthJ.width), maxY = static_cast<float>(depthJ.height);
   const float lastX = maxX - 1.0f, lastY = maxY - 1.0f;
@@ -46,7 +62,7 @@ __attribute__((target_clones("avx2", "default"))) VisibleCount countVisibleKerne
         const float x = px * inv, y = py * inv;
         const int32_t good = validDepth(d);
         ok[k] = good & (pz > kMinDepth) & (x >= 0.0f) & (x < maxX) & (y >= 0.0f) & (y < maxY);
-        // max/min in this operand order map NaN to 0 (maxps), so the conversion is defined.
+        // NaN goes to 0 and inf to the last pixel, so the conversion to int is defined.
         const float xc = std::min(x > 0.0f ? x : 0.0f, lastX);
         const float yc = std::min(y > 0.0f ? y : 0.0f, lastY);
         index[k] = static_cast<int32_t>(yc) * Wj + static_cast<int32_t>(xc);

@@ -4,11 +4,11 @@
 //
 // Everything here is one affine map of (u, v, z): the point of pixel (u, v) at z-depth z is
 // z * A (u, v, 1)^T + b, in whatever frame A and b are built for. The +0.5 offset and K^-1 are
-// folded into A, so loops over pixels step along a row with one add.
+// folded into A, so a loop along a row costs one multiply-add per coordinate.
 #pragma once
 
 #include <Eigen/Core>
-#include <cmath>
+#include <cstddef>
 #include <optional>
 #include <vector>
 
@@ -47,7 +47,7 @@ std::vector<Eigen::Vector3f> unprojectDepth(const Camera& camera, const ImageF& 
 
 // Mean world point of the valid pixels (CroCo's "mean 3D point seen by the first view", which
 // its pair sampler aims the second camera at); nullopt when no pixel is valid. Accumulated in
-// double, so it does not depend on summation order within float precision.
+// double.
 std::optional<Eigen::Vector3d> meanValidPoint(const Camera& camera, const ImageF& depth);
 
 // Throws paircast::Error unless `depth` is [camera.height, camera.width, 1].
