@@ -23,6 +23,7 @@
 #include "model/reconstruct.h"
 #include "trainer/augment.h"
 #include "trainer/distributed.h"
+#include "trainer/grad_scaler.h"
 #include "trainer/pair_dataset.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -64,123 +65,8 @@ torch::Tensor sampleMask(const CroCoConfig& m, uint64_t seed, const std::string&
   return mask;
 }
 
-// Batches in a fixed order: batch b of epoch e holds the pairs perm_e[b B .. (b+1) B), each
-// augmented with a stream seeded by (seed, epoch, pair), so a batch depends only on its
-// position, whatever the number of workers. Workers prefetch a window ahead.
-class BatchLoader {
- public:
-  // Rank `rank` of `world` reads slice `rank` of each global batch of world x batchSize pairs.
-  BatchLoader(const PairDataset& ds, const TrainConfig& c, int64_t startIter, int rank, int world)
-      : ds_(ds),
-        c_(c),
-        rank_(rank),
-        world_(world),
-        perEpoch_(static_cast<int64_t>(ds.size()) / (static_cast<int64_t>(c.batchSize) * world)),
-        next_(startIter),
-        consumed_(startIter) {
-    if (perEpoch_ < 1)
-      throw Error("dataset has " + std::to_string(ds.size()) + " pairs, fewer than one batch of " +
-                  std::to_string(c.batchSize));
-    for (int w = 0; w < std::max(1, c.workers); ++w) threads_.emplace_back([this] { work(); });
-  }
-  ~BatchLoader() {
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      stop_ = true;
-    }
-    cv_.notify_all();
-    for (auto& t : threads_) t.join();
-  }
-  int64_t perEpoch() const { return perEpoch_; }
-
-  Batch get(int64_t iter) {
-    std::unique_lock<std::mutex> lock(mu_);
-    cv_.wait(lock, [&] { return ready_.count(iter) || failure_; });
-    if (failure_) std::rethrow_exception(failure_);
-    Batch b = std::move(ready_[iter]);
-    ready_.erase(iter);
-    consumed_ = iter + 1;
-    cv_.notify_all();
-    return b;
-  }
-
- private:
-  const std::vector<int64_t>& permutation(int64_t epoch) {  // under mu_
-    auto it = perms_.find(epoch);
-    if (it != perms_.end()) return it->second;
-    std::vector<int64_t> p(ds_.size());
-    std::iota(p.begin(), p.end(), 0);
-    Rng rng(mixSeed(c_.seed, "epoch", static_cast<uint64_t>(epoch)));
-    for (size_t i = p.size() - 1; i > 0; --i) std::swap(p[i], p[rng.below(i + 1)]);
-    if (perms_.size() > 4) perms_.erase(perms_.begin());
-    return perms_[epoch] = std::move(p);
-  }
-
-  void work() {
-    while (true) {
-      int64_t iter;
-      std::vector<int64_t> idx;
-      {
-        std::unique_lock<std::mutex> lock(mu_);
-        cv_.wait(lock,
-                 [&] { return stop_ || next_ < consumed_ + 2 * std::max(1, c_.workers) + 2; });
-        if (stop_) return;
-        iter = next_++;
-        const int64_t epoch = iter / perEpoch_, b = iter % perEpoch_;
-        const auto& perm = permutation(epoch);
-        const int64_t first = (b * world_ + rank_) * c_.batchSize;
-        idx.assign(perm.begin() + first, perm.begin() + first + c_.batchSize);
-      }
-      try {
-        std::vector<torch::Tensor> a, b, masks;
-        const int64_t epoch = iter / perEpoch_;
-        for (int64_t i : idx) {
-          // A corrupt pair is reported and replaced by the next one, deterministically.
-          for (int attempt = 0;; ++attempt) {
-            const size_t k = static_cast<size_t>(i + attempt) % ds_.size();
-            try {
-              auto [x, y] = ds_.load(k);
-              Rng rng(mixSeed(c_.seed, "aug" + std::to_string(epoch), k));
-              AugmentOptions ao;
-              ao.size = c_.model.img_size;
-              auto [t1, t2] = augmentPair(x, y, ao, rng);
-              a.push_back(t1);
-              b.push_back(t2);
-              masks.push_back(sampleMask(c_.model, c_.seed, "mask" + std::to_string(epoch), k));
-              break;
-            } catch (const Error& e) {
-              std::fprintf(stderr, "pretrain: warning: skipping a corrupt pair: %s\n", e.what());
-              if (attempt >= 16) throw;
-            }
-          }
-        }
-        Batch batch{torch::stack(a), torch::stack(b), torch::stack(masks)};
-        std::lock_guard<std::mutex> lock(mu_);
-        ready_[iter] = std::move(batch);
-        cv_.notify_all();
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(mu_);
-        failure_ = std::current_exception();
-        cv_.notify_all();
-        return;
-      }
-    }
-  }
-
-  const PairDataset& ds_;
-  const TrainConfig& c_;
-  int rank_, world_;
-  int64_t perEpoch_, next_, consumed_;
-  std::vector<std::thread> threads_;
-  std::mutex mu_;
-  std::condition_variable cv_;
-  std::map<int64_t, Batch> ready_;
-  std::map<int64_t, std::vector<int64_t>> perms_;
-  std::exception_ptr failure_;
-  bool stop_ = false;
-};
-
-// Live pairs: rendered by a PairStream, augmented like the others.
+// Live pairs: rendered by a PairStream, augmented like the others. The stream is read in
+// order by the training thread, so its position in a checkpoint resumes it exactly.
 class LiveLoader {
  public:
   LiveLoader(const TrainConfig& c, uint64_t position, int rank, int world) : c_(c) {
@@ -194,27 +80,215 @@ class LiveLoader {
     o.pair.resolution = std::max(c.model.img_size, 64);
     stream_ = std::make_unique<PairStream>(o);
   }
-  Batch get(int64_t iter) {
-    std::vector<torch::Tensor> a, b, masks;
-    for (int i = 0; i < c_.batchSize; ++i) {
-      auto p = stream_->next();
-      if (!p) throw Error("the live pair stream stopped");
-      Rng rng(mixSeed(c_.seed, "live", static_cast<uint64_t>(iter) * c_.batchSize + i));
-      AugmentOptions ao;
-      ao.size = c_.model.img_size;
-      auto [t1, t2] = augmentPair(p->rgb[0], p->rgb[1], ao, rng);
-      a.push_back(t1);
-      b.push_back(t2);
-      masks.push_back(sampleMask(c_.model, c_.seed, "livemask",
-                                 static_cast<uint64_t>(iter) * c_.batchSize + i));
-    }
-    return {torch::stack(a), torch::stack(b), torch::stack(masks)};
+  // The next live pair, augmented and masked with streams keyed by `key`.
+  void next(uint64_t key, torch::Tensor& a, torch::Tensor& b, torch::Tensor& mask) {
+    auto p = stream_->next();
+    if (!p) throw Error("the live pair stream stopped");
+    Rng rng(mixSeed(c_.seed, "live", key));
+    AugmentOptions ao;
+    ao.size = c_.model.img_size;
+    std::tie(a, b) = augmentPair(p->rgb[0], p->rgb[1], ao, rng);
+    mask = sampleMask(c_.model, c_.seed, "livemask", key);
   }
   uint64_t position() const { return stream_->position(); }
 
  private:
   const TrainConfig& c_;
   std::unique_ptr<PairStream> stream_;
+};
+
+// One weighted data source: a dataset on disk, or the live stream (dataset == nullptr).
+struct Source {
+  const PairDataset* dataset = nullptr;
+  double weight = 1.0;
+  std::string name;
+};
+
+// Batches in a fixed order. With one disk source, batch b of epoch e holds the pairs
+// perm_e[b B .. (b+1) B). With several sources, slot g of the run draws its source with the
+// weights and its pair uniformly, from a stream keyed by g. Either way each pair is augmented
+// with a stream seeded by its position, so a batch depends only on its position, whatever the
+// number of workers. Workers prefetch a window ahead; live slots are filled in order by get().
+class BatchLoader {
+ public:
+  // Rank `rank` of `world` reads slice `rank` of each global batch of world x batchSize pairs.
+  BatchLoader(std::vector<Source> sources, const TrainConfig& c, int64_t startIter, int rank,
+              int world, LiveLoader* live)
+      : sources_(std::move(sources)),
+        c_(c),
+        rank_(rank),
+        world_(world),
+        live_(live),
+        next_(startIter),
+        consumed_(startIter) {
+    double total = 0;
+    int64_t pairs = 0;
+    for (const auto& s : sources_) {
+      if (!(s.weight >= 0) || !std::isfinite(s.weight))
+        throw Error("the weight of " + s.name + " must be a finite number >= 0");
+      total += s.weight;
+      pairs += s.dataset ? static_cast<int64_t>(s.dataset->size()) : c.liveEpochPairs;
+      if (s.dataset && s.dataset->size() == 0 && s.weight > 0)
+        throw Error(s.name + " holds no pairs");
+    }
+    if (!(total > 0)) throw Error("the data sources' weights sum to 0");
+    for (const auto& s : sources_) cumulative_.push_back((cumulative_.empty() ? 0.0 : cumulative_.back()) + s.weight / total);
+    single_ = sources_.size() == 1 && sources_[0].dataset;
+    perEpoch_ = pairs / (static_cast<int64_t>(c.batchSize) * world);
+    if (perEpoch_ < 1)
+      throw Error("the data has " + std::to_string(pairs) + " pairs, fewer than one batch of " +
+                  std::to_string(c.batchSize) + (world > 1 ? " per rank" : ""));
+    if (single_ || live_ == nullptr || sources_.size() > 1)
+      for (int w = 0; w < std::max(1, c.workers); ++w) threads_.emplace_back([this] { work(); });
+  }
+  ~BatchLoader() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    for (auto& t : threads_) t.join();
+  }
+  int64_t perEpoch() const { return perEpoch_; }
+  // Pairs drawn from each source by get() so far, by source name.
+  nlohmann::json counts() const {
+    nlohmann::json j = nlohmann::json::object();
+    for (size_t i = 0; i < sources_.size(); ++i) j[sources_[i].name] = counts_[i];
+    return j;
+  }
+
+  Batch get(int64_t iter) {
+    Slots s;
+    if (threads_.empty()) {  // live only
+      s.a.resize(c_.batchSize), s.b.resize(c_.batchSize), s.mask.resize(c_.batchSize);
+      for (int i = 0; i < c_.batchSize; ++i) s.live.push_back(i);
+      s.source.assign(c_.batchSize, 0);
+    } else {
+      std::unique_lock<std::mutex> lock(mu_);
+      cv_.wait(lock, [&] { return ready_.count(iter) || failure_; });
+      if (failure_) std::rethrow_exception(failure_);
+      s = std::move(ready_[iter]);
+      ready_.erase(iter);
+      consumed_ = iter + 1;
+      cv_.notify_all();
+    }
+    for (int i : s.live) {
+      const uint64_t key = static_cast<uint64_t>(iter) * c_.batchSize + i;
+      live_->next(key, s.a[i], s.b[i], s.mask[i]);
+    }
+    for (size_t src : s.source) ++counts_[src];
+    return {torch::stack(s.a), torch::stack(s.b), torch::stack(s.mask)};
+  }
+
+ private:
+  struct Slots {
+    std::vector<torch::Tensor> a, b, mask;
+    std::vector<int> live;       // slots the live stream fills
+    std::vector<size_t> source;  // each slot's source
+  };
+
+  const std::vector<int64_t>& permutation(int64_t epoch) {  // under mu_
+    auto it = perms_.find(epoch);
+    if (it != perms_.end()) return it->second;
+    std::vector<int64_t> p(sources_[0].dataset->size());
+    std::iota(p.begin(), p.end(), 0);
+    Rng rng(mixSeed(c_.seed, "epoch", static_cast<uint64_t>(epoch)));
+    for (size_t i = p.size() - 1; i > 0; --i) std::swap(p[i], p[rng.below(i + 1)]);
+    if (perms_.size() > 4) perms_.erase(perms_.begin());
+    return perms_[epoch] = std::move(p);
+  }
+
+  // Loads, augments and masks pair k of `ds`; a corrupt pair is reported and replaced by the
+  // next one, deterministically.
+  void loadPair(const PairDataset& ds, int64_t i, const std::string& augStream,
+                const std::string& maskStream, Slots& s, int slot) {
+    for (int attempt = 0;; ++attempt) {
+      const size_t k = static_cast<size_t>(i + attempt) % ds.size();
+      try {
+        auto [x, y] = ds.load(k);
+        Rng rng(mixSeed(c_.seed, augStream, k));
+        AugmentOptions ao;
+        ao.size = c_.model.img_size;
+        std::tie(s.a[slot], s.b[slot]) = augmentPair(x, y, ao, rng);
+        s.mask[slot] = sampleMask(c_.model, c_.seed, maskStream, k);
+        return;
+      } catch (const Error& e) {
+        std::fprintf(stderr, "pretrain: warning: skipping a corrupt pair: %s\n", e.what());
+        if (attempt >= 16) throw;
+      }
+    }
+  }
+
+  void work() {
+    while (true) {
+      int64_t iter;
+      std::vector<int64_t> idx;
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        cv_.wait(lock,
+                 [&] { return stop_ || next_ < consumed_ + 2 * std::max(1, c_.workers) + 2; });
+        if (stop_) return;
+        iter = next_++;
+        if (single_) {
+          const int64_t epoch = iter / perEpoch_, b = iter % perEpoch_;
+          const auto& perm = permutation(epoch);
+          const int64_t first = (b * world_ + rank_) * c_.batchSize;
+          idx.assign(perm.begin() + first, perm.begin() + first + c_.batchSize);
+        }
+      }
+      try {
+        Slots s;
+        s.a.resize(c_.batchSize), s.b.resize(c_.batchSize), s.mask.resize(c_.batchSize);
+        s.source.assign(c_.batchSize, 0);
+        const int64_t epoch = iter / perEpoch_;
+        for (int j = 0; j < c_.batchSize; ++j) {
+          if (single_) {
+            loadPair(*sources_[0].dataset, idx[j], "aug" + std::to_string(epoch),
+                     "mask" + std::to_string(epoch), s, j);
+            continue;
+          }
+          // Slot g of the whole run, the same whatever the number of ranks.
+          const uint64_t g = (static_cast<uint64_t>(iter) * world_ + rank_) * c_.batchSize + j;
+          Rng rng(mixSeed(c_.seed, "mix", g));
+          const double u = rng.uniform();
+          size_t src = 0;
+          while (src + 1 < sources_.size() && u >= cumulative_[src]) ++src;
+          s.source[j] = src;
+          if (!sources_[src].dataset) {
+            s.live.push_back(j);
+            continue;
+          }
+          const int64_t k = static_cast<int64_t>(rng.below(sources_[src].dataset->size()));
+          const std::string tag = "/" + std::to_string(src) + "/" + std::to_string(g);
+          loadPair(*sources_[src].dataset, k, "maug" + tag, "mmask" + tag, s, j);
+        }
+        std::lock_guard<std::mutex> lock(mu_);
+        ready_[iter] = std::move(s);
+        cv_.notify_all();
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mu_);
+        failure_ = std::current_exception();
+        cv_.notify_all();
+        return;
+      }
+    }
+  }
+
+  std::vector<Source> sources_;
+  std::vector<double> cumulative_;
+  std::vector<int64_t> counts_ = std::vector<int64_t>(sources_.size());
+  const TrainConfig& c_;
+  int rank_, world_;
+  LiveLoader* live_;
+  bool single_ = false;
+  int64_t perEpoch_ = 0, next_, consumed_;
+  std::vector<std::thread> threads_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::map<int64_t, Slots> ready_;
+  std::map<int64_t, std::vector<int64_t>> perms_;
+  std::exception_ptr failure_;
+  bool stop_ = false;
 };
 
 // AdamW state, by parameter position, as "optimizer/state/<i>/{exp_avg,exp_avg_sq,step}".
@@ -310,8 +384,10 @@ double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs
 }
 
 nlohmann::json runPretrain(const TrainConfig& c) {
-  const int sources = !c.shards.empty() + !c.crocoDir.empty() + !c.live.empty();
-  if (sources != 1) throw Error("give exactly one data source: --data, --croco-dir or --live");
+  if (c.shards.empty() && c.crocoDir.empty() && c.live.empty())
+    throw Error("give a data source: --data, --croco-dir or --live (or several, with weights)");
+  if (c.amp != "bf16" && c.amp != "fp16" && c.amp != "none")
+    throw Error("--amp must be bf16, fp16 or none, not '" + c.amp + "'");
   if (c.out.empty()) throw Error("--out is required");
   if (c.batchSize < 1 || c.accumIter < 1 || c.epochs < 1)
     throw Error("batch size, accum-iter and epochs must be >= 1");
@@ -326,16 +402,25 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       throw Error("--device cuda, but this LibTorch has no CUDA device");
     device =
         torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
+    allowTf32();
   }
   makeDirs(c.out);
   const std::string ckptPath = (fs::path(c.out) / "checkpoint-last.pth").string();
   const std::string logPath = (fs::path(c.out) / "log.jsonl").string();
 
   // Data.
-  std::unique_ptr<PairDataset> dataset;
-  if (!c.shards.empty()) dataset = std::make_unique<PairDataset>(PairDataset::fromShards(c.shards));
-  if (!c.crocoDir.empty())
-    dataset = std::make_unique<PairDataset>(PairDataset::fromCrocoDir(c.crocoDir));
+  std::unique_ptr<PairDataset> shardSet, crocoSet;
+  std::vector<Source> sources;
+  if (!c.shards.empty()) {
+    shardSet = std::make_unique<PairDataset>(PairDataset::fromShards(c.shards));
+    sources.push_back({shardSet.get(), c.shardsWeight, "--data"});
+  }
+  if (!c.crocoDir.empty()) {
+    crocoSet = std::make_unique<PairDataset>(PairDataset::fromCrocoDir(c.crocoDir));
+    sources.push_back({crocoSet.get(), c.crocoWeight, "--croco-dir " + c.crocoDir});
+  }
+  if (!c.live.empty()) sources.push_back({nullptr, c.liveWeight, "--live"});
+  const PairDataset* dataset = shardSet ? shardSet.get() : crocoSet.get();  // for the recon grid
 
   // Model and optimizer: no weight decay on biases and 1-D parameters (norms).
   torch::manual_seed(c.seed);
@@ -361,6 +446,10 @@ nlohmann::json runPretrain(const TrainConfig& c) {
                           torch::optim::AdamWOptions(lr).betas({0.9, 0.95}).weight_decay(0.0)));
   torch::optim::AdamW opt(groups, torch::optim::AdamWOptions(lr).betas({0.9, 0.95}));
 
+  // fp16 needs a loss scale; bf16 has float32's range and does not.
+  GradScaler scaler((device.is_cuda() && c.amp == "fp16") || c.forceLossScaling, c.initScale,
+                    c.scaleGrowthInterval);
+
   // Resume.
   int64_t iter = 0;
   uint64_t livePosition = 0;
@@ -373,6 +462,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
     restoreOptimizer(opt, ordered, ck.extraTensors, ckptPath);
     iter = ck.extra.value("step", int64_t{0});
     livePosition = ck.extra.value("live_position", uint64_t{0});
+    if (ck.extra.contains("scaler")) scaler.restore(ck.extra["scaler"]);
     auto rng = ck.extraTensors.find("rng/torch");
     if (rng != ck.extraTensors.end()) {
       auto gen = at::detail::getDefaultCPUGenerator();
@@ -398,16 +488,10 @@ nlohmann::json runPretrain(const TrainConfig& c) {
   model->to(device);
   if (dist) dist->broadcast(ordered);  // every rank starts from rank 0's weights
 
-  std::unique_ptr<BatchLoader> loader;
   std::unique_ptr<LiveLoader> live;
-  int64_t perEpoch;
-  if (dataset) {
-    loader = std::make_unique<BatchLoader>(*dataset, c, iter, rank, world);
-    perEpoch = loader->perEpoch();
-  } else {
-    live = std::make_unique<LiveLoader>(c, livePosition, rank, world);
-    perEpoch = std::max(1, c.liveEpochPairs / c.batchSize);
-  }
+  if (!c.live.empty()) live = std::make_unique<LiveLoader>(c, livePosition, rank, world);
+  auto loader = std::make_unique<BatchLoader>(sources, c, iter, rank, world, live.get());
+  const int64_t perEpoch = loader->perEpoch();
   const int64_t total = static_cast<int64_t>(c.epochs) * perEpoch;
   const int64_t stopAt = c.maxSteps >= 0 ? std::min(total, c.maxSteps) : total;
   const int64_t saveEvery =
@@ -429,6 +513,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
                             {"seed", c.seed},
                             {"batch_size", c.batchSize},
                             {"accum_iter", c.accumIter}};
+    if (scaler.enabled()) extra["scaler"] = scaler.state();
     saveCheckpoint(path, model, step / perEpoch, extra, tensors);
   };
 
@@ -445,7 +530,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
   auto lastPrint = Clock::now();
   while (iter < stopAt) {
     const auto t0 = Clock::now();
-    const Batch batch = loader ? loader->get(iter) : live->get(iter);
+    const Batch batch = loader->get(iter);
     const double wait = since(t0);
     const double epochF = static_cast<double>(iter) / perEpoch;
     if (iter % c.accumIter == 0) {
@@ -455,8 +540,9 @@ nlohmann::json runPretrain(const TrainConfig& c) {
     }
     torch::Tensor loss;
     {
-      // On CUDA: bf16 autocast (no loss scaling needed); the loss itself in float32.
-      AutocastGuard autocast(device.is_cuda());
+      // On CUDA: bf16 or fp16 autocast; the loss itself in float32.
+      AutocastGuard autocast(device.is_cuda() && c.amp != "none",
+                             c.amp == "fp16" ? at::kHalf : at::kBFloat16);
       auto out =
           model->forward(batch.img1.to(device), batch.img2.to(device), batch.mask.to(device));
       loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
@@ -477,7 +563,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       opt.zero_grad();
     } else {
       nanRun = 0;
-      (loss / c.accumIter).backward();
+      scaler.scaleLoss(loss / c.accumIter).backward();
       if ((iter + 1) % c.accumIter == 0) {
         if (dist) {
           std::vector<torch::Tensor> grads;
@@ -485,7 +571,16 @@ nlohmann::json runPretrain(const TrainConfig& c) {
             if (p.grad().defined()) grads.push_back(p.grad());
           dist->allReduceMean(grads);
         }
-        opt.step();
+        // With a loss scale, gradients that overflowed skip the step (on every rank alike:
+        // they were all-reduced) and the scale backs off.
+        const bool finite = scaler.unscale(ordered);
+        if (finite) opt.step();
+        scaler.update(finite);
+        if (!finite && lead)
+          std::fprintf(stderr,
+                       "pretrain: warning: fp16 gradients overflowed at step %lld; step skipped, "
+                       "loss scale now %g\n",
+                       static_cast<long long>(iter), scaler.scale());
         opt.zero_grad();
       }
       lastLoss = lossValue;
@@ -570,6 +665,8 @@ nlohmann::json runPretrain(const TrainConfig& c) {
       {"interrupted", interrupted},
       {"checkpoint", ckptPath}};
   summary["world_size"] = world;
+  summary["pairs_by_source"] = loader->counts();
+  if (scaler.enabled()) summary["loss_scale"] = scaler.scale();
   if (lead) writeFileAtomic((fs::path(c.out) / "summary.json").string(), summary.dump(1) + "\n");
   if (dist) dist->barrier();
   return summary;

@@ -13,11 +13,14 @@
 namespace paircast {
 
 struct TrainConfig {
-  // Data: exactly one of these.
+  // Data: one or more of these. With one source, each epoch is a permutation of it. With
+  // several, each sample comes from a source drawn with these weights (normalised; samples
+  // within a source drawn with replacement), and an epoch is the sum of the sources' sizes.
   std::vector<std::string> shards;  // tar shards or glob patterns
   std::string crocoDir;             // CroCo layout with pairs.txt
   std::vector<std::string> live;    // scenes: pairs rendered on the fly
-  int liveEpochPairs = 1000;        // pairs per "epoch" with --live
+  int liveEpochPairs = 1000;        // pairs per "epoch" from --live
+  double shardsWeight = 1.0, crocoWeight = 1.0, liveWeight = 1.0;
 
   CroCoConfig model = presetConfig("tiny");
   int batchSize = 16;
@@ -31,6 +34,12 @@ struct TrainConfig {
   std::string out;
   bool resume = false;
   std::string device = "cpu";
+  // Mixed precision on CUDA: "bf16" (autocast), "fp16" (autocast and a dynamic loss scale, as
+  // torch.cuda.amp.GradScaler) or "none" (float32, TF32 matmuls).
+  std::string amp = "bf16";
+  bool forceLossScaling = false;  // the fp16 loss scale on any device (tests)
+  double initScale = 65536.0;     // GradScaler's defaults
+  int scaleGrowthInterval = 2000;
   uint64_t seed = 0;
   int workers = 2;
   int64_t saveEvery = 100;  // iterations between checkpoints (rounded up to accumIter)

@@ -16,6 +16,7 @@
 #include "test_paths.h"
 #include "test_process.h"
 #include "trainer/augment.h"
+#include "trainer/grad_scaler.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
 
@@ -186,12 +187,113 @@ TEST(Pretrain, CrocoLayoutAndBadSources) {
   TrainConfig none = tinyRun(testing::scratchDir("none"));
   none.shards.clear();
   EXPECT_THROW(runPretrain(none), Error);
-  TrainConfig two = tinyRun(testing::scratchDir("two"));
-  two.crocoDir = pairsDir();
-  EXPECT_THROW(runPretrain(two), Error);
+  TrainConfig zero = tinyRun(testing::scratchDir("zero"));
+  zero.crocoDir = pairsDir();
+  zero.shardsWeight = zero.crocoWeight = 0;
+  EXPECT_THROW(runPretrain(zero), Error);
+  TrainConfig negative = tinyRun(testing::scratchDir("negative"));
+  negative.crocoDir = pairsDir();
+  negative.crocoWeight = -1;
+  EXPECT_THROW(runPretrain(negative), Error);
+  TrainConfig amp = tinyRun(testing::scratchDir("amp"));
+  amp.amp = "fp8";
+  EXPECT_THROW(runPretrain(amp), Error);
   TrainConfig missing = tinyRun(testing::scratchDir("missing"));
   missing.shards = {"/nonexistent/pairs-*.tar"};
   EXPECT_THROW(runPretrain(missing), Error);
+}
+
+TEST(Pretrain, MixedSourcesFollowTheWeightsAndResumeExactly) {
+  const std::string dir = testing::scratchDir("mix");
+  auto mixed = [&](const std::string& out) {
+    TrainConfig c = tinyRun(out);
+    c.crocoDir = pairsDir();  // the same pairs through the other reader: a second source
+    c.shardsWeight = 3;
+    c.crocoWeight = 1;
+    return c;
+  };
+  TrainConfig whole = mixed(dir + "/whole");
+  whole.maxSteps = 40;
+  whole.saveEvery = 40;
+  const nlohmann::json s = runPretrain(whole);
+  const auto& counts = s["pairs_by_source"];
+  const int64_t fromShards = counts["--data"], fromCroco = counts["--croco-dir " + pairsDir()];
+  EXPECT_EQ(fromShards + fromCroco, 160);
+  // 160 draws at p = 0.75: the standard deviation is 5.5 pairs.
+  EXPECT_NEAR(fromShards, 120, 25) << counts.dump();
+  // An epoch is the sum of the sources: 64 pairs, 16 batches of 4.
+  std::ifstream log(whole.out + "/log.jsonl");
+  std::string line, last;
+  while (std::getline(log, line)) last = line;
+  EXPECT_NEAR(nlohmann::json::parse(last)["epoch"].get<double>(), 39.0 / 16, 1e-9);
+
+  TrainConfig a = mixed(dir + "/a"), b = mixed(dir + "/b");
+  a.maxSteps = 6;
+  runPretrain(a);
+  b.maxSteps = 3;
+  runPretrain(b);
+  b.maxSteps = 6;
+  b.resume = true;
+  b.workers = 2;
+  runPretrain(b);
+  const Checkpoint ca = loadCheckpoint(a.out + "/checkpoint-last.pth");
+  const Checkpoint cb = loadCheckpoint(b.out + "/checkpoint-last.pth");
+  for (const auto& [k, t] : ca.model)
+    EXPECT_TRUE(torch::equal(t, cb.model.at(k))) << k << " differs after a mixed resume";
+}
+
+TEST(Pretrain, LiveAndShardsMix) {
+  TrainConfig c = tinyRun(testing::scratchDir("mixlive"));
+  c.live = {testing::sourceDir() + "/scenes/room/room.obj"};
+  c.liveWeight = 1;
+  c.shardsWeight = 1;
+  c.maxSteps = 3;
+  const nlohmann::json s = runPretrain(c);
+  EXPECT_EQ(s["steps"], 3);
+  const int64_t live = s["pairs_by_source"]["--live"], disk = s["pairs_by_source"]["--data"];
+  EXPECT_EQ(live + disk, 12);
+  EXPECT_GT(live, 0);
+  EXPECT_GT(disk, 0);
+}
+
+TEST(GradScaler, SkipsOverflowsBacksOffAndGrows) {
+  auto p = torch::ones({3}, torch::requires_grad());
+  GradScaler scaler(true, 1024.0, /*growthInterval=*/2);
+  scaler.scaleLoss(p.sum() * 2).backward();
+  EXPECT_TRUE(scaler.unscale({p}));
+  EXPECT_TRUE(torch::allclose(p.grad(), torch::full({3}, 2.0)));  // unscaled back
+  scaler.update(true);
+  EXPECT_EQ(scaler.scale(), 1024.0);
+  scaler.update(true);
+  EXPECT_EQ(scaler.scale(), 2048.0);  // two clean steps in a row: doubled
+  p.grad().fill_(std::numeric_limits<float>::infinity());
+  EXPECT_FALSE(scaler.unscale({p}));
+  scaler.update(false);
+  EXPECT_EQ(scaler.scale(), 1024.0);  // halved
+  GradScaler restored(true, 1.0, 2);
+  restored.restore(scaler.state());
+  EXPECT_EQ(restored.scale(), 1024.0);
+  EXPECT_THROW(restored.restore({{"scale", -1.0}}), Error);
+  GradScaler off(false);
+  EXPECT_TRUE(torch::equal(off.scaleLoss(torch::ones({1})), torch::ones({1})));
+}
+
+TEST(Pretrain, PowerOfTwoLossScaleLeavesTheWeightsBitIdentical) {
+  // Scaling by 2^k and back is exact in float32, so the fp16 code path (run here in float32
+  // on the CPU) must reproduce the unscaled run to the bit, and it keeps its scale on resume.
+  const std::string dir = testing::scratchDir("scaler");
+  TrainConfig plain = tinyRun(dir + "/plain"), scaled = tinyRun(dir + "/scaled");
+  plain.maxSteps = scaled.maxSteps = 4;
+  scaled.forceLossScaling = true;
+  scaled.initScale = 1024;
+  scaled.scaleGrowthInterval = 3;
+  runPretrain(plain);
+  const nlohmann::json s = runPretrain(scaled);
+  EXPECT_EQ(s["loss_scale"], 2048.0);  // grew once after 3 clean steps
+  const Checkpoint a = loadCheckpoint(plain.out + "/checkpoint-last.pth");
+  const Checkpoint b = loadCheckpoint(scaled.out + "/checkpoint-last.pth");
+  for (const auto& [k, t] : a.model) EXPECT_TRUE(torch::equal(t, b.model.at(k))) << k;
+  EXPECT_EQ(b.extra["scaler"]["scale"], 2048.0);
 }
 
 TEST(Pretrain, TruncatedShardKeepsItsWholeSamples) {
@@ -243,9 +345,14 @@ TEST(Pretrain, CudaStep) {
   TrainConfig c = tinyRun(testing::scratchDir("cuda"));
   c.device = "cuda";
   c.maxSteps = 3;
-  const nlohmann::json s = runPretrain(c);
-  EXPECT_EQ(s["steps"], 3);
-  EXPECT_TRUE(std::isfinite(s["loss"].get<double>()));
+  for (const char* amp : {"bf16", "fp16", "none"}) {
+    c.amp = amp;
+    c.out = testing::scratchDir(std::string("cuda_") + amp);
+    const nlohmann::json s = runPretrain(c);
+    EXPECT_EQ(s["steps"], 3) << amp;
+    EXPECT_TRUE(std::isfinite(s["loss"].get<double>())) << amp;
+    EXPECT_EQ(s.contains("loss_scale"), std::string(amp) == "fp16") << amp;
+  }
 }
 
 TEST(Pretrain, TwoGlooProcessesEqualOneWithTheDoubledBatch) {
