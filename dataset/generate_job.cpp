@@ -189,6 +189,7 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
   }
 
   makeDirs(cfg.out);
+  removeStaleTemporaries(cfg.out);  // left by a killed run
   removeTemporaries(cfg.out);
   const std::string part = cfg.numShards > 1 ? "-" + std::to_string(cfg.shardIndex) : "";
   const std::string shardPrefix = "pairs" + part;
@@ -223,6 +224,8 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
   size_t totalItems = 0;
   for (size_t s = 0; s < scenes.size(); ++s) {
     makeDirs((recordsDir / scenes[s]->name).string());
+    removeStaleTemporaries((recordsDir / scenes[s]->name).string());
+    removeStaleTemporaries((fs::path(cfg.out) / scenes[s]->name).string());
     for (uint64_t k = 0; k < static_cast<uint64_t>(cfg.pairsPerScene); ++k) {
       ++totalItems;
       const nlohmann::json rec = readRecord(recordPath(*scenes[s], k));

@@ -75,7 +75,9 @@ std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
           computeCovisibility(first.camera, depth[0], second.camera, depth[1], options_.covis);
       s.covisSeconds += since(t0);
       s.candidateCovis.push_back(static_cast<float>(c.covis));
-      if (c.covis < options_.minCovis || c.covis > options_.maxCovis) continue;
+      if (options_.accept ? !options_.accept(c.covis)
+                          : c.covis < options_.minCovis || c.covis > options_.maxCovis)
+        continue;
       // Accepted: render the colour images (the geometry is the same as the depth pass).
       t0 = Clock::now();
       s.camera[0] = first.camera;

@@ -4,6 +4,7 @@
 // output does not depend on how work was split.
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -21,6 +22,8 @@ struct PairOptions {
   double hfov = 60.0;     // degrees
   double minCovis = 0.5;  // keep a pair when covis lies in [minCovis, maxCovis]
   double maxCovis = 1.0;
+  // When set, decides instead of [minCovis, maxCovis] (covis_sweep's buckets). Must be pure.
+  std::function<bool(double covis)> accept;
   double minValidFraction = 0.7;  // of each view's pixels with depth > 0
   int maxAttempts = 100;          // second views tried per reference view
   int maxReferences = 20;         // reference views tried per pair before it is given up

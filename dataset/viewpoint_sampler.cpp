@@ -30,7 +30,7 @@ ViewpointSampler::ViewpointSampler(const Scene& scene, const RayCaster& caster,
 }
 
 Eigen::Matrix3d ViewpointSampler::orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
-                                         Rng& rng) const {
+                                         Rng& rng, double noiseScale) const {
   Eigen::Vector3d forward = target - eye;
   // Looking straight up or down: fall back to a horizontal direction.
   if ((forward - forward.dot(up_) * up_).norm() < 1e-6) forward = up_.unitOrthogonal();
@@ -38,7 +38,7 @@ Eigen::Matrix3d ViewpointSampler::orient(const Eigen::Vector3d& eye, const Eigen
   const double pan = rng.uniform(-options_.panDegrees, options_.panDegrees);
   const double tilt = rng.uniform(-options_.tiltDegrees, options_.tiltDegrees);
   const double roll = rng.uniform(-options_.rollDegrees, options_.rollDegrees);
-  return R * orientationNoise(pan, tilt, roll);
+  return R * orientationNoise(noiseScale * pan, noiseScale * tilt, noiseScale * roll);
 }
 
 Viewpoint ViewpointSampler::sampleReference(const Camera& intrinsics, Rng& rng) const {
@@ -61,16 +61,26 @@ Viewpoint ViewpointSampler::sampleOther(const Camera& intrinsics, const Viewpoin
   v.floorPoint = from.floorPoint;
   const Eigen::Vector3f a = up_.unitOrthogonal().cast<float>();
   const Eigen::Vector3f b = up_.cast<float>().cross(a);
+  double scale = options_.walkScale, closeness = 1.0;
+  if (options_.minWalkScale > 0 && options_.minWalkScale < scale) {
+    scale = std::exp(rng.uniform(std::log(options_.minWalkScale), std::log(scale)));
+    closeness = scale / options_.walkScale;
+  }
   for (int s = 0; s < options_.walkSteps; ++s) {
-    const float da = static_cast<float>(options_.walkScale * rng.normal());
-    const float db = static_cast<float>(options_.walkScale * rng.normal());
+    const float da = static_cast<float>(scale * rng.normal());
+    const float db = static_cast<float>(scale * rng.normal());
     rng.normal();  // CroCo draws a third (vertical, zero-weighted) component
     if (auto snapped = floor_.snap(v.floorPoint + da * a + db * b)) v.floorPoint = *snapped;
   }
-  const double height = rng.uniform(options_.minHeight, options_.maxHeight);
+  double height = rng.uniform(options_.minHeight, options_.maxHeight);
+  if (closeness < 1.0) {
+    const double firstHeight =
+        (from.camera.t_cam2world - from.floorPoint.cast<double>()).dot(up_);
+    height = firstHeight + closeness * (height - firstHeight);
+  }
   const Eigen::Vector3d eye = v.floorPoint.cast<double>() + height * up_;
   v.camera = intrinsics;
-  v.camera.R_cam2world = orient(eye, target, rng);
+  v.camera.R_cam2world = orient(eye, target, rng, closeness);
   v.camera.t_cam2world = eye;
   return v;
 }

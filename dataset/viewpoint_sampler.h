@@ -22,6 +22,10 @@ struct SamplerOptions {
   int walkSteps = 5;       // random walk of the second view
   double walkScale = 2.0;  // each step: walkScale * N(0, 1) along both floor axes (CroCo's
                            // random_step_variance)
+  // > 0: each second view draws its walk scale s log-uniformly in [minWalkScale, walkScale],
+  // and moves its height and orientation noise towards the first view's by s / walkScale, so
+  // near-identical views (covis up to 1) are proposed too (covis_sweep's pool).
+  double minWalkScale = 0;
   FloorOptions floor;
 };
 
@@ -52,7 +56,8 @@ class ViewpointSampler {
 
  private:
   // worldFromCamera rotation looking along `forward` (levelled on up), then the noise.
-  Eigen::Matrix3d orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, Rng& rng) const;
+  Eigen::Matrix3d orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, Rng& rng,
+                         double noiseScale = 1.0) const;
   SamplerOptions options_;
   Eigen::Vector3d up_;
   FloorMap floor_;

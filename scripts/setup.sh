@@ -12,6 +12,7 @@ PACKAGES=(
 # Optional references for tests and benchmarks (Python side): torch, open3d, sklearn.
 if [[ "${PAIRCAST_WITH_REFERENCES:-1}" == 1 ]]; then
   PACKAGES+=(python3-numpy python3-torch python3-open3d python3-sklearn python3-openimageio)
+  PACKAGES+=(chromium)  # the dataset report is checked in headless Chromium
 fi
 
 missing=()

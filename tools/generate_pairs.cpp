@@ -2,6 +2,7 @@
 // folder layout. Its last line of output is the summary JSON.
 #include <cstdio>
 
+#include "dataset/dataset_report.h"
 #include "dataset/generate_job.h"
 #include "tool_main.h"
 
@@ -54,6 +55,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1.0));
   bool quiet = false;
   app.add_flag("--quiet", quiet, "No progress line");
+  bool report = false;
+  app.add_flag("--report", report, "Write OUT/report.html (dataset_report) at the end");
   return runTool("generate_pairs", app, argc, argv, [&] {
     cfg.load.up = parseUpAxis(up);
     cfg.shards = format != "croco";
@@ -63,7 +66,12 @@ int main(int argc, char** argv) {
     cfg.progress = !quiet;
     if (cfg.pair.minCovis > cfg.pair.maxCovis)
       throw Error("--min-covis must not exceed --max-covis");
-    const nlohmann::json summary = runGenerate(cfg);
+    nlohmann::json summary = runGenerate(cfg);
+    if (report) {
+      ReportOptions ro;
+      ro.dir = cfg.out;
+      summary["report"] = writeDatasetReport(ro)["report"];
+    }
     std::printf("%s\n", summary.dump().c_str());
     return 0;
   });

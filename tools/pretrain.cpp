@@ -12,6 +12,7 @@ int main(int argc, char** argv) {
   int imgSize = 224;
   CLI::App app{"Pre-train CroCo on image pairs (checkpoints that PyTorch loads)"};
   app.add_option("--data", c.shards, "Tar shards or glob patterns");
+  app.add_option("--keys", c.keysFile, "Train only on the shard keys listed in this file");
   app.add_option("--croco-dir", c.crocoDir, "A CroCo pairs folder (pairs.txt)");
   app.add_option("--live", c.live, "Scenes: pairs rendered on the fly");
   app.add_option("--data-weight", c.shardsWeight, "Share of samples from --data when mixing");

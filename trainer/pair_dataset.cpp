@@ -127,6 +127,28 @@ PairDataset PairDataset::fromCrocoDir(const std::string& dir) {
   return ds;
 }
 
+void PairDataset::restrictTo(const std::string& keysFile) {
+  std::ifstream in(keysFile);
+  if (!in) throw Error(keysFile, "cannot read the key list");
+  std::map<std::string, bool> wanted;  // key -> found
+  std::string line;
+  while (std::getline(in, line)) {
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+    if (!line.empty()) wanted.emplace(line, false);
+  }
+  if (wanted.empty()) throw Error(keysFile, "lists no key");
+  std::vector<Pair> kept;
+  for (auto& p : pairs_) {
+    auto it = wanted.find(p.key);
+    if (it == wanted.end() || it->second) continue;  // not listed, or a duplicate
+    it->second = true;
+    kept.push_back(std::move(p));
+  }
+  for (const auto& [key, found] : wanted)
+    if (!found) throw Error(keysFile, "lists key '" + key + "', which is not in the data");
+  pairs_ = std::move(kept);
+}
+
 std::pair<Image8, Image8> PairDataset::load(size_t i) const {
   const Pair& p = pairs_.at(i);
   auto one = [&](const Member& m, const char* which) {

@@ -18,7 +18,12 @@ class PairDataset {
   // CroCo layout: DIR/pairs.txt with "im1 im2" lines relative to DIR.
   static PairDataset fromCrocoDir(const std::string& dir);
 
+  // Keeps only the pairs whose key is listed (one key per line in `keysFile`), in their order
+  // in the shards. Throws paircast::Error naming the file when a listed key is missing.
+  void restrictTo(const std::string& keysFile);
+
   size_t size() const { return pairs_.size(); }
+  const std::string& key(size_t i) const { return pairs_.at(i).key; }
   // Decodes pair i. Throws paircast::Error naming the file and member on corruption.
   std::pair<Image8, Image8> load(size_t i) const;
   std::string describe(size_t i) const;

@@ -405,6 +405,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
     allowTf32();
   }
   makeDirs(c.out);
+  if (lead) removeStaleTemporaries(c.out);  // left by a killed run
   const std::string ckptPath = (fs::path(c.out) / "checkpoint-last.pth").string();
   const std::string logPath = (fs::path(c.out) / "log.jsonl").string();
 
@@ -413,6 +414,7 @@ nlohmann::json runPretrain(const TrainConfig& c) {
   std::vector<Source> sources;
   if (!c.shards.empty()) {
     shardSet = std::make_unique<PairDataset>(PairDataset::fromShards(c.shards));
+    if (!c.keysFile.empty()) shardSet->restrictTo(c.keysFile);
     sources.push_back({shardSet.get(), c.shardsWeight, "--data"});
   }
   if (!c.crocoDir.empty()) {

@@ -17,6 +17,7 @@ struct TrainConfig {
   // several, each sample comes from a source drawn with these weights (normalised; samples
   // within a source drawn with replacement), and an epoch is the sum of the sources' sizes.
   std::vector<std::string> shards;  // tar shards or glob patterns
+  std::string keysFile;             // optional: train only on these shard keys (one per line)
   std::string crocoDir;             // CroCo layout with pairs.txt
   std::vector<std::string> live;    // scenes: pairs rendered on the fly
   int liveEpochPairs = 1000;        // pairs per "epoch" from --live

@@ -21,6 +21,16 @@ void writeFileAtomic(const std::string& path, std::string_view data,
 // The temporary name used for `path` by this process: "<dir>/.<name>.tmp.<pid>".
 std::string tempPathFor(const std::string& path);
 
+// Removes the temporary files ("<dir>/.<name>.tmp.<pid>") that killed processes left in `dir`
+// (their pid no longer runs). Returns how many were removed.
+int removeStaleTemporaries(const std::string& dir);
+
+// Test-only fault injection: when the environment variable PAIRCAST_FAULT_KILL_DURING_WRITE holds
+// a string that the path contains, the process writes half of the data to the temporary file
+// and then kills itself with SIGKILL, as a crash or kill -9 in the middle of a write would.
+// (tests/reliability/fault_injection_test.cpp uses it on checkpoints and shards.)
+void faultPointDuringWrite(const std::string& path, int fd, std::string_view data);
+
 // Renames `from` to `to` after fsync-ing `from`, then fsyncs the folder.
 void commitFile(const std::string& from, const std::string& to);
 

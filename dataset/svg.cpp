@@ -1,0 +1,184 @@
+#include "dataset/svg.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace paircast::svg {
+namespace {
+
+struct Frame {
+  double x0, x1, y0, y1;  // data range
+  double left = 60, right = 20, top = 30, bottom = 45;
+  int width = 0, height = 0;
+  double px(double x) const { return left + (width - left - right) * (x - x0) / (x1 - x0); }
+  double py(double y) const { return height - bottom - (height - top - bottom) * (y - y0) / (y1 - y0); }
+};
+
+std::string num(double v, const char* fmt = "%.4g") {
+  char b[64];
+  std::snprintf(b, sizeof b, fmt, v);
+  return b;
+}
+
+std::string open(const Axes& a) {
+  return "<svg xmlns='http://www.w3.org/2000/svg' width='" + std::to_string(a.width) +
+         "' height='" + std::to_string(a.height) + "' viewBox='0 0 " + std::to_string(a.width) +
+         " " + std::to_string(a.height) +
+         "' font-family='sans-serif' font-size='11'><rect width='100%' height='100%' "
+         "fill='white'/>";
+}
+
+// Axis lines, 5 ticks on each axis, labels and title.
+std::string frame(const Frame& f, const Axes& a) {
+  std::string s;
+  const double L = f.left, R = f.width - f.right, T = f.top, B = f.height - f.bottom;
+  s += "<path d='M" + num(L) + " " + num(T) + " V" + num(B) + " H" + num(R) +
+       "' stroke='#333' fill='none'/>";
+  for (int i = 0; i <= 4; ++i) {
+    const double x = f.x0 + (f.x1 - f.x0) * i / 4, y = f.y0 + (f.y1 - f.y0) * i / 4;
+    s += "<text x='" + num(f.px(x)) + "' y='" + num(B + 14) + "' text-anchor='middle'>" +
+         num(x, "%.3g") + "</text>";
+    s += "<text x='" + num(L - 4) + "' y='" + num(f.py(y) + 4) + "' text-anchor='end'>" +
+         num(y, "%.3g") + "</text>";
+    s += "<path d='M" + num(L) + " " + num(f.py(y)) + " H" + num(R) +
+         "' stroke='#ddd' stroke-width='0.5'/>";
+  }
+  s += "<text x='" + num((L + R) / 2) + "' y='" + num(f.height - 8.0) +
+       "' text-anchor='middle'>" + escape(a.xLabel) + "</text>";
+  s += "<text transform='translate(14," + num((T + B) / 2) +
+       ") rotate(-90)' text-anchor='middle'>" + escape(a.yLabel) + "</text>";
+  s += "<text x='" + num((L + R) / 2) + "' y='18' text-anchor='middle' font-size='13'>" +
+       escape(a.title) + "</text>";
+  return s;
+}
+
+std::string viridis(double t) {  // a short viridis-like ramp
+  static const double c[5][3] = {
+      {68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98}, {253, 231, 37}};
+  t = std::clamp(std::isfinite(t) ? t : 0.0, 0.0, 1.0) * 4;
+  const int i = std::min(3, static_cast<int>(t));
+  const double u = t - i;
+  char b[16];
+  std::snprintf(b, sizeof b, "#%02x%02x%02x", static_cast<int>(c[i][0] + u * (c[i + 1][0] - c[i][0])),
+                static_cast<int>(c[i][1] + u * (c[i + 1][1] - c[i][1])),
+                static_cast<int>(c[i][2] + u * (c[i + 1][2] - c[i][2])));
+  return b;
+}
+
+}  // namespace
+
+std::string escape(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '\'': out += "&#39;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string histogram(const std::vector<double>& edges, const std::vector<double>& counts,
+                      const Axes& a) {
+  double top = 1;
+  for (double c : counts) top = std::max(top, c);
+  Frame f{edges.front(), edges.back(), 0, top * 1.05};
+  f.width = a.width, f.height = a.height;
+  std::string s = open(a);
+  for (size_t i = 0; i + 1 < edges.size() && i < counts.size(); ++i) {
+    const double x = f.px(edges[i]), w = f.px(edges[i + 1]) - x, y = f.py(counts[i]);
+    s += "<rect x='" + num(x + 0.5) + "' y='" + num(y) + "' width='" + num(std::max(0.5, w - 1)) +
+         "' height='" + num(f.py(0) - y) + "' fill='#4c78a8'><title>" + num(edges[i]) + "-" +
+         num(edges[i + 1]) + ": " + num(counts[i], "%.0f") + "</title></rect>";
+  }
+  return s + frame(f, a) + "</svg>\n";
+}
+
+std::string lines(const std::vector<Series>& series, const Axes& a) {
+  double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
+  for (const auto& s : series)
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!std::isfinite(s.y[i])) continue;
+      x0 = std::min(x0, s.x[i]), x1 = std::max(x1, s.x[i]);
+      y0 = std::min(y0, s.y[i]), y1 = std::max(y1, s.y[i]);
+    }
+  if (x0 > x1) x0 = 0, x1 = 1, y0 = 0, y1 = 1;
+  if (x1 <= x0) x1 = x0 + 1;
+  const double pad = (y1 - y0) > 0 ? 0.08 * (y1 - y0) : std::max(1e-6, 0.1 * std::abs(y0));
+  Frame f{x0, x1, y0 - pad, y1 + pad};
+  f.width = a.width, f.height = a.height, f.right = 130;
+  std::string s = open(a) + frame(f, a);
+  int row = 0;
+  for (const auto& se : series) {
+    std::string pts;
+    for (size_t i = 0; i < se.x.size() && i < se.y.size(); ++i)
+      if (std::isfinite(se.y[i])) pts += num(f.px(se.x[i])) + "," + num(f.py(se.y[i])) + " ";
+    s += "<polyline fill='none' stroke='" + se.color + "' stroke-width='2'" +
+         (se.dashed ? " stroke-dasharray='6 4'" : "") + " points='" + pts + "'/>";
+    if (se.markers)
+      for (size_t i = 0; i < se.x.size() && i < se.y.size(); ++i)
+        if (std::isfinite(se.y[i]))
+          s += "<circle cx='" + num(f.px(se.x[i])) + "' cy='" + num(f.py(se.y[i])) +
+               "' r='3' fill='" + se.color + "'><title>" + escape(se.label) + " " +
+               num(se.x[i]) + ": " + num(se.y[i]) + "</title></circle>";
+    const double ly = f.top + 10 + 16 * row++;
+    s += "<path d='M" + num(a.width - 122.0) + " " + num(ly) + " h22' stroke='" + se.color +
+         "' stroke-width='2'" + (se.dashed ? " stroke-dasharray='6 4'" : "") + "/>";
+    s += "<text x='" + num(a.width - 96.0) + "' y='" + num(ly + 4) + "'>" + escape(se.label) +
+         "</text>";
+  }
+  return s + "</svg>\n";
+}
+
+std::string heatmap(const std::vector<double>& xEdges, const std::vector<double>& yEdges,
+                    const std::vector<std::vector<double>>& counts, const Axes& a) {
+  double top = 1;
+  for (const auto& r : counts)
+    for (double c : r) top = std::max(top, c);
+  Frame f{xEdges.front(), xEdges.back(), yEdges.front(), yEdges.back()};
+  f.width = a.width, f.height = a.height;
+  std::string s = open(a);
+  for (size_t r = 0; r + 1 < yEdges.size() && r < counts.size(); ++r)
+    for (size_t c = 0; c + 1 < xEdges.size() && c < counts[r].size(); ++c) {
+      if (counts[r][c] <= 0) continue;
+      const double x = f.px(xEdges[c]), y = f.py(yEdges[r + 1]);
+      s += "<rect x='" + num(x) + "' y='" + num(y) + "' width='" + num(f.px(xEdges[c + 1]) - x) +
+           "' height='" + num(f.py(yEdges[r]) - y) + "' fill='" +
+           viridis(std::sqrt(counts[r][c] / top)) + "'><title>" + num(counts[r][c], "%.0f") +
+           "</title></rect>";
+    }
+  return s + frame(f, a) + "</svg>\n";
+}
+
+std::string cameraPlot(const std::vector<Arrow>& arrows, const Axes& a) {
+  double r = 1;
+  for (const auto& p : arrows)
+    if (std::isfinite(p.x) && std::isfinite(p.y)) r = std::max({r, std::abs(p.x), std::abs(p.y)});
+  r *= 1.1;
+  Frame f{-r, r, -r, r};
+  f.width = a.width, f.height = a.height;
+  std::string s = open(a);
+  const double len = 0.06 * r;
+  for (const auto& p : arrows) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y)) continue;
+    const std::string col = viridis(p.value);
+    s += "<circle cx='" + num(f.px(p.x)) + "' cy='" + num(f.py(p.y)) + "' r='2' fill='" + col +
+         "'/>";
+    if (p.dx != 0 || p.dy != 0)
+      s += "<path d='M" + num(f.px(p.x)) + " " + num(f.py(p.y)) + " L" +
+           num(f.px(p.x + len * p.dx)) + " " + num(f.py(p.y + len * p.dy)) + "' stroke='" + col +
+           "' stroke-width='0.8'/>";
+  }
+  // The reference camera: a triangle at the origin, looking up the page.
+  s += "<path d='M" + num(f.px(0)) + " " + num(f.py(0) - 10) + " L" + num(f.px(0) - 6) + " " +
+       num(f.py(0) + 6) + " L" + num(f.px(0) + 6) + " " + num(f.py(0) + 6) +
+       " Z' fill='#d62728'/>";
+  return s + frame(f, a) + "</svg>\n";
+}
+
+}  // namespace paircast::svg

@@ -1,0 +1,607 @@
+#include "sweep/covis_sweep.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+
+#include "dataset/generate_job.h"
+#include "dataset/pair_generator.h"
+#include "dataset/shard.h"
+#include "dataset/viewpoint_sampler.h"
+#include "model/checkpoint.h"
+#include "model/croco_net.h"
+#include "model/reconstruct.h"
+#include "render/ray_caster.h"
+#include "render/scene_loader.h"
+#include "dataset/dataset_report.h"
+#include "sweep/depth_probe.h"
+#include "dataset/svg.h"
+#include "trainer/pair_dataset.h"
+#include "trainer/trainer.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+#include "util/random.h"
+#include "util/timer.h"
+
+namespace paircast {
+namespace fs = std::filesystem;
+
+int covisBucket(double covis) {
+  return std::clamp(static_cast<int>(std::floor(covis * kCovisBuckets + 1e-9)), 0,
+                    kCovisBuckets - 1);
+}
+
+namespace {
+
+// k if x is k * 0.05 (within 1e-6), else -1.
+int gridIndex(double x) {
+  const double k = x * kCovisBuckets;
+  return std::abs(k - std::round(k)) < 1e-6 ? static_cast<int>(std::round(k)) : -1;
+}
+
+std::string centerName(double c) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.2f", c);
+  return b;
+}
+
+nlohmann::json readJson(const std::string& path) {
+  if (!fs::exists(path)) return nullptr;
+  try {
+    return nlohmann::json::parse(readFile(path));
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(path, std::string("unreadable state file (delete it to redo this stage): ") +
+                          e.what());
+  }
+}
+
+void say(const SweepConfig& c, const std::string& line) {
+  if (c.progress) std::fprintf(stderr, "[covis_sweep] %s\n", line.c_str());
+}
+
+// A training scene, loaded once.
+struct PoolScene {
+  std::string path, name;
+  std::unique_ptr<Scene> scene;
+  std::unique_ptr<RayCaster> caster;
+  std::unique_ptr<ViewpointSampler> sampler;
+};
+
+std::vector<std::unique_ptr<PoolScene>> loadScenes(const std::vector<std::string>& files,
+                                                   const SamplerOptions& so, const char* role) {
+  std::vector<std::unique_ptr<PoolScene>> out;
+  std::set<std::string> names;
+  for (const auto& f : files) {
+    auto s = std::make_unique<PoolScene>();
+    s->path = f;
+    s->name = sanitizeName(fs::path(f).stem().string());
+    for (int k = 1; names.count(s->name); ++k)
+      s->name = sanitizeName(fs::path(f).stem().string()) + "_" + std::to_string(k);
+    try {
+      s->scene = std::make_unique<Scene>(loadScene(f));
+      s->scene->name = s->name;
+      s->caster = std::make_unique<RayCaster>(s->scene->mesh);
+      s->sampler = std::make_unique<ViewpointSampler>(*s->scene, *s->caster, so);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "covis_sweep: warning: %s scene skipped: %s\n", role, e.what());
+      continue;
+    }
+    names.insert(s->name);
+    out.push_back(std::move(s));
+  }
+  if (out.empty()) throw Error(std::string("no usable ") + role + " scene");
+  return out;
+}
+
+// The pool: pairs from the training scenes, bucketed by covis, kept in pool/pool-RRRRRR.tar
+// (one shard per sampling round) and pool/pool.json (the pairs of the completed rounds).
+struct Pool {
+  std::vector<std::string> keys;
+  std::vector<double> covis;
+};
+
+Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
+               const std::vector<int>& demand) {
+  const fs::path dir = fs::path(c.out) / "pool";
+  makeDirs(dir.string());
+  const std::string statePath = (dir / "pool.json").string();
+  Pool pool;
+  uint64_t nextIndex = 0;
+  int round = 0;
+  std::vector<int> have(kCovisBuckets, 0);
+  const nlohmann::json settings = {{"scenes", sceneFiles},       {"seed", c.seed},
+                                   {"resolution", c.resolution}, {"demand", demand},
+                                   {"min_walk_scale", c.minWalkScale}};
+  if (const nlohmann::json state = readJson(statePath); state.is_object()) {
+    if (state.value("settings", nlohmann::json()) != settings)
+      throw Error(statePath,
+                  "was sampled with other settings (scenes, seed, resolution or set sizes); use "
+                  "another --out or delete the pool folder");
+    for (const auto& p : state.at("pairs")) {
+      pool.keys.push_back(p.at("key").get<std::string>());
+      pool.covis.push_back(p.at("covis").get<double>());
+      have[covisBucket(pool.covis.back())]++;
+    }
+    nextIndex = state.at("next_index").get<uint64_t>();
+    round = state.at("rounds").get<int>();
+  }
+  auto deficit = [&] {
+    std::vector<int> d(kCovisBuckets);
+    for (int b = 0; b < kCovisBuckets; ++b) d[b] = std::max(0, demand[b] - have[b]);
+    return d;
+  };
+  int total = 0;
+  for (int d : deficit()) total += d;
+  if (total == 0) return pool;
+
+  SamplerOptions so;
+  so.minWalkScale = c.minWalkScale;
+  auto scenes = loadScenes(sceneFiles, so, "training");
+  const auto start = SteadyClock::now();
+  int idle = 0;
+  while (true) {
+    const std::vector<int> need = deficit();
+    int missing = 0;
+    for (int d : need) missing += d;
+    if (missing == 0) break;
+    PairOptions po;
+    po.resolution = c.resolution;
+    po.keepDepth = false;
+    po.sampler = so;
+    po.maxReferences = 4;  // rare buckets: many cheap tries over more indices
+    po.maxAttempts = 25;
+    po.accept = [need](double v) { return need[covisBucket(v)] > 0; };
+    std::vector<std::unique_ptr<PairGenerator>> gens;
+    for (auto& s : scenes)
+      gens.push_back(std::make_unique<PairGenerator>(*s->scene, *s->caster, *s->sampler, po));
+    const int m = std::max(8, missing + missing / 4);
+    std::vector<std::optional<PairSample>> got(m);
+    const int threads = c.jobs > 0 ? c.jobs : omp_get_num_procs();
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+    for (int i = 0; i < m; ++i) {
+      const uint64_t idx = nextIndex + i;
+      got[i] = gens[idx % gens.size()]->generate(c.seed, idx);
+    }
+    // Keep, in index order, the pairs whose bucket still needs them.
+    char name[64];
+    std::snprintf(name, sizeof name, "pool-%06d.tar", round);
+    ShardWriter writer((dir / name).string());
+    std::vector<int> left = need;
+    nlohmann::json added = nlohmann::json::array();
+    for (int i = 0; i < m; ++i) {
+      if (!got[i]) continue;
+      const int b = covisBucket(got[i]->covis.covis);
+      if (left[b] <= 0) continue;
+      --left[b];
+      const EncodedPair enc = encodePair(*got[i], false, 90);
+      writer.add(enc);
+      added.push_back({{"key", enc.key}, {"covis", got[i]->covis.covis}});
+    }
+    if (!added.empty()) writer.close();  // an empty round leaves no shard
+    nextIndex += m;
+    ++round;
+    for (const auto& a : added) {
+      pool.keys.push_back(a["key"]);
+      pool.covis.push_back(a["covis"]);
+      have[covisBucket(pool.covis.back())]++;
+    }
+    nlohmann::json pairs = nlohmann::json::array();
+    for (size_t i = 0; i < pool.keys.size(); ++i)
+      pairs.push_back({{"key", pool.keys[i]}, {"covis", pool.covis[i]}});
+    writeFileAtomic(statePath, nlohmann::json({{"settings", settings},
+                                               {"pairs", pairs},
+                                               {"next_index", nextIndex},
+                                               {"rounds", round}})
+                                   .dump() +
+                                   "\n");
+    int stillMissing = 0;
+    std::string shortList;
+    for (int b = 0; b < kCovisBuckets; ++b) {
+      const int d = std::max(0, demand[b] - have[b]);
+      stillMissing += d;
+      if (d > 0)
+        shortList += " [" + centerName(b * 0.05) + "," + centerName((b + 1) * 0.05) + "): " +
+                     std::to_string(have[b]) + "/" + std::to_string(demand[b]);
+    }
+    say(c, "pool round " + std::to_string(round) + ": " + std::to_string(pool.keys.size()) +
+               " pairs, " + std::to_string(stillMissing) + " still needed (" +
+               std::to_string(static_cast<int>(secondsSince(start))) + " s)");
+    idle = added.empty() ? idle + 1 : 0;
+    if (idle >= 3 || round >= 400)
+      throw Error(statePath, "cannot fill the covis buckets:" + shortList +
+                                 " (the scenes rarely give such pairs; drop those centres or "
+                                 "lower --pairs-per-set)");
+  }
+  return pool;
+}
+
+// Held-out views for the depth probe: a reference view each, with RGB and depth at the
+// model's input size.
+ProbeData probeViews(const SweepConfig& c, const std::vector<std::unique_ptr<PoolScene>>& scenes,
+                     int first, int count) {
+  std::vector<torch::Tensor> imgs, depths;
+  const Camera intr = Camera::fromHfov(c.imgSize, c.imgSize, 60.0);
+  RenderOptions ro;
+  ro.normals = false;
+  ro.ids = false;
+  for (int i = first; i < first + count; ++i) {
+    const auto& s = *scenes[i % scenes.size()];
+    Rng rng(mixSeed(c.seed, "probe/" + s.name, static_cast<uint64_t>(i)));
+    Frame f;
+    bool ok = false;
+    for (int attempt = 0; attempt < 50 && !ok; ++attempt) {
+      const Viewpoint v = s.sampler->sampleReference(intr, rng);
+      s.caster->render(v.camera, ro, f);
+      ok = f.validFraction() >= 0.7;
+    }
+    if (!ok) throw Error(s.path, "no held-out view with 70 % valid depth for the depth probe");
+    imgs.push_back(imageTensor(f.rgb, c.imgSize));
+    depths.push_back(torch::from_blob(f.depth.data.data(), {c.imgSize, c.imgSize},
+                                      torch::kFloat32)
+                         .clone()
+                         .unsqueeze(0));
+  }
+  return {torch::cat(imgs), torch::cat(depths)};
+}
+
+struct HeldOut {
+  torch::Tensor img1, img2, mask;  // cross-view completion pairs at covis ~0.5
+  ProbeData probeTrain, probeTest;
+};
+
+nlohmann::json evaluate(CroCoNet& model, const HeldOut& h) {
+  torch::NoGradGuard ng;
+  model->eval();
+  double lossSum = 0;
+  int64_t n = 0;
+  for (int64_t i = 0; i < h.img1.size(0); i += 16) {
+    const int64_t j = std::min<int64_t>(i + 16, h.img1.size(0));
+    auto out = model->forward(h.img1.slice(0, i, j), h.img2.slice(0, i, j), h.mask.slice(0, i, j));
+    lossSum += maskedMse(out.prediction, out.mask, out.target).item<double>() * (j - i);
+    n += j - i;
+  }
+  const DepthProbe probe(model, h.probeTrain);
+  const DepthMetrics m = probe.evaluate(h.probeTest);
+  return {{"xv_loss", lossSum / n},
+          {"probe_delta1", m.delta1},
+          {"probe_absrel", m.absRel},
+          {"probe_rmse", m.rmse}};
+}
+
+CroCoConfig modelConfig(const SweepConfig& c) {
+  CroCoConfig m = presetConfig(c.preset);
+  m.img_size = c.imgSize;
+  m.patch_size = c.patchSize;
+  m.validate();
+  return m;
+}
+
+void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann::json& random) {
+  const fs::path out(c.out);
+  const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd"};
+  struct Metric {
+    const char* key;
+    const char* label;
+  } metrics[] = {{"xv_loss", "cross-view completion loss (held-out, covis ~0.5), lower is better"},
+                 {"probe_delta1", "depth probe delta1, higher is better"},
+                 {"probe_absrel", "depth probe AbsRel, lower is better"},
+                 {"probe_rmse", "depth probe RMSE (m), lower is better"}};
+  for (const auto& m : metrics) {
+    std::vector<svg::Series> series;
+    int k = 0;
+    for (const auto& mode : c.modes) {
+      svg::Series s;
+      s.label = mode;
+      s.color = colors[k++ % 4];
+      for (const auto& r : rows)
+        if (r["mode"] == mode) s.x.push_back(r["center"]), s.y.push_back(r[m.key]);
+      series.push_back(s);
+    }
+    svg::Series base;
+    base.label = "random encoder";
+    base.color = "#7f7f7f";
+    base.dashed = true;
+    base.markers = false;
+    base.x = {c.centers.front(), c.centers.back()};
+    base.y = {random[m.key].get<double>(), random[m.key].get<double>()};
+    series.push_back(base);
+    writeFileAtomic((out / (std::string("plot_") + m.key + ".svg")).string(),
+                    svg::lines(series, {m.label, "covis centre of the training set", m.key, 620, 340}));
+  }
+}
+
+}  // namespace
+
+SweepSet makeSweepSet(const std::string& mode, double center) {
+  SweepSet s;
+  s.mode = mode;
+  s.center = center;
+  s.name = mode + "_" + centerName(center);
+  if (mode == "bin") {
+    const int lo = gridIndex(center - 0.05);
+    if (lo < 0 || lo + 1 >= kCovisBuckets || center < 0.05 - 1e-9)
+      throw Error("bin centre " + centerName(center) +
+                  " must be a multiple of 0.05 in [0.05, 0.95] (bins [x - 0.05, x + 0.05))");
+    s.buckets = {lo, lo + 1};
+  } else if (mode == "uniform") {
+    const int lo = gridIndex(center);
+    if (lo < 0 || lo >= kCovisBuckets)
+      throw Error("uniform centre " + centerName(center) +
+                  " must be a multiple of 0.05 in [0, 0.95]");
+    for (int b = lo; b < kCovisBuckets; ++b) s.buckets.push_back(b);
+  } else {
+    throw Error("unknown sweep mode '" + mode + "' (use bin or uniform)");
+  }
+  return s;
+}
+
+std::vector<int> bucketDemand(const std::vector<SweepSet>& sets, int n) {
+  std::vector<int> demand(kCovisBuckets, 0);
+  for (const auto& s : sets) {
+    const int k = static_cast<int>(s.buckets.size());
+    for (int i = 0; i < k; ++i)
+      demand[s.buckets[i]] = std::max(demand[s.buckets[i]], n / k + (i < n % k ? 1 : 0));
+  }
+  return demand;
+}
+
+std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
+                                          const std::vector<SweepSet>& sets, int n) {
+  std::vector<std::vector<size_t>> byBucket(kCovisBuckets);
+  for (size_t i = 0; i < poolCovis.size(); ++i) byBucket[covisBucket(poolCovis[i])].push_back(i);
+  std::vector<std::vector<size_t>> out;
+  for (const auto& s : sets) {
+    std::vector<size_t> picked;
+    const int k = static_cast<int>(s.buckets.size());
+    for (int i = 0; i < k; ++i) {
+      const int want = n / k + (i < n % k ? 1 : 0);
+      const auto& have = byBucket[s.buckets[i]];
+      if (static_cast<int>(have.size()) < want)
+        throw Error("set " + s.name + " needs " + std::to_string(want) + " pairs with covis in [" +
+                    centerName(s.buckets[i] * 0.05) + ", " +
+                    centerName((s.buckets[i] + 1) * 0.05) + "), the pool has " +
+                    std::to_string(have.size()));
+      picked.insert(picked.end(), have.begin(), have.begin() + want);
+    }
+    std::sort(picked.begin(), picked.end());
+    out.push_back(std::move(picked));
+  }
+  return out;
+}
+
+nlohmann::json runCovisSweep(const SweepConfig& c) {
+  if (c.out.empty()) throw Error("--out is required");
+  if (c.scenes.empty()) throw Error("--scenes: give the training scenes");
+  if (c.heldout.empty()) throw Error("--heldout: give at least one held-out scene");
+  if (c.modes.empty() || c.centers.empty()) throw Error("give at least one mode and one centre");
+  if (c.pairsPerSet < c.batchSize)
+    throw Error("--pairs-per-set must be at least one batch (" + std::to_string(c.batchSize) + ")");
+  if (c.steps < 1 || c.evalPairs < 1 || c.probeViews < 4)
+    throw Error("--steps, --eval-pairs must be >= 1 and --probe-views >= 4");
+  const CroCoConfig mc = modelConfig(c);
+  std::vector<SweepSet> sets;
+  for (const auto& mode : c.modes)
+    for (double x : c.centers) sets.push_back(makeSweepSet(mode, x));
+
+  // Held-out scenes never appear in training: by file and by scene name.
+  const auto train = expandSceneList(c.scenes), held = expandSceneList(c.heldout);
+  std::set<std::string> trainIds;
+  for (const auto& f : train) {
+    trainIds.insert(fs::weakly_canonical(f).string());
+    trainIds.insert("name:" + sanitizeName(fs::path(f).stem().string()));
+  }
+  for (const auto& f : held)
+    if (trainIds.count(fs::weakly_canonical(f).string()) ||
+        trainIds.count("name:" + sanitizeName(fs::path(f).stem().string())))
+      throw Error(f, "is both a training and a held-out scene");
+  makeDirs(c.out);
+  const fs::path out(c.out);
+  const auto start = SteadyClock::now();
+
+  // 1. One pool, bucketed; equal sets drawn from it.
+  const Pool pool = buildPool(c, train, bucketDemand(sets, c.pairsPerSet));
+  std::set<std::string> heldNames;
+  for (const auto& f : held) heldNames.insert(sanitizeName(fs::path(f).stem().string()));
+  for (const auto& key : pool.keys)
+    PAIRCAST_CHECK_MSG(!heldNames.count(key.substr(0, key.rfind('_'))),
+                       "a held-out scene's pair is in the training pool");
+  const auto drawn = drawSets(pool.covis, sets, c.pairsPerSet);
+  makeDirs((out / "sets").string());
+  nlohmann::json setInfo = nlohmann::json::object();
+  for (size_t s = 0; s < sets.size(); ++s) {
+    std::string keys;
+    double mean = 0;
+    for (size_t i : drawn[s]) keys += pool.keys[i] + "\n", mean += pool.covis[i];
+    const std::string keysFile = (out / "sets" / (sets[s].name + ".keys")).string();
+    writeFileAtomic(keysFile, keys);
+    setInfo[sets[s].name] = {{"pairs", drawn[s].size()}, {"mean_covis", mean / drawn[s].size()}};
+    const fs::path reportDir = out / "sets" / sets[s].name;
+    if (c.reports && !fs::exists(reportDir / "report.html")) {
+      ReportOptions ro;
+      ro.dir = (out / "pool").string();
+      ro.keysFile = keysFile;
+      ro.out = reportDir.string();
+      ro.title = "covis_sweep set " + sets[s].name;
+      ro.samplesPerBin = 3;
+      writeDatasetReport(ro);
+    }
+  }
+  say(c, std::to_string(sets.size()) + " sets of " + std::to_string(c.pairsPerSet) +
+             " pairs from a pool of " + std::to_string(pool.keys.size()));
+
+  // 2. Held-out data: pairs at covis ~0.5, and views with depth for the probe.
+  GenerateConfig g;
+  g.scenes = held;
+  g.out = (out / "heldout" / "xv").string();
+  g.pairsPerScene = (c.evalPairs + static_cast<int>(held.size()) - 1) / static_cast<int>(held.size());
+  g.seed = c.seed + 1;
+  g.jobs = c.jobs;
+  g.pair.resolution = c.resolution;
+  g.pair.minCovis = 0.45;
+  g.pair.maxCovis = 0.55;
+  g.shardSize = 100000;
+  g.progress = false;
+  if (!fs::exists(out / "heldout" / "xv" / "summary.json")) runGenerate(g);
+  HeldOut h;
+  {
+    const PairDataset xv = PairDataset::fromShards({g.out + "/pairs-*.tar"});
+    std::vector<torch::Tensor> a, b;
+    for (size_t i = 0; i < xv.size() && static_cast<int>(i) < c.evalPairs; ++i) {
+      auto [x, y] = xv.load(i);
+      a.push_back(imageTensor(x, c.imgSize));
+      b.push_back(imageTensor(y, c.imgSize));
+    }
+    h.img1 = torch::cat(a);
+    h.img2 = torch::cat(b);
+    auto gen = at::make_generator<at::CPUGeneratorImpl>(c.seed + 7);
+    h.mask = torch::argsort(torch::rand({h.img1.size(0), mc.numPatches()}, gen), 1, false) <
+             mc.numMasked();
+    auto heldScenes = loadScenes(held, SamplerOptions(), "held-out");
+    const int half = c.probeViews / 2;
+    h.probeTrain = probeViews(c, heldScenes, 0, half);
+    h.probeTest = probeViews(c, heldScenes, half, c.probeViews - half);
+  }
+
+  // A floor for the probe: the training views' mean log depth, everywhere.
+  nlohmann::json constant;
+  {
+    const auto d = h.probeTrain.depth;
+    const double meanLog = torch::log(d.masked_select(d > 0)).mean().item<double>();
+    const DepthMetrics m =
+        depthMetrics(torch::full_like(h.probeTest.depth, std::exp(meanLog)), h.probeTest.depth);
+    constant = {{"probe_delta1", m.delta1}, {"probe_absrel", m.absRel}, {"probe_rmse", m.rmse}};
+  }
+
+  // 3. The random-encoder baseline: the weights every run starts from.
+  const fs::path randomEval = out / "runs" / "random" / "eval.json";
+  nlohmann::json random = readJson(randomEval.string());
+  if (!random.is_object()) {
+    torch::manual_seed(c.seed);
+    CroCoNet model(mc);
+    random = evaluate(model, h);
+    makeDirs(randomEval.parent_path().string());
+    writeFileAtomic(randomEval.string(), random.dump(1) + "\n");
+  }
+
+  // 4. Train and evaluate each set.
+  nlohmann::json rows = nlohmann::json::array();
+  for (size_t s = 0; s < sets.size(); ++s) {
+    const fs::path run = out / "runs" / sets[s].name;
+    nlohmann::json ev = readJson((run / "eval.json").string());
+    if (!ev.is_object()) {
+      const nlohmann::json done = readJson((run / "summary.json").string());
+      if (!done.is_object() || done.value("steps", int64_t{0}) < c.steps ||
+          done.value("interrupted", false)) {
+        TrainConfig t;
+        t.shards = {(out / "pool" / "pool-*.tar").string()};
+        t.keysFile = (out / "sets" / (sets[s].name + ".keys")).string();
+        t.model = mc;
+        t.batchSize = c.batchSize;
+        const int64_t perEpoch = std::max(1, c.pairsPerSet / c.batchSize);
+        t.epochs = static_cast<int>((c.steps + perEpoch - 1) / perEpoch);
+        t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
+        t.maxSteps = c.steps;
+        t.blr = c.blr;
+        t.seed = c.seed;
+        t.workers = c.workers;
+        t.saveEvery = std::max<int64_t>(25, c.steps / 4);
+        t.out = run.string();
+        t.resume = true;
+        t.progress = false;
+        say(c, "training " + sets[s].name + " (" + std::to_string(c.steps) + " steps)");
+        const nlohmann::json r = runPretrain(t);
+        if (r.value("interrupted", false))
+          throw Error(run.string(), "interrupted; run covis_sweep again to resume");
+      }
+      CroCoNet model(mc);
+      const Checkpoint ck = loadCheckpoint((run / "checkpoint-last.pth").string());
+      loadStateDictStrict(model, ck.model, (run / "checkpoint-last.pth").string());
+      ev = evaluate(model, h);
+      const nlohmann::json sum = readJson((run / "summary.json").string());
+      ev["train_loss"] = sum.is_object() ? sum.value("loss", NAN) : NAN;
+      writeFileAtomic((run / "eval.json").string(), ev.dump(1) + "\n");
+    }
+    nlohmann::json row = {{"mode", sets[s].mode},
+                          {"center", sets[s].center},
+                          {"set", sets[s].name},
+                          {"pairs", setInfo[sets[s].name]["pairs"]},
+                          {"mean_covis", setInfo[sets[s].name]["mean_covis"]}};
+    row.update(ev);
+    rows.push_back(row);
+    say(c, sets[s].name + ": xv_loss " + std::to_string(ev["xv_loss"].get<double>()) +
+               ", probe delta1 " + std::to_string(ev["probe_delta1"].get<double>()) +
+               " (random encoder " + std::to_string(random["probe_delta1"].get<double>()) + ")");
+  }
+
+  // 5. Results.
+  std::string csv = "mode,center,set,pairs,mean_covis,train_loss,xv_loss,probe_delta1,probe_absrel,probe_rmse\n";
+  auto num = [](const nlohmann::json& v) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.6g", v.is_number() ? v.get<double>() : NAN);
+    return std::string(b);
+  };
+  for (const auto& r : rows)
+    csv += r["mode"].get<std::string>() + "," + centerName(r["center"]) + "," +
+           r["set"].get<std::string>() + "," + std::to_string(r["pairs"].get<int>()) + "," +
+           num(r["mean_covis"]) + "," + num(r["train_loss"]) + "," + num(r["xv_loss"]) + "," +
+           num(r["probe_delta1"]) + "," + num(r["probe_absrel"]) + "," + num(r["probe_rmse"]) + "\n";
+  csv += "random,,random_encoder,0,," + std::string(",") + num(random["xv_loss"]) + "," +
+         num(random["probe_delta1"]) + "," + num(random["probe_absrel"]) + "," +
+         num(random["probe_rmse"]) + "\n";
+  writeFileAtomic((out / "results.csv").string(), csv);
+  nlohmann::json results = {
+      {"rows", rows},
+      {"random_encoder", random},
+      {"constant_depth", constant},
+      {"config",
+       {{"scenes", train}, {"heldout", held}, {"modes", c.modes}, {"centers", c.centers},
+        {"pairs_per_set", c.pairsPerSet}, {"steps", c.steps}, {"preset", c.preset},
+        {"img_size", c.imgSize}, {"batch_size", c.batchSize}, {"blr", c.blr}, {"seed", c.seed},
+        {"eval_pairs", h.img1.size(0)}, {"probe_views", c.probeViews}}},
+      {"pool_pairs", pool.keys.size()}};
+  writeFileAtomic((out / "results.json").string(), results.dump(1) + "\n");
+  writePlots(c, rows, random);
+
+  std::string html =
+      "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>covis_sweep "
+      "results</title><style>body{font-family:sans-serif;margin:24px;max-width:1300px}"
+      "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:"
+      "right}th{background:#f3f3f3}</style></head><body>\n<h1>Co-visibility sweep</h1>\n<p>" +
+      std::to_string(sets.size()) + " training sets of " + std::to_string(c.pairsPerSet) +
+      " pairs (" + svg::escape(c.preset) + " model, " + std::to_string(c.steps) + " steps of " +
+      std::to_string(c.batchSize) + " at " + std::to_string(c.imgSize) +
+      " px), evaluated on held-out scenes. Data: <a href='results.csv'>results.csv</a>, <a "
+      "href='results.json'>results.json</a>.</p>\n";
+  for (const char* m : {"xv_loss", "probe_delta1", "probe_absrel", "probe_rmse"})
+    html += "<img src='plot_" + std::string(m) + ".svg' alt='" + m + "'>\n";
+  html += "<table><tr><th>set</th><th>mean covis</th><th>train loss</th><th>xv loss</th><th>"
+          "delta1</th><th>AbsRel</th><th>RMSE</th><th>dataset</th></tr>\n";
+  for (const auto& r : rows)
+    html += "<tr><td style='text-align:left'>" + r["set"].get<std::string>() + "</td><td>" +
+            num(r["mean_covis"]) + "</td><td>" + num(r["train_loss"]) + "</td><td>" +
+            num(r["xv_loss"]) + "</td><td>" + num(r["probe_delta1"]) + "</td><td>" +
+            num(r["probe_absrel"]) + "</td><td>" + num(r["probe_rmse"]) + "</td><td>" +
+            (c.reports ? "<a href='sets/" + r["set"].get<std::string>() + "/report.html'>report</a>"
+                       : std::string("-")) +
+            "</td></tr>\n";
+  html += "<tr><td style='text-align:left'>random encoder</td><td></td><td></td><td>" +
+          num(random["xv_loss"]) + "</td><td>" + num(random["probe_delta1"]) + "</td><td>" +
+          num(random["probe_absrel"]) + "</td><td>" + num(random["probe_rmse"]) +
+          "</td><td></td></tr>\n<tr><td style='text-align:left'>constant depth (no encoder)</td>"
+          "<td></td><td></td><td></td><td>" +
+          num(constant["probe_delta1"]) + "</td><td>" + num(constant["probe_absrel"]) +
+          "</td><td>" + num(constant["probe_rmse"]) + "</td><td></td></tr>\n</table>\n"
+          "</body></html>\n";
+  writeFileAtomic((out / "summary.html").string(), html);
+  results["seconds_this_run"] = secondsSince(start);
+  return results;
+}
+
+}  // namespace paircast

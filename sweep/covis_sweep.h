@@ -1,0 +1,66 @@
+// covis_sweep: the co-visibility ablation of CroCo's appendix, end to end. One pool of pairs is
+// sampled from the training scenes and bucketed by covis (20 buckets of 0.05); every set of the
+// sweep ("bin": covis in [x - 0.05, x + 0.05); "uniform": spread evenly over [x, 1]) is drawn
+// from the pool with the same size. The same model is pre-trained on each set with the same
+// seed and steps, then evaluated on held-out scenes: the cross-view completion loss on pairs at
+// covis about 0.5, and a monocular depth probe on the frozen encoder, against a randomly
+// initialised encoder. Every stage is kept on disk and reused, so a killed sweep resumes.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+namespace paircast {
+
+constexpr int kCovisBuckets = 20;  // of width 0.05
+int covisBucket(double covis);
+
+struct SweepSet {
+  std::string name;  // e.g. bin_0.45, uniform_0.25
+  std::string mode;  // bin or uniform
+  double center = 0;
+  std::vector<int> buckets;  // covis buckets it draws from, equally
+};
+
+// The set of `mode` at `center`. Throws paircast::Error when the centre is not on the buckets'
+// grid (bin: 0.05, 0.15, ...; uniform: a multiple of 0.05 below 1).
+SweepSet makeSweepSet(const std::string& mode, double center);
+
+// Pairs needed from each bucket so that every set of n pairs can be drawn (sets share pairs).
+std::vector<int> bucketDemand(const std::vector<SweepSet>& sets, int n);
+
+// Draws each set from a pool (pair i has covis poolCovis[i]), in pool order: n / k pairs from
+// each of its k buckets (the remainder from its first buckets). Returns pool indices per set.
+// Throws paircast::Error naming the bucket that is short.
+std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
+                                          const std::vector<SweepSet>& sets, int n);
+
+struct SweepConfig {
+  std::vector<std::string> scenes;   // training scenes (files, folders or .txt lists)
+  std::vector<std::string> heldout;  // evaluation scenes; never in training (checked)
+  std::string out;
+  std::vector<std::string> modes = {"bin", "uniform"};
+  std::vector<double> centers = {0.05, 0.15, 0.25, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.95};
+  int pairsPerSet = 256;
+  int64_t steps = 200;
+  std::string preset = "tiny";
+  int imgSize = 112;     // training crop and probe size
+  int patchSize = 16;
+  int resolution = 128;  // rendered pair size
+  int batchSize = 16;
+  double blr = 1.5e-3;
+  uint64_t seed = 0;
+  int jobs = 0;             // render threads (0: all cores)
+  int workers = 2;          // trainer data threads
+  int evalPairs = 64;       // held-out pairs at covis in [0.45, 0.55]
+  int probeViews = 256;     // held-out views, half to fit the probe, half to test it
+  double minWalkScale = 0.05;  // the pool's second views walk log-uniformly from this scale up
+  bool reports = true;      // a dataset report per set
+  bool progress = true;
+};
+
+// Runs (or resumes) the sweep; writes results.csv, results.json, plots and summary.html in out.
+nlohmann::json runCovisSweep(const SweepConfig& config);
+
+}  // namespace paircast

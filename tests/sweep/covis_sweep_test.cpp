@@ -1,0 +1,202 @@
+#include "sweep/covis_sweep.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <regex>
+
+#include "sweep/depth_probe.h"
+#include "test_paths.h"
+#include "test_process.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+
+TEST(CovisSweep, BucketsAndSets) {
+  EXPECT_EQ(covisBucket(0.0), 0);
+  EXPECT_EQ(covisBucket(0.0499), 0);
+  EXPECT_EQ(covisBucket(0.05), 1);
+  EXPECT_EQ(covisBucket(0.5), 10);
+  EXPECT_EQ(covisBucket(0.97), 19);
+  EXPECT_EQ(covisBucket(1.0), 19);
+  EXPECT_EQ(makeSweepSet("bin", 0.45).buckets, (std::vector<int>{8, 9}));   // [0.40, 0.50)
+  EXPECT_EQ(makeSweepSet("bin", 0.95).buckets, (std::vector<int>{18, 19}));  // [0.90, 1.00]
+  EXPECT_EQ(makeSweepSet("uniform", 0.75).buckets, (std::vector<int>{15, 16, 17, 18, 19}));
+  EXPECT_EQ(makeSweepSet("uniform", 0.0).buckets.size(), 20u);
+  EXPECT_EQ(makeSweepSet("bin", 0.15).name, "bin_0.15");
+  EXPECT_EQ(makeSweepSet("bin", 0.5).buckets, (std::vector<int>{9, 10}));  // [0.45, 0.55)
+  EXPECT_THROW(makeSweepSet("bin", 0.47), Error);  // off the 0.05 grid
+  EXPECT_THROW(makeSweepSet("bin", 1.05), Error);
+  EXPECT_THROW(makeSweepSet("uniform", 0.33), Error);
+  EXPECT_THROW(makeSweepSet("spread", 0.5), Error);
+}
+
+TEST(CovisSweep, SetsAreEqualInSizeAndEachPairIsInItsRange) {
+  std::vector<SweepSet> sets;
+  for (const char* mode : {"bin", "uniform"})
+    for (double c : {0.05, 0.25, 0.45, 0.95}) sets.push_back(makeSweepSet(mode, c));
+  const int n = 30;
+  const std::vector<int> demand = bucketDemand(sets, n);
+  // A pool that holds exactly the demand, in a scrambled order.
+  std::vector<double> pool;
+  for (int b = 0; b < kCovisBuckets; ++b)
+    for (int i = 0; i < demand[b]; ++i) pool.push_back((b + (i * 0.37 - std::floor(i * 0.37))) / 20.0);
+  std::vector<double> scrambled;
+  for (size_t i = 0; i < pool.size(); ++i) scrambled.push_back(pool[(i * 7919) % pool.size()]);
+  const auto drawn = drawSets(scrambled, sets, n);
+  ASSERT_EQ(drawn.size(), sets.size());
+  for (size_t s = 0; s < sets.size(); ++s) {
+    EXPECT_EQ(drawn[s].size(), static_cast<size_t>(n)) << sets[s].name;
+    std::vector<int> perBucket(kCovisBuckets, 0);
+    for (size_t i : drawn[s]) {
+      const double v = scrambled[i];
+      if (sets[s].mode == "bin") {
+        EXPECT_GE(v, sets[s].center - 0.05 - 1e-12) << sets[s].name;
+        EXPECT_LT(v, sets[s].center + 0.05) << sets[s].name;
+      } else {
+        EXPECT_GE(v, sets[s].center - 1e-12) << sets[s].name;
+      }
+      perBucket[covisBucket(v)]++;
+    }
+    // Uniform sets are spread evenly: bucket counts differ by at most one.
+    int lo = n, hi = 0;
+    for (int b : sets[s].buckets) lo = std::min(lo, perBucket[b]), hi = std::max(hi, perBucket[b]);
+    EXPECT_LE(hi - lo, 1) << sets[s].name;
+  }
+  // One pair short in a bucket: the error names it.
+  scrambled.erase(std::find_if(scrambled.begin(), scrambled.end(),
+                               [](double v) { return covisBucket(v) == 19; }));
+  try {
+    drawSets(scrambled, sets, n);
+    ADD_FAILURE() << "a short bucket was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("[0.95, 1.00)"), std::string::npos) << e.what();
+  }
+}
+
+TEST(DepthMetrics, HandComputedCases) {
+  const auto gt = torch::tensor({1.0, 2.0, 4.0, 0.0}, torch::kFloat64);
+  const auto pred = torch::tensor({1.0, 2.6, 3.0, 5.0}, torch::kFloat64);  // the last pixel has no depth
+  const DepthMetrics m = depthMetrics(pred, gt);
+  EXPECT_EQ(m.pixels, 3);
+  EXPECT_NEAR(m.delta1, 1.0 / 3, 1e-12);  // ratios 1, 1.3, 1.333
+  EXPECT_NEAR(m.absRel, (0 + 0.3 + 0.25) / 3, 1e-9);
+  EXPECT_NEAR(m.rmse, std::sqrt((0 + 0.36 + 1.0) / 3), 1e-9);
+  const DepthMetrics perfect = depthMetrics(gt, gt);
+  EXPECT_EQ(perfect.delta1, 1.0);
+  EXPECT_EQ(perfect.absRel, 0.0);
+  EXPECT_THROW(depthMetrics(torch::ones({2}), torch::zeros({2})), Error);
+  EXPECT_THROW(depthMetrics(torch::ones({2}), torch::ones({3})), Error);
+}
+
+TEST(DepthProbe, FitsDepthThatIsLinearInTheFeatures) {
+  // A "model" whose encoder is the patch embedding alone cannot be built here; instead check the
+  // probe's ridge fit through a tiny CroCo model on images whose depth is a function of colour.
+  CroCoConfig c = presetConfig("tiny");
+  c.img_size = 32;
+  c.patch_size = 8;
+  torch::manual_seed(0);
+  CroCoNet model(c);
+  torch::manual_seed(1);
+  // Each image is one flat random colour; its depth is a function of that colour.
+  const auto colour = torch::rand({40, 3, 1, 1});
+  const auto images = colour.expand({40, 3, 32, 32}).contiguous();
+  const auto depth = (1.0 + 3.0 * colour.select(1, 0)).expand({40, 32, 32}).contiguous();
+  ProbeData train{images.slice(0, 0, 30), depth.slice(0, 0, 30)};
+  ProbeData test{images.slice(0, 30), depth.slice(0, 30)};
+  const DepthProbe probe(model, train);
+  const DepthMetrics m = probe.evaluate(test);
+  EXPECT_GT(m.delta1, 0.9) << m.toJson().dump();
+  // Against predicting the mean depth everywhere, the probe is far better.
+  const auto mean = torch::full_like(test.depth, train.depth.mean().item<double>());
+  EXPECT_LT(m.absRel, 0.5 * depthMetrics(mean, test.depth).absRel);
+}
+
+SweepConfig miniSweep(const std::string& out) {
+  SweepConfig c;
+  c.scenes = {testing::sourceDir() + "/scenes/room", testing::sourceDir() + "/scenes/apartment"};
+  c.heldout = {testing::sourceDir() + "/scenes/studio"};
+  c.out = out;
+  c.centers = {0.45, 0.75};
+  c.pairsPerSet = 16;
+  c.batchSize = 8;
+  c.steps = 4;
+  c.imgSize = 32;
+  c.patchSize = 8;
+  c.resolution = 64;
+  c.evalPairs = 8;
+  c.probeViews = 8;
+  c.jobs = 2;
+  c.workers = 1;
+  c.progress = false;
+  return c;
+}
+
+TEST(CovisSweep, HeldOutScenesMustNotBeTrainedOn) {
+  SweepConfig c = miniSweep(testing::scratchDir("overlap"));
+  c.heldout = {testing::sourceDir() + "/scenes/room/room.obj"};
+  EXPECT_THROW(runCovisSweep(c), Error);
+  c.heldout = {};
+  EXPECT_THROW(runCovisSweep(c), Error);
+}
+
+std::string covisSweepTool() {
+  return std::string(PAIRCAST_BINARY_DIR) + "/tools/covis_sweep";
+}
+
+std::vector<std::string> miniArgs(const std::string& out) {
+  const std::string s = testing::sourceDir();
+  return {covisSweepTool(), "--scenes", s + "/scenes/room", s + "/scenes/apartment",
+          "--heldout", s + "/scenes/studio", "--out", out, "--centers", "0.45,0.75",
+          "--pairs-per-set", "16", "--batch-size", "8", "--steps", "4", "--img-size", "32",
+          "--patch-size", "8", "--resolution", "64", "--eval-pairs", "8", "--probe-views", "8",
+          "--jobs", "2", "--quiet"};
+}
+
+TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
+  const std::string dir = testing::scratchDir("e2e");
+  // A clean run, through the library.
+  const nlohmann::json r = runCovisSweep(miniSweep(dir + "/clean"));
+  ASSERT_EQ(r["rows"].size(), 4u);
+  for (const auto& row : r["rows"]) {
+    EXPECT_EQ(row["pairs"], 16);
+    EXPECT_TRUE(std::isfinite(row["xv_loss"].get<double>()));
+    EXPECT_GE(row["probe_delta1"].get<double>(), 0.0);
+  }
+  const std::string csv = readFile(dir + "/clean/results.csv");
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 6);  // header, 4 sets, random encoder
+  for (const char* f : {"results.json", "plot_xv_loss.svg", "plot_probe_delta1.svg",
+                        "plot_probe_absrel.svg", "plot_probe_rmse.svg", "summary.html",
+                        "sets/bin_0.45/report.html", "sets/uniform_0.75.keys"})
+    EXPECT_TRUE(fs::exists(dir + "/clean/" + f)) << f;
+  const std::string html = readFile(dir + "/clean/summary.html");
+  const std::regex ref("(src|href)='([^']+)'");
+  for (auto it = std::sregex_iterator(html.begin(), html.end(), ref); it != std::sregex_iterator(); ++it)
+    EXPECT_TRUE(fs::exists(dir + "/clean/" + (*it)[2].str())) << (*it)[2].str();
+
+  // A rerun reuses everything: no checkpoint is rewritten.
+  const auto ckpt = dir + "/clean/runs/bin_0.45/checkpoint-last.pth";
+  const auto before = fs::last_write_time(ckpt);
+  runCovisSweep(miniSweep(dir + "/clean"));
+  EXPECT_EQ(fs::last_write_time(ckpt), before);
+  EXPECT_EQ(readFile(dir + "/clean/results.csv"), csv);
+
+  // The real command, SIGKILLed at growing delays and restarted, gives the same results.
+  const std::string killed = dir + "/killed";
+  int kills = 0;
+  for (int delayMs = 300; delayMs < 60000 && !fs::exists(killed + "/results.csv"); delayMs *= 2) {
+    const int rc = testing::runProcess(miniArgs(killed), delayMs);
+    if (rc == -SIGKILL) ++kills;
+  }
+  EXPECT_GE(kills, 1);
+  ASSERT_EQ(testing::runProcess(miniArgs(killed)), 0);
+  EXPECT_EQ(readFile(killed + "/results.csv"), csv);
+}
+
+}  // namespace
+}  // namespace paircast
