@@ -137,8 +137,8 @@ std::vector<PairRecord> readRecords(const std::string& dir, const std::string& k
         const Eigen::Quaterniond h(q.at(0).get<double>(), q.at(1).get<double>(),
                                    q.at(2).get<double>(), q.at(3).get<double>());
         // Habitat's camera axes (x right, y up, z back) back to OpenCV's.
-        r.camera[k].R_cam2world = h.normalized().toRotationMatrix() *
-                                  Eigen::Vector3d(1, -1, -1).asDiagonal();
+        r.camera[k].R_cam2world =
+            h.normalized().toRotationMatrix() * Eigen::Vector3d(1, -1, -1).asDiagonal();
         r.camera[k].t_cam2world = {p.at(0).get<double>(), p.at(1).get<double>(),
                                    p.at(2).get<double>()};
       }
@@ -248,12 +248,13 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
 
   // The page.
   std::string html =
-      "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>" +
-      svg::escape(title) +
+      "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>" + svg::escape(title) +
       " - paircast dataset report</title>\n<style>body{font-family:sans-serif;margin:24px;"
       "max-width:1200px}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px "
       "8px;text-align:right}th{background:#f3f3f3}.grid td{text-align:center;vertical-align:top}"
-      ".grid img{width:96px;height:auto;display:inline-block;margin:1px}figure{display:inline-block;margin:6px}"
+      ".grid "
+      "img{width:96px;height:auto;display:inline-block;margin:1px}figure{display:inline-block;"
+      "margin:6px}"
       "</style></head><body>\n<h1>" +
       svg::escape(title) + "</h1>\n<p>" + std::to_string(pairs.size()) + " pairs from " +
       std::to_string(perScene.size()) + " scene(s); mean co-visibility " +
@@ -266,8 +267,9 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
       "<figure><img src='report_files/relative_positions.svg' alt='relative positions'>"
       "<figcaption>Red: the first view, looking up. Dots: second views, with their heading, "
       "coloured by covis (dark low, yellow high).</figcaption></figure>\n";
-  html += "<h2>Pairs per scene</h2>\n<table><tr><th>scene</th><th>pairs</th><th>mean "
-          "covis</th></tr>\n";
+  html +=
+      "<h2>Pairs per scene</h2>\n<table><tr><th>scene</th><th>pairs</th><th>mean "
+      "covis</th></tr>\n";
   for (const auto& [scene, v] : perScene)
     html += "<tr><td style='text-align:left'>" + svg::escape(scene) + "</td><td>" +
             std::to_string(v.first) + "</td><td>" + fmt(v.second / v.first) + "</td></tr>\n";
@@ -282,13 +284,14 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
       const auto& jpegs = sample.jpeg;
       html += "<td>";
       for (int k = 0; k < 2; ++k) {
-        const std::string name = "sample_" + std::to_string(image) + "_" +
-                                 std::to_string(k + 1) + ".jpg";
+        const std::string name =
+            "sample_" + std::to_string(image) + "_" + std::to_string(k + 1) + ".jpg";
         writeFileAtomic((files / name).string(), jpegs[k], Durability::NoSync);
         html += "<img src='report_files/" + name + "' alt='view " + std::to_string(k + 1) + "'>";
       }
       ++image;
-      html += "<br>covis " + fmt(rec.covis) + "<br><small>" + svg::escape(rec.key) + "</small></td>";
+      html +=
+          "<br>covis " + fmt(rec.covis) + "<br><small>" + svg::escape(rec.key) + "</small></td>";
     }
     html += "</tr>\n";
   }

@@ -12,7 +12,9 @@ struct Frame {
   double left = 60, right = 20, top = 30, bottom = 45;
   int width = 0, height = 0;
   double px(double x) const { return left + (width - left - right) * (x - x0) / (x1 - x0); }
-  double py(double y) const { return height - bottom - (height - top - bottom) * (y - y0) / (y1 - y0); }
+  double py(double y) const {
+    return height - bottom - (height - top - bottom) * (y - y0) / (y1 - y0);
+  }
 };
 
 std::string num(double v, const char* fmt = "%.4g") {
@@ -44,8 +46,8 @@ std::string frame(const Frame& f, const Axes& a) {
     s += "<path d='M" + num(L) + " " + num(f.py(y)) + " H" + num(R) +
          "' stroke='#ddd' stroke-width='0.5'/>";
   }
-  s += "<text x='" + num((L + R) / 2) + "' y='" + num(f.height - 8.0) +
-       "' text-anchor='middle'>" + escape(a.xLabel) + "</text>";
+  s += "<text x='" + num((L + R) / 2) + "' y='" + num(f.height - 8.0) + "' text-anchor='middle'>" +
+       escape(a.xLabel) + "</text>";
   s += "<text transform='translate(14," + num((T + B) / 2) +
        ") rotate(-90)' text-anchor='middle'>" + escape(a.yLabel) + "</text>";
   s += "<text x='" + num((L + R) / 2) + "' y='18' text-anchor='middle' font-size='13'>" +
@@ -60,7 +62,8 @@ std::string viridis(double t) {  // a short viridis-like ramp
   const int i = std::min(3, static_cast<int>(t));
   const double u = t - i;
   char b[16];
-  std::snprintf(b, sizeof b, "#%02x%02x%02x", static_cast<int>(c[i][0] + u * (c[i + 1][0] - c[i][0])),
+  std::snprintf(b, sizeof b, "#%02x%02x%02x",
+                static_cast<int>(c[i][0] + u * (c[i + 1][0] - c[i][0])),
                 static_cast<int>(c[i][1] + u * (c[i + 1][1] - c[i][1])),
                 static_cast<int>(c[i][2] + u * (c[i + 1][2] - c[i][2])));
   return b;
@@ -72,12 +75,23 @@ std::string escape(const std::string& text) {
   std::string out;
   for (char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '\'': out += "&#39;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '\'':
+        out += "&#39;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -124,8 +138,8 @@ std::string lines(const std::vector<Series>& series, const Axes& a) {
       for (size_t i = 0; i < se.x.size() && i < se.y.size(); ++i)
         if (std::isfinite(se.y[i]))
           s += "<circle cx='" + num(f.px(se.x[i])) + "' cy='" + num(f.py(se.y[i])) +
-               "' r='3' fill='" + se.color + "'><title>" + escape(se.label) + " " +
-               num(se.x[i]) + ": " + num(se.y[i]) + "</title></circle>";
+               "' r='3' fill='" + se.color + "'><title>" + escape(se.label) + " " + num(se.x[i]) +
+               ": " + num(se.y[i]) + "</title></circle>";
     const double ly = f.top + 10 + 16 * row++;
     s += "<path d='M" + num(a.width - 122.0) + " " + num(ly) + " h22' stroke='" + se.color +
          "' stroke-width='2'" + (se.dashed ? " stroke-dasharray='6 4'" : "") + "/>";
@@ -176,8 +190,7 @@ std::string cameraPlot(const std::vector<Arrow>& arrows, const Axes& a) {
   }
   // The reference camera: a triangle at the origin, looking up the page.
   s += "<path d='M" + num(f.px(0)) + " " + num(f.py(0) - 10) + " L" + num(f.px(0) - 6) + " " +
-       num(f.py(0) + 6) + " L" + num(f.px(0) + 6) + " " + num(f.py(0) + 6) +
-       " Z' fill='#d62728'/>";
+       num(f.py(0) + 6) + " L" + num(f.px(0) + 6) + " " + num(f.py(0) + 6) + " Z' fill='#d62728'/>";
   return s + frame(f, a) + "</svg>\n";
 }
 

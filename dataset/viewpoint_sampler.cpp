@@ -74,8 +74,7 @@ Viewpoint ViewpointSampler::sampleOther(const Camera& intrinsics, const Viewpoin
   }
   double height = rng.uniform(options_.minHeight, options_.maxHeight);
   if (closeness < 1.0) {
-    const double firstHeight =
-        (from.camera.t_cam2world - from.floorPoint.cast<double>()).dot(up_);
+    const double firstHeight = (from.camera.t_cam2world - from.floorPoint.cast<double>()).dot(up_);
     height = firstHeight + closeness * (height - firstHeight);
   }
   const Eigen::Vector3d eye = v.floorPoint.cast<double>() + height * up_;

@@ -11,18 +11,18 @@
 #include <map>
 #include <set>
 
+#include "dataset/dataset_report.h"
 #include "dataset/generate_job.h"
 #include "dataset/pair_generator.h"
 #include "dataset/shard.h"
+#include "dataset/svg.h"
 #include "dataset/viewpoint_sampler.h"
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
 #include "model/reconstruct.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
-#include "dataset/dataset_report.h"
 #include "sweep/depth_probe.h"
-#include "dataset/svg.h"
 #include "trainer/pair_dataset.h"
 #include "trainer/trainer.h"
 #include "util/atomic_file.h"
@@ -57,8 +57,8 @@ nlohmann::json readJson(const std::string& path) {
   try {
     return nlohmann::json::parse(readFile(path));
   } catch (const nlohmann::json::exception& e) {
-    throw Error(path, std::string("unreadable state file (delete it to redo this stage): ") +
-                          e.what());
+    throw Error(path,
+                std::string("unreadable state file (delete it to redo this stage): ") + e.what());
   }
 }
 
@@ -116,8 +116,10 @@ Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
   uint64_t nextIndex = 0;
   int round = 0;
   std::vector<int> have(kCovisBuckets, 0);
-  const nlohmann::json settings = {{"scenes", sceneFiles},       {"seed", c.seed},
-                                   {"resolution", c.resolution}, {"demand", demand},
+  const nlohmann::json settings = {{"scenes", sceneFiles},
+                                   {"seed", c.seed},
+                                   {"resolution", c.resolution},
+                                   {"demand", demand},
                                    {"min_walk_scale", c.minWalkScale}};
   if (const nlohmann::json state = readJson(statePath); state.is_object()) {
     if (state.value("settings", nlohmann::json()) != settings)
@@ -199,16 +201,16 @@ Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
                                                {"pairs", pairs},
                                                {"next_index", nextIndex},
                                                {"rounds", round}})
-                                   .dump() +
+                                       .dump() +
                                    "\n");
+    const std::vector<int> after = deficit();
     int stillMissing = 0;
     std::string shortList;
     for (int b = 0; b < kCovisBuckets; ++b) {
-      const int d = std::max(0, demand[b] - have[b]);
-      stillMissing += d;
-      if (d > 0)
-        shortList += " [" + centerName(b * 0.05) + "," + centerName((b + 1) * 0.05) + "): " +
-                     std::to_string(have[b]) + "/" + std::to_string(demand[b]);
+      stillMissing += after[b];
+      if (after[b] > 0)
+        shortList += " [" + centerName(b * 0.05) + "," + centerName((b + 1) * 0.05) +
+                     "): " + std::to_string(have[b]) + "/" + std::to_string(demand[b]);
     }
     say(c, "pool round " + std::to_string(round) + ": " + std::to_string(pool.keys.size()) +
                " pairs, " + std::to_string(stillMissing) + " still needed (" +
@@ -243,8 +245,7 @@ ProbeData probeViews(const SweepConfig& c, const std::vector<std::unique_ptr<Poo
     }
     if (!ok) throw Error(s.path, "no held-out view with 70 % valid depth for the depth probe");
     imgs.push_back(imageTensor(f.rgb, c.imgSize));
-    depths.push_back(torch::from_blob(f.depth.data.data(), {c.imgSize, c.imgSize},
-                                      torch::kFloat32)
+    depths.push_back(torch::from_blob(f.depth.data.data(), {c.imgSize, c.imgSize}, torch::kFloat32)
                          .clone()
                          .unsqueeze(0));
   }
@@ -312,8 +313,9 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
     base.x = {c.centers.front(), c.centers.back()};
     base.y = {random[m.key].get<double>(), random[m.key].get<double>()};
     series.push_back(base);
-    writeFileAtomic((out / (std::string("plot_") + m.key + ".svg")).string(),
-                    svg::lines(series, {m.label, "covis centre of the training set", m.key, 620, 340}));
+    writeFileAtomic(
+        (out / (std::string("plot_") + m.key + ".svg")).string(),
+        svg::lines(series, {m.label, "covis centre of the training set", m.key, 620, 340}));
   }
 }
 
@@ -365,9 +367,8 @@ std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
       const auto& have = byBucket[s.buckets[i]];
       if (static_cast<int>(have.size()) < want)
         throw Error("set " + s.name + " needs " + std::to_string(want) + " pairs with covis in [" +
-                    centerName(s.buckets[i] * 0.05) + ", " +
-                    centerName((s.buckets[i] + 1) * 0.05) + "), the pool has " +
-                    std::to_string(have.size()));
+                    centerName(s.buckets[i] * 0.05) + ", " + centerName((s.buckets[i] + 1) * 0.05) +
+                    "), the pool has " + std::to_string(have.size()));
       picked.insert(picked.end(), have.begin(), have.begin() + want);
     }
     std::sort(picked.begin(), picked.end());
@@ -410,8 +411,9 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   std::set<std::string> heldNames;
   for (const auto& f : held) heldNames.insert(sanitizeName(fs::path(f).stem().string()));
   for (const auto& key : pool.keys)
-    PAIRCAST_CHECK_MSG(!heldNames.count(key.substr(0, key.rfind('_'))),
-                       "a held-out scene's pair is in the training pool");
+    PAIRCAST_CHECK_MSG(
+        !heldNames.count(key.substr(0, key.rfind('-'))),  // sampleKey's "<scene>-<index>"
+        "a held-out scene's pair is in the training pool");
   const auto drawn = drawSets(pool.covis, sets, c.pairsPerSet);
   makeDirs((out / "sets").string());
   nlohmann::json setInfo = nlohmann::json::object();
@@ -440,7 +442,8 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   GenerateConfig g;
   g.scenes = held;
   g.out = (out / "heldout" / "xv").string();
-  g.pairsPerScene = (c.evalPairs + static_cast<int>(held.size()) - 1) / static_cast<int>(held.size());
+  g.pairsPerScene =
+      (c.evalPairs + static_cast<int>(held.size()) - 1) / static_cast<int>(held.size());
   g.seed = c.seed + 1;
   g.jobs = c.jobs;
   g.pair.resolution = c.resolution;
@@ -541,7 +544,8 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   }
 
   // 5. Results.
-  std::string csv = "mode,center,set,pairs,mean_covis,train_loss,xv_loss,probe_delta1,probe_absrel,probe_rmse\n";
+  std::string csv =
+      "mode,center,set,pairs,mean_covis,train_loss,xv_loss,probe_delta1,probe_absrel,probe_rmse\n";
   auto num = [](const nlohmann::json& v) {
     char b[64];
     std::snprintf(b, sizeof b, "%.6g", v.is_number() ? v.get<double>() : NAN);
@@ -551,21 +555,30 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
     csv += r["mode"].get<std::string>() + "," + centerName(r["center"]) + "," +
            r["set"].get<std::string>() + "," + std::to_string(r["pairs"].get<int>()) + "," +
            num(r["mean_covis"]) + "," + num(r["train_loss"]) + "," + num(r["xv_loss"]) + "," +
-           num(r["probe_delta1"]) + "," + num(r["probe_absrel"]) + "," + num(r["probe_rmse"]) + "\n";
+           num(r["probe_delta1"]) + "," + num(r["probe_absrel"]) + "," + num(r["probe_rmse"]) +
+           "\n";
   csv += "random,,random_encoder,0,," + std::string(",") + num(random["xv_loss"]) + "," +
          num(random["probe_delta1"]) + "," + num(random["probe_absrel"]) + "," +
          num(random["probe_rmse"]) + "\n";
   writeFileAtomic((out / "results.csv").string(), csv);
-  nlohmann::json results = {
-      {"rows", rows},
-      {"random_encoder", random},
-      {"constant_depth", constant},
-      {"config",
-       {{"scenes", train}, {"heldout", held}, {"modes", c.modes}, {"centers", c.centers},
-        {"pairs_per_set", c.pairsPerSet}, {"steps", c.steps}, {"preset", c.preset},
-        {"img_size", c.imgSize}, {"batch_size", c.batchSize}, {"blr", c.blr}, {"seed", c.seed},
-        {"eval_pairs", h.img1.size(0)}, {"probe_views", c.probeViews}}},
-      {"pool_pairs", pool.keys.size()}};
+  nlohmann::json results = {{"rows", rows},
+                            {"random_encoder", random},
+                            {"constant_depth", constant},
+                            {"config",
+                             {{"scenes", train},
+                              {"heldout", held},
+                              {"modes", c.modes},
+                              {"centers", c.centers},
+                              {"pairs_per_set", c.pairsPerSet},
+                              {"steps", c.steps},
+                              {"preset", c.preset},
+                              {"img_size", c.imgSize},
+                              {"batch_size", c.batchSize},
+                              {"blr", c.blr},
+                              {"seed", c.seed},
+                              {"eval_pairs", h.img1.size(0)},
+                              {"probe_views", c.probeViews}}},
+                            {"pool_pairs", pool.keys.size()}};
   writeFileAtomic((out / "results.json").string(), results.dump(1) + "\n");
   writePlots(c, rows, random);
 
@@ -581,8 +594,9 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
       "href='results.json'>results.json</a>.</p>\n";
   for (const char* m : {"xv_loss", "probe_delta1", "probe_absrel", "probe_rmse"})
     html += "<img src='plot_" + std::string(m) + ".svg' alt='" + m + "'>\n";
-  html += "<table><tr><th>set</th><th>mean covis</th><th>train loss</th><th>xv loss</th><th>"
-          "delta1</th><th>AbsRel</th><th>RMSE</th><th>dataset</th></tr>\n";
+  html +=
+      "<table><tr><th>set</th><th>mean covis</th><th>train loss</th><th>xv loss</th><th>"
+      "delta1</th><th>AbsRel</th><th>RMSE</th><th>dataset</th></tr>\n";
   for (const auto& r : rows)
     html += "<tr><td style='text-align:left'>" + r["set"].get<std::string>() + "</td><td>" +
             num(r["mean_covis"]) + "</td><td>" + num(r["train_loss"]) + "</td><td>" +
@@ -597,7 +611,8 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
           "</td><td></td></tr>\n<tr><td style='text-align:left'>constant depth (no encoder)</td>"
           "<td></td><td></td><td></td><td>" +
           num(constant["probe_delta1"]) + "</td><td>" + num(constant["probe_absrel"]) +
-          "</td><td>" + num(constant["probe_rmse"]) + "</td><td></td></tr>\n</table>\n"
+          "</td><td>" + num(constant["probe_rmse"]) +
+          "</td><td></td></tr>\n</table>\n"
           "</body></html>\n";
   writeFileAtomic((out / "summary.html").string(), html);
   results["seconds_this_run"] = secondsSince(start);

@@ -45,18 +45,18 @@ struct SweepConfig {
   int pairsPerSet = 256;
   int64_t steps = 200;
   std::string preset = "tiny";
-  int imgSize = 112;     // training crop and probe size
+  int imgSize = 112;  // training crop and probe size
   int patchSize = 16;
   int resolution = 128;  // rendered pair size
   int batchSize = 16;
   double blr = 1.5e-3;
   uint64_t seed = 0;
-  int jobs = 0;             // render threads (0: all cores)
-  int workers = 2;          // trainer data threads
-  int evalPairs = 64;       // held-out pairs at covis in [0.45, 0.55]
-  int probeViews = 256;     // held-out views, half to fit the probe, half to test it
+  int jobs = 0;                // render threads (0: all cores)
+  int workers = 2;             // trainer data threads
+  int evalPairs = 64;          // held-out pairs at covis in [0.45, 0.55]
+  int probeViews = 256;        // held-out views, half to fit the probe, half to test it
   double minWalkScale = 0.05;  // the pool's second views walk log-uniformly from this scale up
-  bool reports = true;      // a dataset report per set
+  bool reports = true;         // a dataset report per set
   bool progress = true;
 };
 

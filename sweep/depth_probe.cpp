@@ -9,7 +9,8 @@ nlohmann::json DepthMetrics::toJson() const {
 }
 
 DepthMetrics depthMetrics(const torch::Tensor& predIn, const torch::Tensor& gtIn) {
-  if (predIn.sizes() != gtIn.sizes()) throw Error("depthMetrics: prediction and ground truth differ in shape");
+  if (predIn.sizes() != gtIn.sizes())
+    throw Error("depthMetrics: prediction and ground truth differ in shape");
   const auto pred = predIn.to(torch::kFloat64).flatten(), gt = gtIn.to(torch::kFloat64).flatten();
   const auto valid = torch::logical_and(gt > 0, torch::isfinite(gt));
   DepthMetrics m;

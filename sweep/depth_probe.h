@@ -50,7 +50,7 @@ class DepthProbe {
  private:
   CroCoNet& model_;
   ProbeOptions options_;
-  double ridge_ = 0;        // the lambda kept
+  double ridge_ = 0;       // the lambda kept
   torch::Tensor weights_;  // [2 D + 1, p * p], float64
 
  public:

@@ -8,7 +8,6 @@ using namespace paircast;
 
 int main(int argc, char** argv) {
   SweepConfig c;
-  std::string modes = "bin,uniform";
   CLI::App app{
       "Pre-train on sets of pairs binned by co-visibility, and evaluate each on held-out scenes"};
   app.add_option("--scenes", c.scenes, "Training scenes (files, folders or .txt lists)")
@@ -17,10 +16,14 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("--out", c.out, "Output folder (rerun with the same folder to resume)")
       ->required();
-  app.add_option("--mode", modes, "bin, uniform, or bin,uniform");
+  app.add_option("--mode", c.modes, "bin, uniform, or bin,uniform")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"bin", "uniform"}));
   app.add_option("--centers", c.centers, "Covis centres, e.g. 0.05,0.15,...,0.95")->delimiter(',');
-  app.add_option("--pairs-per-set", c.pairsPerSet, "Pairs in every set")->check(CLI::Range(1, 10000000));
-  app.add_option("--steps", c.steps, "Training iterations per set")->check(CLI::Range(1, 100000000));
+  app.add_option("--pairs-per-set", c.pairsPerSet, "Pairs in every set")
+      ->check(CLI::Range(1, 10000000));
+  app.add_option("--steps", c.steps, "Training iterations per set")
+      ->check(CLI::Range(1, 100000000));
   app.add_option("--preset", c.preset, "Model: tiny, small or base")
       ->check(CLI::IsMember({"tiny", "small", "base"}));
   app.add_option("--img-size", c.imgSize, "Training crop and probe size");
@@ -38,15 +41,6 @@ int main(int argc, char** argv) {
   app.add_flag("--no-reports", noReports, "No dataset report per set");
   app.add_flag("--quiet", quiet, "No progress lines");
   return runTool("covis_sweep", app, argc, argv, [&] {
-    c.modes.clear();
-    size_t start = 0;
-    while (start <= modes.size()) {
-      const size_t comma = modes.find(',', start);
-      const std::string m = modes.substr(start, comma - start);
-      if (!m.empty()) c.modes.push_back(m);
-      if (comma == std::string::npos) break;
-      start = comma + 1;
-    }
     c.reports = !noReports;
     c.progress = !quiet;
     const nlohmann::json r = runCovisSweep(c);

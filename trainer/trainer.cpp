@@ -132,13 +132,15 @@ class BatchLoader {
         throw Error(s.name + " holds no pairs");
     }
     if (!(total > 0)) throw Error("the data sources' weights sum to 0");
-    for (const auto& s : sources_) cumulative_.push_back((cumulative_.empty() ? 0.0 : cumulative_.back()) + s.weight / total);
+    for (const auto& s : sources_)
+      cumulative_.push_back((cumulative_.empty() ? 0.0 : cumulative_.back()) + s.weight / total);
     single_ = sources_.size() == 1 && sources_[0].dataset;
     perEpoch_ = pairs / (static_cast<int64_t>(c.batchSize) * world);
     if (perEpoch_ < 1)
       throw Error("the data has " + std::to_string(pairs) + " pairs, fewer than one batch of " +
                   std::to_string(c.batchSize) + (world > 1 ? " per rank" : ""));
-    if (single_ || live_ == nullptr || sources_.size() > 1)
+    const bool liveOnly = sources_.size() == 1 && !sources_[0].dataset;  // get() fills all
+    if (!liveOnly)
       for (int w = 0; w < std::max(1, c.workers); ++w) threads_.emplace_back([this] { work(); });
   }
   ~BatchLoader() {
@@ -158,11 +160,9 @@ class BatchLoader {
   }
 
   Batch get(int64_t iter) {
-    Slots s;
+    Slots s(c_.batchSize);
     if (threads_.empty()) {  // live only
-      s.a.resize(c_.batchSize), s.b.resize(c_.batchSize), s.mask.resize(c_.batchSize);
       for (int i = 0; i < c_.batchSize; ++i) s.live.push_back(i);
-      s.source.assign(c_.batchSize, 0);
     } else {
       std::unique_lock<std::mutex> lock(mu_);
       cv_.wait(lock, [&] { return ready_.count(iter) || failure_; });
@@ -182,6 +182,7 @@ class BatchLoader {
 
  private:
   struct Slots {
+    explicit Slots(int n = 0) : a(n), b(n), mask(n), source(n, 0) {}
     std::vector<torch::Tensor> a, b, mask;
     std::vector<int> live;       // slots the live stream fills
     std::vector<size_t> source;  // each slot's source
@@ -237,9 +238,7 @@ class BatchLoader {
         }
       }
       try {
-        Slots s;
-        s.a.resize(c_.batchSize), s.b.resize(c_.batchSize), s.mask.resize(c_.batchSize);
-        s.source.assign(c_.batchSize, 0);
+        Slots s(c_.batchSize);
         const int64_t epoch = iter / perEpoch_;
         for (int j = 0; j < c_.batchSize; ++j) {
           if (single_) {
@@ -524,7 +523,8 @@ nlohmann::json runPretrain(const TrainConfig& c) {
   std::ofstream log;
   if (lead) log.open(logPath, std::ios::app);
   const auto start = Clock::now();
-  double waitTotal = 0, stepTotal = 0, lastLoss = NAN;
+  // A resumed run that has no step left still reports the last logged loss.
+  double waitTotal = 0, stepTotal = 0, lastLoss = curve.empty() ? NAN : curve.back().second;
   int nanRun = 0, skipped = 0;
   int64_t firstIter = iter;
   bool interrupted = false;

@@ -33,8 +33,8 @@ TEST(DatasetReport, RelativePoseGeometry) {
   EXPECT_NEAR(viewDistance(p), std::sqrt(5.0), 1e-12);
   EXPECT_NEAR(viewAngleDegrees(p), 90, 1e-9);
   const FloorRelative r = floorRelative(p);
-  EXPECT_NEAR(r.x, 1.0, 1e-9);  // to the right of the first camera
-  EXPECT_NEAR(r.y, 2.0, 1e-9);  // ahead of it
+  EXPECT_NEAR(r.x, 1.0, 1e-9);         // to the right of the first camera
+  EXPECT_NEAR(r.y, 2.0, 1e-9);         // ahead of it
   EXPECT_NEAR(r.headingX, 1.0, 1e-9);  // looking right
   EXPECT_NEAR(r.headingY, 0.0, 1e-9);
   // Height differences do not move the point on the floor plane.
@@ -47,9 +47,9 @@ TEST(DatasetReport, RelativePoseGeometry) {
 // 24 pairs of the shipped room, in shards and in CroCo's layout.
 const std::string& generated() {
   static const std::string dir = [] {
-    const std::string d = (fs::path(::testing::TempDir()) / "paircast" /
-                           ("report_pairs." + std::to_string(getpid())))
-                              .string();
+    const std::string d =
+        (fs::path(::testing::TempDir()) / "paircast" / ("report_pairs." + std::to_string(getpid())))
+            .string();
     fs::remove_all(d);
     GenerateConfig g;
     g.scenes = {testing::sourceDir() + "/scenes/room/room.obj"};
@@ -156,7 +156,8 @@ TEST(DatasetReport, LoadsInHeadlessChromiumWithItsImagesAndNoConsoleErrors) {
   const std::string url = "file://" + fs::absolute(out + "/report.html").string();
   const std::string flags =
       "timeout 120 chromium --headless=new --no-sandbox --disable-gpu --no-first-run "
-      "--user-data-dir=" + out + "/profile ";
+      "--user-data-dir=" +
+      out + "/profile ";
   // The page's own script counts the images that loaded, once the page has loaded.
   const std::string dom = capture(flags + "--dump-dom '" + url + "' 2>/dev/null");
   std::smatch m;
@@ -167,8 +168,9 @@ TEST(DatasetReport, LoadsInHeadlessChromiumWithItsImagesAndNoConsoleErrors) {
   // Console messages go to the log; none may be an error.
   const std::string log = capture(flags + "--enable-logging=stderr --v=0 --screenshot=" + out +
                                   "/shot.png --window-size=1200,1600 '" + url + "' 2>&1");
-  for (const std::regex& bad : {std::regex("CONSOLE.*(Error|error|Uncaught)"),
-                               std::regex("Not allowed to load"), std::regex("ERR_FILE_NOT_FOUND")})
+  for (const std::regex& bad :
+       {std::regex("CONSOLE.*(Error|error|Uncaught)"), std::regex("Not allowed to load"),
+        std::regex("ERR_FILE_NOT_FOUND")})
     EXPECT_FALSE(std::regex_search(log, bad)) << log;
   EXPECT_TRUE(fs::exists(out + "/shot.png"));
 }

@@ -14,6 +14,7 @@
 
 #include "dataset/shard.h"
 #include "dataset/test_scenes.h"
+#include "test_files.h"
 #include "test_paths.h"
 #include "test_process.h"
 #include "util/atomic_file.h"
@@ -42,19 +43,6 @@ GenerateConfig smallConfig(const std::vector<std::string>& scenes, const std::st
   c.jobs = 2;
   c.progress = false;
   return c;
-}
-
-// Every regular file under `dir` (relative path -> bytes), except the run's summary, whose
-// timings differ between runs.
-std::map<std::string, std::string> tree(const std::string& dir) {
-  std::map<std::string, std::string> files;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    const std::string rel = fs::relative(e.path(), dir).string();
-    if (rel.rfind("summary", 0) == 0) continue;
-    files[rel] = readFile(e.path().string());
-  }
-  return files;
 }
 
 TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
@@ -174,7 +162,7 @@ TEST(GeneratePairs, OutputIsIdenticalWhateverTheJobCount) {
   three.croco = true;
   runGenerate(one);
   runGenerate(three);
-  const auto a = tree(dir + "/one"), b = tree(dir + "/three");
+  const auto a = testing::fileTree(dir + "/one"), b = testing::fileTree(dir + "/three");
   ASSERT_EQ(a.size(), b.size());
   for (const auto& [name, bytes] : a) {
     ASSERT_TRUE(b.count(name)) << name;
@@ -249,7 +237,7 @@ TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {
   }
   ASSERT_EQ(runCommand(args(dir + "/killed"), -1), 0);
   EXPECT_GE(kills, 1) << "no run was killed before it finished; the test did not test resuming";
-  const auto a = tree(dir + "/clean"), b = tree(dir + "/killed");
+  const auto a = testing::fileTree(dir + "/clean"), b = testing::fileTree(dir + "/killed");
   ASSERT_EQ(a.size(), b.size());
   for (const auto& [name, bytes] : a) {
     ASSERT_TRUE(b.count(name)) << name << " missing after resume";

@@ -13,6 +13,7 @@
 
 #include "dataset/shard.h"
 #include "model/checkpoint.h"
+#include "test_files.h"
 #include "test_paths.h"
 #include "test_process.h"
 #include "util/atomic_file.h"
@@ -26,18 +27,6 @@ using Clock = std::chrono::steady_clock;
 
 std::string tool(const char* name) {
   return std::string(PAIRCAST_BINARY_DIR) + "/tools/" + name;
-}
-
-// Every regular file (relative path -> bytes), except run summaries, whose timings differ.
-std::map<std::string, std::string> tree(const std::string& dir) {
-  std::map<std::string, std::string> files;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    const std::string rel = fs::relative(e.path(), dir).string();
-    if (rel.rfind("summary", 0) == 0) continue;
-    files[rel] = readFile(e.path().string());
-  }
-  return files;
 }
 
 // Shards under their final names are always whole, and hold each key once.
@@ -58,9 +47,25 @@ void expectWholeShards(const std::string& dir) {
 
 std::vector<std::string> generateArgs(const std::string& out) {
   const std::string s = testing::sourceDir() + "/scenes/";
-  return {tool("generate_pairs"), "--scenes", s + "room", s + "studio", "--out", out,
-          "--pairs-per-scene", "24", "--resolution", "64", "--shard-size", "5", "--format",
-          "both", "--seed", "11", "--jobs", "2", "--quiet"};
+  return {tool("generate_pairs"),
+          "--scenes",
+          s + "room",
+          s + "studio",
+          "--out",
+          out,
+          "--pairs-per-scene",
+          "24",
+          "--resolution",
+          "64",
+          "--shard-size",
+          "5",
+          "--format",
+          "both",
+          "--seed",
+          "11",
+          "--jobs",
+          "2",
+          "--quiet"};
 }
 
 TEST(FaultInjection, GeneratePairsSurvivesTwentyRandomKills) {
@@ -69,7 +74,7 @@ TEST(FaultInjection, GeneratePairsSurvivesTwentyRandomKills) {
   ASSERT_EQ(testing::runProcess(generateArgs(dir + "/clean")), 0);
   const int cleanMs = static_cast<int>(
       std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - t0).count());
-  const auto clean = tree(dir + "/clean");
+  const auto clean = testing::fileTree(dir + "/clean");
   std::mt19937 rng(20261122);
   // Random kill times over the whole run; when a run completes, start a new output, so that
   // every one of the 20 kills lands somewhere in a run.
@@ -84,11 +89,11 @@ TEST(FaultInjection, GeneratePairsSurvivesTwentyRandomKills) {
       continue;
     }
     ASSERT_EQ(rc, 0) << "generate_pairs failed after a kill";
-    EXPECT_EQ(tree(out), clean) << out << " differs from the clean run";
+    EXPECT_EQ(testing::fileTree(out), clean) << out << " differs from the clean run";
     out = dir + "/killed" + std::to_string(++outputs);
   }
   ASSERT_EQ(testing::runProcess(generateArgs(out)), 0);
-  const auto last = tree(out);
+  const auto last = testing::fileTree(out);
   EXPECT_EQ(last.size(), clean.size());
   EXPECT_TRUE(last == clean) << "the output after the last kill differs from the clean run";
   for (const auto& [name, bytes] : last)
@@ -96,11 +101,28 @@ TEST(FaultInjection, GeneratePairsSurvivesTwentyRandomKills) {
   RecordProperty("kills", kills);
 }
 
-std::vector<std::string> pretrainArgs(const std::string& data, const std::string& out,
-                                      int steps) {
-  return {tool("pretrain"), "--data", data + "/pairs-*.tar", "--preset", "tiny", "--img-size",
-          "32", "--batch-size", "4", "--epochs", "3", "--max-steps", std::to_string(steps),
-          "--save-every", "2", "--workers", "1", "--out", out, "--resume", "--quiet"};
+std::vector<std::string> pretrainArgs(const std::string& data, const std::string& out, int steps) {
+  return {tool("pretrain"),
+          "--data",
+          data + "/pairs-*.tar",
+          "--preset",
+          "tiny",
+          "--img-size",
+          "32",
+          "--batch-size",
+          "4",
+          "--epochs",
+          "3",
+          "--max-steps",
+          std::to_string(steps),
+          "--save-every",
+          "2",
+          "--workers",
+          "1",
+          "--out",
+          out,
+          "--resume",
+          "--quiet"};
 }
 
 TEST(FaultInjection, PretrainKilledDuringACheckpointWriteKeepsThePreviousOne) {

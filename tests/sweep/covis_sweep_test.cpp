@@ -24,13 +24,13 @@ TEST(CovisSweep, BucketsAndSets) {
   EXPECT_EQ(covisBucket(0.5), 10);
   EXPECT_EQ(covisBucket(0.97), 19);
   EXPECT_EQ(covisBucket(1.0), 19);
-  EXPECT_EQ(makeSweepSet("bin", 0.45).buckets, (std::vector<int>{8, 9}));   // [0.40, 0.50)
+  EXPECT_EQ(makeSweepSet("bin", 0.45).buckets, (std::vector<int>{8, 9}));    // [0.40, 0.50)
   EXPECT_EQ(makeSweepSet("bin", 0.95).buckets, (std::vector<int>{18, 19}));  // [0.90, 1.00]
   EXPECT_EQ(makeSweepSet("uniform", 0.75).buckets, (std::vector<int>{15, 16, 17, 18, 19}));
   EXPECT_EQ(makeSweepSet("uniform", 0.0).buckets.size(), 20u);
   EXPECT_EQ(makeSweepSet("bin", 0.15).name, "bin_0.15");
   EXPECT_EQ(makeSweepSet("bin", 0.5).buckets, (std::vector<int>{9, 10}));  // [0.45, 0.55)
-  EXPECT_THROW(makeSweepSet("bin", 0.47), Error);  // off the 0.05 grid
+  EXPECT_THROW(makeSweepSet("bin", 0.47), Error);                          // off the 0.05 grid
   EXPECT_THROW(makeSweepSet("bin", 1.05), Error);
   EXPECT_THROW(makeSweepSet("uniform", 0.33), Error);
   EXPECT_THROW(makeSweepSet("spread", 0.5), Error);
@@ -45,7 +45,8 @@ TEST(CovisSweep, SetsAreEqualInSizeAndEachPairIsInItsRange) {
   // A pool that holds exactly the demand, in a scrambled order.
   std::vector<double> pool;
   for (int b = 0; b < kCovisBuckets; ++b)
-    for (int i = 0; i < demand[b]; ++i) pool.push_back((b + (i * 0.37 - std::floor(i * 0.37))) / 20.0);
+    for (int i = 0; i < demand[b]; ++i)
+      pool.push_back((b + (i * 0.37 - std::floor(i * 0.37))) / 20.0);
   std::vector<double> scrambled;
   for (size_t i = 0; i < pool.size(); ++i) scrambled.push_back(pool[(i * 7919) % pool.size()]);
   const auto drawn = drawSets(scrambled, sets, n);
@@ -81,7 +82,8 @@ TEST(CovisSweep, SetsAreEqualInSizeAndEachPairIsInItsRange) {
 
 TEST(DepthMetrics, HandComputedCases) {
   const auto gt = torch::tensor({1.0, 2.0, 4.0, 0.0}, torch::kFloat64);
-  const auto pred = torch::tensor({1.0, 2.6, 3.0, 5.0}, torch::kFloat64);  // the last pixel has no depth
+  const auto pred =
+      torch::tensor({1.0, 2.6, 3.0, 5.0}, torch::kFloat64);  // the last pixel has no depth
   const DepthMetrics m = depthMetrics(pred, gt);
   EXPECT_EQ(m.pixels, 3);
   EXPECT_NEAR(m.delta1, 1.0 / 3, 1e-12);  // ratios 1, 1.3, 1.333
@@ -151,11 +153,35 @@ std::string covisSweepTool() {
 
 std::vector<std::string> miniArgs(const std::string& out) {
   const std::string s = testing::sourceDir();
-  return {covisSweepTool(), "--scenes", s + "/scenes/room", s + "/scenes/apartment",
-          "--heldout", s + "/scenes/studio", "--out", out, "--centers", "0.45,0.75",
-          "--pairs-per-set", "16", "--batch-size", "8", "--steps", "4", "--img-size", "32",
-          "--patch-size", "8", "--resolution", "64", "--eval-pairs", "8", "--probe-views", "8",
-          "--jobs", "2", "--quiet"};
+  return {covisSweepTool(),
+          "--scenes",
+          s + "/scenes/room",
+          s + "/scenes/apartment",
+          "--heldout",
+          s + "/scenes/studio",
+          "--out",
+          out,
+          "--centers",
+          "0.45,0.75",
+          "--pairs-per-set",
+          "16",
+          "--batch-size",
+          "8",
+          "--steps",
+          "4",
+          "--img-size",
+          "32",
+          "--patch-size",
+          "8",
+          "--resolution",
+          "64",
+          "--eval-pairs",
+          "8",
+          "--probe-views",
+          "8",
+          "--jobs",
+          "2",
+          "--quiet"};
 }
 
 TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
@@ -176,7 +202,8 @@ TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
     EXPECT_TRUE(fs::exists(dir + "/clean/" + f)) << f;
   const std::string html = readFile(dir + "/clean/summary.html");
   const std::regex ref("(src|href)='([^']+)'");
-  for (auto it = std::sregex_iterator(html.begin(), html.end(), ref); it != std::sregex_iterator(); ++it)
+  for (auto it = std::sregex_iterator(html.begin(), html.end(), ref); it != std::sregex_iterator();
+       ++it)
     EXPECT_TRUE(fs::exists(dir + "/clean/" + (*it)[2].str())) << (*it)[2].str();
 
   // A rerun reuses everything: no checkpoint is rewritten.

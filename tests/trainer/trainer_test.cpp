@@ -139,6 +139,10 @@ TEST(Pretrain, ResumeIsExact) {
   int64_t expected = 0;
   while (std::getline(log, line)) EXPECT_EQ(nlohmann::json::parse(line)["step"], expected++);
   EXPECT_EQ(expected, 10);
+  // Resuming a finished run does no step and still reports the last loss (covis_sweep reads it).
+  const nlohmann::json again = runPretrain(half);
+  EXPECT_EQ(again["steps_this_run"], 0);
+  EXPECT_EQ(again["loss"], s["loss"]);
 }
 
 TEST(Pretrain, LossFallsOnGeneratedPairs) {
