@@ -4,6 +4,7 @@
 #include <archive_entry.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <map>
@@ -43,6 +44,46 @@ nlohmann::json sampleRecord(const PairSample& s) {
   j["valid_fraction2"] = s.covis.valid_j;
   j["candidates"] = s.candidateCovis.size();
   return j;
+}
+
+namespace {
+
+double ratioField(const nlohmann::json& record, const char* key, const std::string& source) {
+  if (!record.contains(key) || !record.at(key).is_number())
+    throw Error(source, std::string("record has no number '") + key + "'");
+  const double v = record.at(key).get<double>();
+  if (!(v >= 0 && v <= 1)) throw Error(source, std::string("'") + key + "' is not in [0, 1]");
+  return v;
+}
+
+}  // namespace
+
+SampleRecord parseSampleRecord(const nlohmann::json& record, const std::string& source) {
+  if (!record.is_object()) throw Error(source, "record is not a JSON object");
+  const auto version = record.find("paircast_shard_version");
+  if (version == record.end() || !version->is_number_integer() ||
+      version->get<int64_t>() != kShardVersion)
+    throw Error(source, "has an unsupported version (paircast_shard_version " +
+                            (version == record.end() ? std::string("missing") : version->dump()) +
+                            ", expected " + std::to_string(kShardVersion) +
+                            "; regenerate the shard with generate_pairs)");
+  SampleRecord r;
+  if (!record.contains("scene") || !record.at("scene").is_string())
+    throw Error(source, "record has no string 'scene'");
+  r.scene = record.at("scene").get<std::string>();
+  if (!record.contains("index") || !record.at("index").is_number_unsigned())
+    throw Error(source, "record has no non-negative integer 'index'");
+  r.index = record.at("index").get<uint64_t>();
+  const char* cameraKeys[2] = {"camera1", "camera2"};
+  for (int k = 0; k < 2; ++k) {
+    if (!record.contains(cameraKeys[k]))
+      throw Error(source, std::string("record has no '") + cameraKeys[k] + "'");
+    r.camera[k] = cameraFromJson(record.at(cameraKeys[k]), source + " " + cameraKeys[k]);
+  }
+  r.covis = ratioField(record, "covis", source);
+  r.v_ij = ratioField(record, "v_ij", source);
+  r.v_ji = ratioField(record, "v_ji", source);
+  return r;
 }
 
 EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality) {
@@ -138,9 +179,27 @@ bool splitEntry(const std::string& name, std::string& key, std::string& member) 
   return true;
 }
 
+// Names that could leave a folder they were extracted to, or that hold control characters.
 bool unsafePath(const std::string& name) {
   return name.empty() || name[0] == '/' || name.find("..") != std::string::npos ||
-         name.find('/') != std::string::npos;
+         name.find('/') != std::string::npos || std::any_of(name.begin(), name.end(), [](char c) {
+           return static_cast<unsigned char>(c) < 0x20 || c == 0x7f;
+         });
+}
+
+// An entry name as it may appear in a one-line message: control bytes escaped, length capped.
+std::string printableName(const std::string& name) {
+  std::string out;
+  for (unsigned char c : name.substr(0, 200)) {
+    if (c >= 0x20 && c != 0x7f) {
+      out += static_cast<char>(c);
+    } else {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02x", c);
+      out += hex;
+    }
+  }
+  return name.size() > 200 ? out + "..." : out;
 }
 
 struct ArchiveReader {
@@ -162,6 +221,9 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
                  const std::function<void(const std::string&)>& onError,
                  const ShardReadOptions& options) {
   if (!fs::exists(path)) throw Error(path, "no such shard");
+  std::error_code ec;
+  const uint64_t shardBytes = fs::file_size(path, ec);
+  if (ec) throw Error(path, "cannot read the shard's size: " + ec.message());
   ArchiveReader reader(path);
   size_t delivered = 0;
   ShardSample current;
@@ -174,13 +236,13 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
     ShardSample s = std::move(current);
     current = ShardSample{};
     if (s.jpeg[0].empty() || s.jpeg[1].empty() || s.record.is_null()) {
-      report("sample '" + s.key + "' is incomplete, skipped");
+      report("sample '" + printableName(s.key) + "' is incomplete, skipped");
       return;
     }
-    if (!s.record.is_object() || s.record.value("paircast_shard_version", -1) != kShardVersion) {
-      report("sample '" + s.key +
-             "' has an unsupported version (regenerate the shard with "
-             "generate_pairs), skipped");
+    try {
+      parseSampleRecord(s.record, "sample '" + printableName(s.key) + "'");
+    } catch (const Error& e) {
+      report(std::string(e.what()) + ", skipped");
       return;
     }
     onSample(std::move(s));
@@ -197,18 +259,31 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
                       (archive_error_string(reader.a) ? archive_error_string(reader.a) : "?"));
     }
     const std::string name = archive_entry_pathname(entry) ? archive_entry_pathname(entry) : "";
-    if (archive_entry_filetype(entry) != AE_IFREG || unsafePath(name)) {
-      report("entry '" + name + "' is not a plain file name, ignored");
+    // libarchive reports a hard link as a regular file with a link target: refuse those too.
+    if (archive_entry_filetype(entry) != AE_IFREG || archive_entry_hardlink(entry) ||
+        archive_entry_symlink(entry)) {
+      report("entry '" + printableName(name) + "' is a link or not a plain file, ignored");
       continue;
     }
-    const la_int64_t size = archive_entry_size(entry);
+    if (unsafePath(name)) {
+      report("entry '" + printableName(name) + "' is not a plain file name, ignored");
+      continue;
+    }
+    const la_int64_t size = archive_entry_size_is_set(entry) ? archive_entry_size(entry) : -1;
+    if (size > 0 && static_cast<uint64_t>(size) > shardBytes) {
+      flush();
+      throw Error(path, "shard is truncated or corrupt: entry '" + printableName(name) +
+                            "' claims " + std::to_string(size) + " bytes, more than the shard's " +
+                            std::to_string(shardBytes));
+    }
     if (size < 0 || static_cast<uint64_t>(size) > options.maxEntryBytes) {
-      report("entry '" + name + "' has an invalid size, ignored");
+      report("entry '" + printableName(name) + "' has an invalid size (" + std::to_string(size) +
+             " bytes, limit " + std::to_string(options.maxEntryBytes) + "), ignored");
       continue;
     }
     std::string key, member;
     if (!splitEntry(name, key, member)) {
-      report("entry '" + name + "' has no key, ignored");
+      report("entry '" + printableName(name) + "' has no key, ignored");
       continue;
     }
     if (key != current.key) {
@@ -218,7 +293,7 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
     std::vector<unsigned char> data(static_cast<size_t>(size));
     if (size > 0 && archive_read_data(reader.a, data.data(), data.size()) != size) {
       flush();
-      throw Error(path, "shard is truncated or corrupt in entry '" + name + "'");
+      throw Error(path, "shard is truncated or corrupt in entry '" + printableName(name) + "'");
     }
     if (member == "1.jpg")
       current.jpeg[0] = std::move(data);

@@ -26,6 +26,18 @@ std::string sanitizeName(const std::string& name);
 // The JSON record of a pair (the same content as CroCo's metadata entries plus ours).
 nlohmann::json sampleRecord(const PairSample& s);
 
+// The checked content of a sample's JSON record, as sampleRecord() writes it: what readers of
+// shards rely on. Other keys (seed, valid fractions, candidates) are optional.
+struct SampleRecord {
+  std::string scene;
+  uint64_t index = 0;
+  Camera camera[2];
+  double covis = 0, v_ij = 0, v_ji = 0;  // in [0, 1]
+};
+// Throws paircast::Error naming `source` when the version differs (the message says how to
+// regenerate the shard) or a field is missing, of the wrong type or out of range.
+SampleRecord parseSampleRecord(const nlohmann::json& record, const std::string& source);
+
 // Encoded files of one pair, shared by the shard and CroCo writers.
 struct EncodedPair {
   std::string key;
@@ -71,10 +83,13 @@ struct ShardReadOptions {
 };
 
 // Reads samples in order. Calls `onSample` for each whole sample; a malformed sample (missing
-// member, bad JSON, wrong version) is reported through `onError` with the shard and key, and
-// skipped. A truncated or corrupt archive throws paircast::Error naming the shard, after the
-// samples before the damage were delivered. Entries with absolute paths, "..", or links are
-// rejected. Returns the number of samples delivered.
+// member, bad JSON, a record parseSampleRecord refuses) is reported through `onError` with the
+// shard and key, and skipped. A truncated or corrupt archive throws paircast::Error naming the
+// shard, after the samples before the damage were delivered. Nothing is ever written or
+// followed: entries that are not plain files (symbolic and hard links, folders, devices) or whose
+// names hold '/', "..", or an absolute path are reported with the shard and entry and skipped,
+// and an entry larger than maxEntryBytes is skipped before anything is allocated for it.
+// Returns the number of samples delivered.
 size_t readShard(const std::string& path, const std::function<void(ShardSample&&)>& onSample,
                  const std::function<void(const std::string&)>& onError = {},
                  const ShardReadOptions& options = {});

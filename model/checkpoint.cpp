@@ -5,9 +5,12 @@
 #include <torch/serialize.h>
 
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <memory>
+#include <set>
 #include <sstream>
+#include <unordered_map>
 #include <variant>
 
 #include "util/atomic_file.h"
@@ -18,8 +21,11 @@ namespace {
 
 // ---- a value-only pickle reader ----
 
+// Values point at each other with plain pointers and all live in the reader's arena until the
+// load ends, so a pickle that builds a cycle (a list appended to itself through the memo) or a
+// chain a million deep can neither leak nor overflow the stack when it is freed.
 struct PyValue;
-using PyPtr = std::shared_ptr<PyValue>;
+using PyPtr = PyValue*;
 
 struct PyValue {
   enum Kind {
@@ -46,10 +52,37 @@ struct PyValue {
   torch::ScalarType dtype = torch::kFloat32;  // Storage
 };
 
-PyPtr make(PyValue::Kind k) {
-  auto v = std::make_shared<PyValue>();
-  v->kind = k;
-  return v;
+// Limits on what a data.pkl may build: far above what a checkpoint needs (one value or two per
+// tensor; a state_dict nests 2 levels, optimizer state 5), far below what would exhaust memory.
+constexpr size_t kMaxValues = size_t(1) << 22;
+constexpr int kMaxDepth = 100;
+// Tensors are copied out of their storages; a view may repeat elements (stride 0) but not
+// without bound, and all copies together are bounded by the file's size.
+constexpr int64_t kMaxBroadcastElements = int64_t(1) << 24;
+constexpr uint64_t kTensorBytesSlack = uint64_t(64) << 20;
+
+// The globals a checkpoint may name: the reader never calls anything, but a file naming
+// os.system or builtins.eval is hostile or not a checkpoint, and is refused outright. Those
+// reduce() does not know become inert objects holding their state.
+bool allowedGlobal(const std::string& name) {
+  static const std::set<std::string> exact = {
+      "collections.OrderedDict",
+      "torch.jit._pickle.restore_type_tag",  // LibTorch's typed containers
+      "torch.device",
+      "torch.Size",
+      "argparse.Namespace",  // the official CroCo checkpoints' "args"
+      "numpy.dtype",
+      "numpy.ndarray",
+      "_codecs.encode",  // numpy scalars' bytes under protocol 2
+  };
+  auto startsWith = [&](const char* prefix) { return name.rfind(prefix, 0) == 0; };
+  auto endsWith = [&](const std::string& suffix) {
+    return name.size() >= suffix.size() &&
+           name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+  };
+  return exact.count(name) || startsWith("torch._utils._rebuild_") ||
+         startsWith("numpy.core.multiarray.") ||
+         (startsWith("torch.") && endsWith("Storage") && name.find('.', 6) == std::string::npos);
 }
 
 torch::ScalarType storageDtype(const std::string& global, const std::string& source) {
@@ -66,9 +99,14 @@ torch::ScalarType storageDtype(const std::string& global, const std::string& sou
 
 class PickleReader {
  public:
+  // `archiveBytes` (the checkpoint's size) bounds the bytes of the tensors built.
   PickleReader(const std::string& data, caffe2::serialize::PyTorchStreamReader& zip,
-               const std::string& prefix, const std::string& source)
-      : data_(data), zip_(zip), prefix_(prefix), source_(source) {}
+               const std::string& prefix, const std::string& source, uint64_t archiveBytes)
+      : data_(data),
+        zip_(zip),
+        prefix_(prefix),
+        source_(source),
+        maxTensorBytes_(2 * archiveBytes + kTensorBytesSlack) {}
 
   PyPtr read() {
     while (true) {
@@ -211,22 +249,23 @@ class PickleReader {
           break;
         case 'c': {  // GLOBAL module\nname\n
           const std::string module = line(), name = line();
-          auto g = make(PyValue::Global);
-          g->s = module + "." + name;
-          stack_.push_back(g);
+          pushGlobal(module + "." + name, "GLOBAL");
           break;
         }
         case 0x93: {  // STACK_GLOBAL
           auto name = pop(), module = pop();
-          auto g = make(PyValue::Global);
-          g->s = module->s + "." + name->s;
-          stack_.push_back(g);
+          if (name->kind != PyValue::String || module->kind != PyValue::String)
+            fail("STACK_GLOBAL of a non-string");
+          pushGlobal(module->s + "." + name->s, "STACK_GLOBAL");
           break;
         }
         case 'Q': {  // BINPERSID: ('storage', type, key, location, numel)
           auto pid = pop();
           if (pid->kind != PyValue::Tuple || pid->items.size() < 5 || pid->items[0]->s != "storage")
             fail("unsupported persistent id");
+          if (pid->items[1]->kind != PyValue::Global || pid->items[2]->kind != PyValue::String ||
+              pid->items[4]->kind != PyValue::Int)
+            fail("malformed storage persistent id");
           auto st = make(PyValue::Storage);
           st->dtype = storageDtype(pid->items[1]->s, source_);
           st->s = pid->items[2]->s;
@@ -261,6 +300,21 @@ class PickleReader {
     std::ostringstream os;
     os << std::hex << v;
     return os.str();
+  }
+  PyPtr make(PyValue::Kind k) {
+    if (values_.size() >= kMaxValues)
+      fail("data.pkl builds more than " + std::to_string(kMaxValues) + " values");
+    values_.emplace_back();
+    values_.back().kind = k;
+    return &values_.back();
+  }
+  void pushGlobal(const std::string& name, const char* opcode) {
+    if (!allowedGlobal(name))
+      fail("refusing global '" + name + "' (" + opcode +
+           " opcode): a checkpoint holds only tensors and plain values, never code");
+    auto g = make(PyValue::Global);
+    g->s = name;
+    stack_.push_back(g);
   }
   uint8_t byte() {
     if (pos_ >= data_.size()) fail("unexpected end");
@@ -319,12 +373,12 @@ class PickleReader {
   }
   void memo(size_t index) {
     need(1);
-    if (memo_.size() <= index) memo_.resize(index + 1);
-    memo_[index] = stack_.back();
+    memo_[index] = stack_.back();  // a map: a 4-byte index must not size a vector
   }
   void get(size_t index) {
-    if (index >= memo_.size() || !memo_[index]) fail("memo key not found");
-    stack_.push_back(memo_[index]);
+    auto it = memo_.find(index);
+    if (it == memo_.end()) fail("memo key not found");
+    stack_.push_back(it->second);
   }
   void setItem(const PyPtr& target, const PyPtr& k, const PyPtr& v) {
     if (target->kind != PyValue::Dict && target->kind != PyValue::Object)
@@ -337,7 +391,9 @@ class PickleReader {
     const std::string& name = callable->s;
     if (name == "collections.OrderedDict") return make(PyValue::Dict);
     if (name == "torch._utils._rebuild_tensor_v2" || name == "torch._utils._rebuild_tensor") {
-      if (args->kind != PyValue::Tuple || args->items.size() < 4) fail("bad tensor arguments");
+      if (args->kind != PyValue::Tuple || args->items.size() < 4 ||
+          args->items[1]->kind != PyValue::Int)
+        fail("bad tensor arguments");
       return rebuildTensor(args->items[0], args->items[1]->i, args->items[2], args->items[3]);
     }
     if (name == "torch.jit._pickle.restore_type_tag") {  // LibTorch's typed containers
@@ -358,9 +414,17 @@ class PickleReader {
   PyPtr rebuildTensor(const PyPtr& storage, int64_t offset, const PyPtr& size,
                       const PyPtr& stride) {
     if (storage->kind != PyValue::Storage) fail("tensor without storage");
+    if (size->kind != PyValue::Tuple || stride->kind != PyValue::Tuple)
+      fail("tensor size or stride is not a tuple");
     std::vector<int64_t> sizes, strides;
-    for (const auto& v : size->items) sizes.push_back(v->i);
-    for (const auto& v : stride->items) strides.push_back(v->i);
+    for (const auto& v : size->items) {
+      if (v->kind != PyValue::Int) fail("tensor size holds a non-integer");
+      sizes.push_back(v->i);
+    }
+    for (const auto& v : stride->items) {
+      if (v->kind != PyValue::Int) fail("tensor stride holds a non-integer");
+      strides.push_back(v->i);
+    }
     if (sizes.size() != strides.size()) fail("size and stride differ in length");
     auto& base = storages_[storage->s];
     if (!base.defined()) {
@@ -368,20 +432,32 @@ class PickleReader {
       if (!zip_.hasRecord(record)) fail("missing storage record '" + record + "'");
       auto [ptr, bytesLen] = zip_.getRecord(record);
       const size_t elem = c10::elementSize(storage->dtype);
-      if (storage->i < 0 || bytesLen != static_cast<size_t>(storage->i) * elem)
-        fail("storage '" + storage->s + "' has " + std::to_string(bytesLen) + " bytes, expected " +
-             std::to_string(storage->i * elem));
+      if (storage->i < 0 || bytesLen % elem != 0 || bytesLen / elem != uint64_t(storage->i))
+        fail("storage '" + storage->s + "' has " + std::to_string(bytesLen) + " bytes, not " +
+             std::to_string(storage->i) + " elements of " + std::to_string(elem) + " bytes");
       base = torch::empty({storage->i}, torch::TensorOptions().dtype(storage->dtype));
-      std::memcpy(base.data_ptr(), ptr.get(), bytesLen);
+      if (bytesLen > 0) std::memcpy(base.data_ptr(), ptr.get(), bytesLen);
     }
-    // Bounds: the largest index reached must lie inside the storage.
-    int64_t last = offset;
+    // Bounds, in checked arithmetic: the largest index reached must lie inside the storage.
+    if (offset < 0) fail("negative storage offset");
+    int64_t last = offset, numel = 1;
     for (size_t k = 0; k < sizes.size(); ++k) {
       if (sizes[k] < 0 || strides[k] < 0) fail("negative size or stride");
-      if (sizes[k] > 0) last += (sizes[k] - 1) * strides[k];
+      int64_t reach = 0;
+      if (sizes[k] > 0 && (__builtin_mul_overflow(sizes[k] - 1, strides[k], &reach) ||
+                           __builtin_add_overflow(last, reach, &last)))
+        fail("tensor view outside its storage");
+      if (__builtin_mul_overflow(numel, sizes[k], &numel)) fail("tensor size overflows");
     }
-    const bool empty = std::any_of(sizes.begin(), sizes.end(), [](int64_t s) { return s == 0; });
-    if (!empty && (offset < 0 || last >= base.numel())) fail("tensor view outside its storage");
+    const bool empty = numel == 0;
+    if (!empty && last >= base.numel()) fail("tensor view outside its storage");
+    if (numel > std::max(base.numel(), kMaxBroadcastElements))
+      fail("tensor view has " + std::to_string(numel) + " elements, its storage " +
+           std::to_string(base.numel()));
+    tensorBytes_ += static_cast<uint64_t>(numel) * base.element_size();
+    if (tensorBytes_ > maxTensorBytes_)
+      fail("tensors take more than " + std::to_string(maxTensorBytes_) +
+           " bytes, far more than the file holds");
     auto t = make(PyValue::Tensor);
     t->tensor = empty ? torch::empty(sizes, base.options())
                       : base.as_strided(sizes, strides, offset).clone();
@@ -391,11 +467,22 @@ class PickleReader {
   const std::string& data_;
   caffe2::serialize::PyTorchStreamReader& zip_;
   std::string prefix_, source_;
+  uint64_t maxTensorBytes_, tensorBytes_ = 0;
   size_t pos_ = 0;
-  std::vector<PyPtr> stack_, memo_;
+  std::deque<PyValue> values_;  // the arena: a deque never moves what it holds
+  std::vector<PyPtr> stack_;
+  std::unordered_map<uint64_t, PyPtr> memo_;
   std::vector<size_t> marks_;
   std::map<std::string, torch::Tensor> storages_;
 };
+
+// An exception's message as one line: c10::Error's what() appends a multi-line backtrace.
+std::string oneLine(const std::exception& e) {
+  const auto* c10e = dynamic_cast<const c10::Error*>(&e);
+  std::string msg = c10e ? c10e->what_without_backtrace() : e.what();
+  const size_t eol = msg.find('\n');
+  return eol == std::string::npos ? msg : msg.substr(0, eol);
+}
 
 std::string keyString(const PyPtr& k) {
   if (k->kind == PyValue::String) return k->s;
@@ -403,7 +490,17 @@ std::string keyString(const PyPtr& k) {
   return "?";
 }
 
-nlohmann::json toJson(const PyPtr& v) {
+// Deeper nesting is refused: it only comes from hostile files, and a cycle reaches any depth.
+void checkDepth(int depth, const std::string& key, const std::string& source) {
+  if (depth > kMaxDepth)
+    throw Error(source, "checkpoint entry '" + key.substr(0, key.find('/')) +
+                            "' nests deeper than " + std::to_string(kMaxDepth) +
+                            " levels (or holds a cycle)");
+}
+
+nlohmann::json toJson(const PyPtr& v, const std::string& key, const std::string& source,
+                      int depth = 0) {
+  checkDepth(depth, key, source);
   switch (v->kind) {
     case PyValue::None:
       return nullptr;
@@ -418,13 +515,13 @@ nlohmann::json toJson(const PyPtr& v) {
     case PyValue::List:
     case PyValue::Tuple: {
       auto a = nlohmann::json::array();
-      for (const auto& x : v->items) a.push_back(toJson(x));
+      for (const auto& x : v->items) a.push_back(toJson(x, key, source, depth + 1));
       return a;
     }
     case PyValue::Dict:
     case PyValue::Object: {
       auto o = nlohmann::json::object();
-      for (const auto& [k, x] : v->dict) o[keyString(k)] = toJson(x);
+      for (const auto& [k, x] : v->dict) o[keyString(k)] = toJson(x, key, source, depth + 1);
       return o;
     }
     default:
@@ -434,15 +531,18 @@ nlohmann::json toJson(const PyPtr& v) {
 
 // Collects tensors below `v` as "prefix/key/..." (state dicts nested in dicts).
 void collectTensors(const PyPtr& v, const std::string& prefix,
-                    std::map<std::string, torch::Tensor>& out) {
+                    std::map<std::string, torch::Tensor>& out, const std::string& source,
+                    int depth = 0) {
+  checkDepth(depth, prefix, source);
   if (v->kind == PyValue::Tensor) {
     out[prefix] = v->tensor;
   } else if (v->kind == PyValue::Dict || v->kind == PyValue::Object) {
     for (const auto& [k, x] : v->dict)
-      collectTensors(x, prefix.empty() ? keyString(k) : prefix + "/" + keyString(k), out);
+      collectTensors(x, prefix.empty() ? keyString(k) : prefix + "/" + keyString(k), out, source,
+                     depth + 1);
   } else if (v->kind == PyValue::List || v->kind == PyValue::Tuple) {
     for (size_t i = 0; i < v->items.size(); ++i)
-      collectTensors(v->items[i], prefix + "/" + std::to_string(i), out);
+      collectTensors(v->items[i], prefix + "/" + std::to_string(i), out, source, depth + 1);
   }
 }
 
@@ -534,36 +634,41 @@ void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
 Checkpoint loadCheckpoint(const std::string& path) {
   if (!std::filesystem::exists(path)) throw Error(path, "no such checkpoint");
   std::string data = readFile(path);
+  const uint64_t archiveBytes = data.size();
   if (data.size() < 4 || data.compare(0, 2, "PK") != 0)
     throw Error(path,
                 "not a zip checkpoint (legacy torch.save format or not a checkpoint); re-save it "
                 "with torch.save(obj, path) from PyTorch >= 1.6");
   std::unique_ptr<caffe2::serialize::PyTorchStreamReader> zip;
+  std::string pkl, prefix;
   try {
     zip = std::make_unique<caffe2::serialize::PyTorchStreamReader>(
         std::make_shared<StringAdapter>(std::move(data)));
-  } catch (const std::exception& e) {
-    throw Error(path, std::string("corrupt checkpoint archive: ") + e.what());
-  }
-  std::string pklName;
-  for (const auto& r : zip->getAllRecords())
-    if (r == "data.pkl" || (r.size() > 9 && r.compare(r.size() - 9, 9, "/data.pkl") == 0))
-      pklName = r;
-  if (pklName.empty()) throw Error(path, "checkpoint archive has no data.pkl");
-  const std::string prefix = pklName.substr(0, pklName.size() - 8);
-  auto [ptr, len] = zip->getRecord(pklName);
-  const std::string pkl(static_cast<const char*>(ptr.get()), len);
-  PyPtr root;
-  try {
-    root = PickleReader(pkl, *zip, prefix, path).read();
+    std::string pklName;
+    for (const auto& r : zip->getAllRecords())
+      if (r == "data.pkl" || (r.size() > 9 && r.compare(r.size() - 9, 9, "/data.pkl") == 0))
+        pklName = r;
+    if (pklName.empty()) throw Error(path, "checkpoint archive has no data.pkl");
+    prefix = pklName.substr(0, pklName.size() - 8);
+    auto [ptr, len] = zip->getRecord(pklName);
+    pkl.assign(static_cast<const char*>(ptr.get()), len);
   } catch (const Error&) {
     throw;
   } catch (const std::exception& e) {
-    throw Error(path, std::string("corrupt checkpoint: ") + e.what());
+    throw Error(path, "corrupt checkpoint archive: " + oneLine(e));
+  }
+  PickleReader reader(pkl, *zip, prefix, path, archiveBytes);  // owns the values until return
+  PyPtr root = nullptr;
+  try {
+    root = reader.read();
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw Error(path, "corrupt checkpoint: " + oneLine(e));
   }
 
   Checkpoint ck;
-  PyPtr modelDict;
+  PyPtr modelDict = nullptr;
   if (isStateDict(root)) {
     modelDict = root;
   } else if (root->kind == PyValue::Dict) {
@@ -572,15 +677,15 @@ Checkpoint loadCheckpoint(const std::string& path) {
       if (key == "model")
         modelDict = v;
       else if (key == "args" && (v->kind == PyValue::Dict || v->kind == PyValue::Object)) {
-        ck.args = toJson(v);
+        ck.args = toJson(v, key, path);
         ck.hasArgs = true;
       } else if (key == "epoch" && v->kind == PyValue::Int)
         ck.epoch = v->i;
       else {
         std::map<std::string, torch::Tensor> tensors;
-        collectTensors(v, key, tensors);
+        collectTensors(v, key, tensors, path);
         ck.extraTensors.insert(tensors.begin(), tensors.end());
-        if (tensors.empty()) ck.extra[key] = toJson(v);
+        if (tensors.empty()) ck.extra[key] = toJson(v, key, path);
       }
     }
   }

@@ -127,17 +127,27 @@ Camera cameraFromJson(const nlohmann::json& j, const std::string& source) {
     if (!t[i].is_number()) throw Error(source, "'t_cam2world' has a non-number");
     c.t_cam2world[i] = t[i].get<double>();
   }
-  // CroCo's own camera_params.json has no size: fall back to the principal point.
+  // CroCo's own camera_params.json has no size: fall back to the principal point. Sizes are
+  // range-checked before they are narrowed to int (1e12 must not wrap to a small size).
+  constexpr int kMaxSize = 16384;
   auto dim = [&](const char* key, double fallback) {
-    if (!j.contains(key)) return static_cast<int>(std::lround(fallback));
-    if (!j.at(key).is_number_integer())
-      throw Error(source, std::string("'") + key + "' is not an integer");
-    return j.at(key).get<int>();
+    if (!j.contains(key)) {
+      if (!(fallback >= 0.5 && fallback < kMaxSize + 0.5))
+        throw Error(source, std::string("no '") + key +
+                                "' and the principal point implies no size in 1..16384");
+      return static_cast<int>(std::lround(fallback));
+    }
+    const auto& v = j.at(key);
+    if (!v.is_number_integer()) throw Error(source, std::string("'") + key + "' is not an integer");
+    const bool inRange = v.is_number_unsigned()
+                             ? v.get<uint64_t>() <= kMaxSize
+                             : v.get<int64_t>() >= 1 && v.get<int64_t>() <= kMaxSize;
+    if (!inRange) throw Error(source, "camera size must be in 1..16384");
+    return static_cast<int>(v.get<int64_t>());
   };
   c.width = dim("width", 2 * c.K(0, 2));
   c.height = dim("height", 2 * c.K(1, 2));
-  if (c.width <= 0 || c.height <= 0 || c.width > 16384 || c.height > 16384)
-    throw Error(source, "camera size must be in 1..16384");
+  if (c.width <= 0 || c.height <= 0) throw Error(source, "camera size must be in 1..16384");
   if (!c.valid())
     throw Error(source,
                 "invalid camera (K must be upper-triangular with positive focal lengths, "

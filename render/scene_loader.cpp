@@ -1,12 +1,18 @@
 #include "render/scene_loader.h"
 
+#include <assimp/DefaultIOSystem.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
 
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <map>
+#include <sstream>
 
 #include "util/error.h"
 #include "util/image_io.h"
@@ -37,14 +43,196 @@ std::string lower(std::string s) {
   return s;
 }
 
+// Why a file a scene names may not be opened, or "" when it may: only regular files (a scene
+// naming /dev/zero or a FIFO must not hang or fill memory) within the size limit.
+std::string refusalOf(const std::string& file, uint64_t maxBytes) {
+  std::error_code ec;
+  const fs::file_status st = fs::status(file, ec);  // follows symlinks: the target counts
+  if (ec || !fs::exists(st)) return "no such file";
+  if (!fs::is_regular_file(st)) return "not a regular file";
+  const uint64_t bytes = fs::file_size(file, ec);
+  if (ec) return "cannot read file size: " + ec.message();
+  if (bytes > maxBytes)
+    return "file is larger than the limit (" + std::to_string(bytes) + " bytes)";
+  return "";
+}
+
+// assimp opens the scene and every file it names (mtllib, .bin buffers, external textures)
+// through this: read-only, and only what refusalOf allows.
+class LimitedIOSystem : public Assimp::DefaultIOSystem {
+ public:
+  explicit LimitedIOSystem(uint64_t maxBytes) : maxBytes_(maxBytes) {}
+  bool Exists(const char* file) const override { return refusalOf(file, maxBytes_).empty(); }
+  Assimp::IOStream* Open(const char* file, const char* mode = "rb") override {
+    if (std::strpbrk(mode, "wa+") || !refusalOf(file, maxBytes_).empty()) return nullptr;
+    return DefaultIOSystem::Open(file, mode);
+  }
+
+ private:
+  uint64_t maxBytes_;
+};
+
+// Bytes one value of a PLY property type takes at least: its size in binary files, a digit and
+// a separator in ASCII ones. 0 for an unknown type.
+uint64_t plyValueBytes(const std::string& type, bool ascii) {
+  static const std::map<std::string, uint64_t> sizes = {
+      {"char", 1},  {"uchar", 1},   {"int8", 1},   {"uint8", 1},  {"short", 2}, {"ushort", 2},
+      {"int16", 2}, {"uint16", 2},  {"int", 4},    {"uint", 4},   {"int32", 4}, {"uint32", 4},
+      {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
+  auto it = sizes.find(type);
+  if (it == sizes.end()) return 0;
+  return ascii ? 2 : it->second;
+}
+
+struct PlyElement {
+  std::string name;
+  uint64_t count = 0;
+  uint64_t minBytes = 0;  // per instance
+};
+struct PlyHeader {
+  uint64_t bytes = 0;  // up to and including the end_header line
+  std::vector<PlyElement> elements;
+};
+
+// Reads a PLY header strictly, and throws paircast::Error on anything but the keywords of the
+// format, spaces and tabs: assimp 5.2.5 loops forever when it does not see end_header, and it
+// splits lines differently from us (fuzz_scene_ply found "end_header\v" and a missing one).
+PlyHeader readPlyHeader(const std::string& path) {
+  constexpr uint64_t kMaxHeaderBytes = 1 << 16;
+  std::ifstream in(path, std::ios::binary);
+  PlyHeader h;
+  std::string line;
+  bool ended = false, ascii = false, hasFormat = false;
+  for (int number = 1; !ended && h.bytes < kMaxHeaderBytes && std::getline(in, line); ++number) {
+    h.bytes += line.size() + 1;
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ' || line.back() == '\t'))
+      line.pop_back();
+    auto bad = [&](const std::string& why) {
+      return Error(path,
+                   "cannot load scene: PLY header line " + std::to_string(number) + ": " + why);
+    };
+    if (std::any_of(line.begin(), line.end(), [](char c) {
+          return (static_cast<unsigned char>(c) < 0x20 && c != '\t') || c == 0x7f;
+        }))
+      throw bad("holds a control character");
+    std::istringstream words(line);
+    std::string word;
+    words >> word;
+    if (number == 1) {
+      if (line != "ply") throw bad("not a PLY file (the first line is not 'ply')");
+    } else if (line == "end_header") {
+      ended = true;
+    } else if (word == "comment" || word == "obj_info") {
+      continue;
+    } else if (word == "format") {
+      std::string format;
+      words >> format;
+      if (format != "ascii" && format != "binary_little_endian" && format != "binary_big_endian")
+        throw bad("unknown format '" + format + "'");
+      ascii = format == "ascii";
+      hasFormat = true;
+    } else if (word == "element") {
+      if (!hasFormat) throw bad("element before the format line");
+      PlyElement e;
+      std::string count;
+      words >> e.name >> count;
+      if (e.name.empty() || count.empty() ||
+          count.find_first_not_of("0123456789") != std::string::npos)
+        throw bad("an element needs a name and a count");
+      errno = 0;
+      e.count = std::strtoull(count.c_str(), nullptr, 10);
+      if (errno == ERANGE) e.count = UINT64_MAX;
+      h.elements.push_back(e);
+    } else if (word == "property") {
+      if (h.elements.empty()) throw bad("property before any element");
+      std::string type, itemType;
+      words >> type;
+      if (type == "list") {
+        words >> type >> itemType;  // a list may be empty: only its count is certain
+        if (plyValueBytes(itemType, ascii) == 0) throw bad("unknown type '" + itemType + "'");
+      }
+      const uint64_t bytes = plyValueBytes(type, ascii);
+      if (bytes == 0) throw bad("unknown type '" + type + "'");
+      h.elements.back().minBytes += bytes;
+    } else {
+      throw bad("unknown keyword '" + word + "'");
+    }
+  }
+  if (!ended)
+    throw Error(path, "cannot load scene: PLY header has no end_header line in its first " +
+                          std::to_string(kMaxHeaderBytes) + " bytes");
+  return h;
+}
+
+// A PLY header states its element counts before the data, and assimp allocates (and zeroes)
+// that many vertices before reading one: a 200-byte file claiming 3e8 vertices made it touch
+// 9 GB for 195 s. Counts the rest of the file cannot hold, and counts over the limits, are
+// refused here.
+void checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptions& options) {
+  const PlyHeader h = readPlyHeader(path);
+  const uint64_t body = fileBytes > h.bytes ? fileBytes - h.bytes : 0;
+  for (const PlyElement& e : h.elements) {
+    const uint64_t atMost = body / std::max<uint64_t>(e.minBytes, 1);
+    if (e.count > atMost)
+      throw Error(path, "cannot load scene: PLY header claims " + std::to_string(e.count) + " '" +
+                            e.name + "' elements, but the " + std::to_string(body) +
+                            " bytes after the header hold at most " + std::to_string(atMost) +
+                            " (truncated or corrupt file)");
+    if (e.name == "vertex" && e.count > options.maxVertices)
+      throw Error(path, "PLY header claims " + std::to_string(e.count) +
+                            " vertices, more than the limit of " +
+                            std::to_string(options.maxVertices));
+    if (e.name == "face" && e.count > options.maxTriangles)
+      throw Error(path, "PLY header claims " + std::to_string(e.count) +
+                            " faces, more than the limit of " +
+                            std::to_string(options.maxTriangles));
+  }
+}
+
+uint32_t le32(const unsigned char* p) {
+  return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+}
+
+// A binary glTF states its chunk lengths up front, and assimp allocates a chunk before reading
+// it: a 1 KB file claiming a 4 GB JSON chunk made it ask for 4 GB (fuzz_scene_glb found it).
+// Lengths the file cannot hold are refused here; files without the glTF magic are left to
+// assimp.
+void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
+  std::ifstream in(path, std::ios::binary);
+  unsigned char header[20];
+  if (!in.read(reinterpret_cast<char*>(header), 12) || std::memcmp(header, "glTF", 4) != 0) return;
+  const uint32_t version = le32(header + 4), length = le32(header + 8);
+  if (length > fileBytes)
+    throw Error(path, "cannot load scene: GLB header claims " + std::to_string(length) +
+                          " bytes, the file has " + std::to_string(fileBytes));
+  if (version == 1) {  // magic, version, length, content length, content format
+    if (in.read(reinterpret_cast<char*>(header + 12), 8) && le32(header + 12) > fileBytes - 20)
+      throw Error(path, "cannot load scene: GLB header claims a " +
+                            std::to_string(le32(header + 12)) +
+                            "-byte scene, more than the file holds");
+    return;
+  }
+  for (uint64_t offset = 12; offset + 8 <= fileBytes;) {  // chunks: length, type, data
+    in.seekg(static_cast<std::streamoff>(offset));
+    if (!in.read(reinterpret_cast<char*>(header), 8)) return;
+    const uint64_t chunk = le32(header);
+    if (chunk > fileBytes - offset - 8)
+      throw Error(path, "cannot load scene: GLB chunk at byte " + std::to_string(offset) +
+                            " claims " + std::to_string(chunk) + " bytes, but only " +
+                            std::to_string(fileBytes - offset - 8) + " follow");
+    offset += 8 + chunk;
+  }
+}
+
 // Converts one assimp material and its texture to ours, loading each texture file once.
 class MaterialBuilder {
  public:
-  MaterialBuilder(const aiScene* scene, const std::string& path, Mesh& mesh,
+  MaterialBuilder(const aiScene* scene, const std::string& path, uint64_t maxFileBytes, Mesh& mesh,
                   std::vector<std::string>& warnings)
       : scene_(scene),
         path_(path),
         dir_(fs::path(path).parent_path()),
+        maxFileBytes_(maxFileBytes),
         mesh_(mesh),
         warnings_(warnings) {}
 
@@ -92,7 +280,10 @@ class MaterialBuilder {
         std::string rel = ref;
         for (auto& c : rel)
           if (c == '\\') c = '/';
-        img = readImage8((dir_ / rel).string());
+        const std::string file = (dir_ / rel).string();
+        const std::string refusal = refusalOf(file, maxFileBytes_);
+        if (!refusal.empty()) throw Error(file, refusal);
+        img = readImage8(file);
       }
       t.width = img.width;
       t.height = img.height;
@@ -111,18 +302,56 @@ class MaterialBuilder {
   const aiScene* scene_;
   std::string path_;
   fs::path dir_;
+  uint64_t maxFileBytes_;
   Mesh& mesh_;
   std::vector<std::string>& warnings_;
   std::map<std::string, int> cache_;
 };
 
-void appendNode(const aiScene* scene, const aiNode* node, const aiMatrix4x4& parent,
-                const std::vector<int>& materialMap, bool linearVertexColors, float scale,
+// Sets each mesh's primitive-type flags from its faces. Importers can get them wrong (assimp's
+// PLY importer flags a mesh as holding polygons when it holds none), and TriangulateProcess then
+// fails an ai_assert, which Debian's assimp 5.2.5 build turns into abort(): a bad file would kill
+// the process (fuzz_scene_ply found it).
+void setPrimitiveTypesFromFaces(aiScene* scene, const std::string& path) {
+  for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
+    aiMesh* m = scene->mMeshes[i];
+    unsigned types = 0;
+    for (unsigned f = 0; f < m->mNumFaces; ++f) {
+      const unsigned n = m->mFaces[f].mNumIndices;
+      // TriangulateProcess counts such a face as a triangle and fails the same assertion.
+      if (n == 0) throw Error(path, "mesh " + std::to_string(i) + " has a face without vertices");
+      types |= n == 1   ? aiPrimitiveType_POINT
+               : n == 2 ? aiPrimitiveType_LINE
+               : n == 3 ? aiPrimitiveType_TRIANGLE
+                        : aiPrimitiveType_POLYGON;
+    }
+    m->mPrimitiveTypes = types;
+  }
+}
+
+// What appendNode needs besides the node: the same for the whole tree.
+struct AppendContext {
+  const aiScene* scene;
+  const std::string& path;
+  const LoadOptions& options;
+  const std::vector<int>& materialMap;
+  bool linearVertexColors;
+};
+
+void appendNode(const AppendContext& ctx, const aiNode* node, const aiMatrix4x4& parent,
                 Mesh& out) {
+  const aiScene* scene = ctx.scene;
+  const float scale = static_cast<float>(ctx.options.scale);
   const aiMatrix4x4 world = parent * node->mTransformation;
   for (unsigned k = 0; k < node->mNumMeshes; ++k) {
     const aiMesh* m = scene->mMeshes[node->mMeshes[k]];
     if (!(m->mPrimitiveTypes & aiPrimitiveType_TRIANGLE)) continue;
+    // A mesh referenced by many nodes is instanced once per node: check before growing.
+    if (out.triangles.size() + m->mNumFaces > ctx.options.maxTriangles ||
+        out.positions.size() + m->mNumVertices > ctx.options.maxVertices)
+      throw Error(ctx.path, "scene has more than " + std::to_string(ctx.options.maxTriangles) +
+                                " triangles or " + std::to_string(ctx.options.maxVertices) +
+                                " vertices (the limits) after instancing");
     const int base = static_cast<int>(out.positions.size());
     for (unsigned i = 0; i < m->mNumVertices; ++i) {
       aiVector3D p = world * m->mVertices[i];
@@ -134,7 +363,7 @@ void appendNode(const aiScene* scene, const aiNode* node, const aiMatrix4x4& par
       if (m->HasVertexColors(0)) {
         const aiColor4D& c = m->mColors[0][i];
         Eigen::Vector3f rgb = Eigen::Vector3f(c.r, c.g, c.b).cwiseMax(0.0f).cwiseMin(1.0f);
-        if (!linearVertexColors)
+        if (!ctx.linearVertexColors)
           rgb =
               Eigen::Vector3f(srgbToLinear(rgb.x()), srgbToLinear(rgb.y()), srgbToLinear(rgb.z()));
         out.colors.push_back(rgb);
@@ -142,7 +371,10 @@ void appendNode(const aiScene* scene, const aiNode* node, const aiMatrix4x4& par
         out.colors.emplace_back(1.0f, 1.0f, 1.0f);
       }
     }
-    const int material = materialMap.at(m->mMaterialIndex);
+    if (m->mMaterialIndex >= ctx.materialMap.size())
+      throw Error(ctx.path, "a mesh names material " + std::to_string(m->mMaterialIndex) +
+                                ", which the file does not have");
+    const int material = ctx.materialMap[m->mMaterialIndex];
     for (unsigned f = 0; f < m->mNumFaces; ++f) {
       const aiFace& face = m->mFaces[f];
       if (face.mNumIndices != 3) continue;  // points and lines left by SortByPType
@@ -151,8 +383,7 @@ void appendNode(const aiScene* scene, const aiNode* node, const aiMatrix4x4& par
       out.triangleMaterial.push_back(material);
     }
   }
-  for (unsigned c = 0; c < node->mNumChildren; ++c)
-    appendNode(scene, node->mChildren[c], world, materialMap, linearVertexColors, scale, out);
+  for (unsigned c = 0; c < node->mNumChildren; ++c) appendNode(ctx, node->mChildren[c], world, out);
 }
 
 }  // namespace
@@ -172,14 +403,25 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
     throw Error(path, "unsupported scene format '" + fs::path(path).extension().string() +
                           "' (glb, gltf, obj, ply, fbx, dae, ifc, ... are supported)");
 
+  const std::string ext = lower(fs::path(path).extension().string());
+  if (ext == ".ply") checkPlyHeader(path, bytes, options);
+  if (ext == ".glb") checkGlbHeader(path, bytes);
+
   Assimp::Importer importer;
-  const unsigned flags =
-      aiProcess_Triangulate | aiProcess_SortByPType | aiProcess_ValidateDataStructure;
+  importer.SetIOHandler(new LimitedIOSystem(options.maxFileBytes));  // the importer owns it
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
                               aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  // Two steps: read and validate, repair the primitive-type flags, then post-process (see
+  // setPrimitiveTypesFromFaces).
   const aiScene* scene = nullptr;
   try {
-    scene = importer.ReadFile(path, flags);
+    scene = importer.ReadFile(path, aiProcess_ValidateDataStructure);
+    if (scene && scene->mRootNode && !(scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE)) {
+      setPrimitiveTypesFromFaces(const_cast<aiScene*>(scene), path);  // the importer owns the scene
+      scene = importer.ApplyPostProcessing(aiProcess_Triangulate | aiProcess_SortByPType);
+    }
+  } catch (const Error&) {
+    throw;
   } catch (const std::exception& e) {
     throw Error(path, std::string("cannot load scene: ") + e.what());
   }
@@ -195,6 +437,10 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   if (triangles > options.maxTriangles)
     throw Error(path, "scene has " + std::to_string(triangles) + " faces, more than the limit of " +
                           std::to_string(options.maxTriangles));
+  if (vertices > options.maxVertices)
+    throw Error(path, "scene has " + std::to_string(vertices) +
+                          " vertices, more than the limit of " +
+                          std::to_string(options.maxVertices));
 
   Scene out;
   out.path = path;
@@ -203,19 +449,15 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   out.mesh.positions.reserve(vertices);
   out.mesh.triangles.reserve(triangles);
 
-  MaterialBuilder materials(scene, path, out.mesh, out.warnings);
+  MaterialBuilder materials(scene, path, options.maxFileBytes, out.mesh, out.warnings);
   std::vector<int> materialMap;
   for (unsigned i = 0; i < scene->mNumMaterials; ++i)
     materialMap.push_back(materials.build(scene->mMaterials[i]));
   if (materialMap.empty()) materialMap.push_back(out.mesh.addMaterial(Material{}));
 
-  const std::string ext = lower(fs::path(path).extension().string());
   const bool linearVertexColors = ext == ".glb" || ext == ".gltf";
-  appendNode(scene, scene->mRootNode, aiMatrix4x4(), materialMap, linearVertexColors,
-             static_cast<float>(options.scale), out.mesh);
-  // A mesh referenced by several nodes is instanced once per node: enforce the limit again.
-  if (out.mesh.numTriangles() > options.maxTriangles)
-    throw Error(path, "scene has more triangles than the limit after instancing");
+  appendNode(AppendContext{scene, path, options, materialMap, linearVertexColors}, scene->mRootNode,
+             aiMatrix4x4(), out.mesh);
   if (out.mesh.numTriangles() == 0) throw Error(path, "scene has no triangles");
   out.mesh.validate(path);
   return out;

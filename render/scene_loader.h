@@ -17,11 +17,14 @@ enum class UpAxis { Y, Z };
 UpAxis parseUpAxis(const std::string& text);  // "y" or "z"; throws paircast::Error otherwise
 Eigen::Vector3f upVector(UpAxis up);
 
+// The limits guard against hostile or broken files: they are checked before assimp allocates
+// (file sizes, and the element counts a PLY header claims) and again after import.
 struct LoadOptions {
   UpAxis up = UpAxis::Y;
   double scale = 1.0;                  // multiplies every position (file units -> metres)
   size_t maxTriangles = 50'000'000;    // refuse larger scenes instead of exhausting memory
-  uint64_t maxFileBytes = 4ull << 30;  // refuse larger files
+  size_t maxVertices = 150'000'000;    // likewise for vertices
+  uint64_t maxFileBytes = 4ull << 30;  // refuse larger files (the scene and every file it names)
 };
 
 struct Scene {
@@ -35,6 +38,8 @@ struct Scene {
 
 // Loads a scene. Throws paircast::Error naming `path` when the file is missing, of an
 // unsupported type, corrupt, empty (no triangles), too large, or has non-finite vertices.
+// Files the scene names (materials, buffers, textures) are opened only when they are regular
+// files (no devices or FIFOs) within maxFileBytes; a texture that fails is a warning.
 Scene loadScene(const std::string& path, const LoadOptions& options = {});
 
 // True when assimp has an importer for the extension of `path`.

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Configures and builds paircast in build/ (Release, Ninja when present). Extra arguments go to
 # CMake, e.g. scripts/build.sh -DPAIRCAST_SANITIZE=address,undefined
+# Environment: BUILD_DIR (default build), JOBS (parallel compile jobs, default nproc).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD_DIR=${BUILD_DIR:-build}
+JOBS=${JOBS:-$(nproc)}
 generator=()
 if command -v ninja >/dev/null; then generator=(-G Ninja); fi
 if [[ ! -f "$BUILD_DIR/CMakeCache.txt" ]]; then
@@ -11,4 +13,4 @@ if [[ ! -f "$BUILD_DIR/CMakeCache.txt" ]]; then
 elif (($#)); then
   cmake -S . -B "$BUILD_DIR" "$@"
 fi
-cmake --build "$BUILD_DIR" -j "$(nproc)"
+cmake --build "$BUILD_DIR" -j "$JOBS"

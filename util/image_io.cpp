@@ -57,9 +57,14 @@ Image<T> decode(std::unique_ptr<ImageInput> in, const std::string& name, int cha
   const ImageSpec& spec = in->spec();
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
     throw Error(name, "image has no pixels");
-  if (static_cast<int64_t>(spec.width) * spec.height > (int64_t(1) << 28))
+  // Checked before anything is allocated: a few bytes of header can claim any size (a 1 KB JPEG
+  // saying 60000 x 60000), and the files come from shards and scenes users download.
+  const uint64_t pixels = static_cast<uint64_t>(spec.width) * static_cast<uint64_t>(spec.height);
+  if (pixels > (uint64_t(1) << 28) || spec.nchannels > 64 ||
+      pixels * static_cast<uint64_t>(spec.nchannels) * sizeof(T) > (uint64_t(1) << 30))
     throw Error(name, "image is too large (" + std::to_string(spec.width) + "x" +
-                          std::to_string(spec.height) + ")");
+                          std::to_string(spec.height) + "x" + std::to_string(spec.nchannels) +
+                          ", limit 1 GiB decoded)");
   const int nc = channels > 0 ? channels : spec.nchannels;
   Image<T> image(spec.width, spec.height, nc);
   const TypeDesc dst = std::is_same_v<T, float> ? TypeDesc::FLOAT : TypeDesc::UINT8;

@@ -8,6 +8,7 @@
 #include <unistd.h>
 #include <filesystem>
 
+#include <chrono>
 #include <fstream>
 
 #include "test_paths.h"
@@ -47,6 +48,26 @@ TEST(ImageIo, JpegRoundTripIsClose) {
   double err = 0;
   for (size_t i = 0; i < img.size(); ++i) err += std::abs(int(back.data[i]) - int(img.data[i]));
   EXPECT_LT(err / img.size(), 2.0);
+}
+
+TEST(ImageIo, HeadersClaimingHugeImagesAreRefusedBeforeDecoding) {
+  // A real 16 x 16 JPEG whose frame header (SOF0) is patched to claim 60000 x 60000 pixels.
+  auto bytes = encodeImage(gradient(16, 16), "jpg", 90);
+  size_t sof = 0;
+  for (size_t i = 0; i + 9 < bytes.size() && !sof; ++i)
+    if (bytes[i] == 0xFF && bytes[i + 1] == 0xC0) sof = i;
+  ASSERT_GT(sof, 0u) << "no SOF0 marker";
+  for (size_t k : {sof + 5, sof + 7}) bytes[k] = 0xEA, bytes[k + 1] = 0x60;  // 60000, big-endian
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    decodeImage8(bytes.data(), bytes.size(), "bomb.jpg");
+    ADD_FAILURE() << "a 60000 x 60000 JPEG was decoded";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bomb.jpg: image is too large (60000x60000x3"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
 }
 
 TEST(ImageIo, ExrKeepsFloatDepthExactly) {

@@ -1,0 +1,7 @@
+// libFuzzer target: tar shards through readShard (dataset/shard.h).
+#include "fuzz/dataset_inputs.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  paircast::fuzz::runShardInput({reinterpret_cast<const char*>(data), size});
+  return 0;
+}

@@ -1,0 +1,188 @@
+// Scene files from untrusted sources: counts and sizes a file claims are checked against the file
+// and the LoadOptions limits before assimp allocates, and the files a scene names are opened only
+// when they are regular files within the limits. Every refusal is a one-line paircast::Error
+// naming the file. (docs/reliability.md, "Untrusted files", lists the threats.)
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include <chrono>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "render/camera.h"
+#include "render/scene_loader.h"
+#include "test_paths.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+std::string refusal(const std::string& path, const LoadOptions& o = {}) {
+  try {
+    loadScene(path, o);
+  } catch (const Error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(path), std::string::npos) << what;
+    EXPECT_EQ(what.find('\n'), std::string::npos) << "one line: " << what;
+    return what;
+  }
+  ADD_FAILURE() << path << " was loaded";
+  return "";
+}
+
+std::string plyHeader(const std::string& format, const std::string& vertices,
+                      const std::string& faces) {
+  return "ply\nformat " + format + " 1.0\nelement vertex " + vertices +
+         "\nproperty float x\nproperty float y\nproperty float z\nelement face " + faces +
+         "\nproperty list uchar int vertex_indices\nend_header\n";
+}
+
+TEST(UntrustedScene, PlyClaimingBillionsOfVerticesIsRefusedBeforeAllocation) {
+  const std::string dir = testing::scratchDir("ply");
+  const auto start = std::chrono::steady_clock::now();
+  // Over the vertex limit (150M by default), whatever the file holds.
+  std::ofstream(dir + "/billions.ply")
+      << plyHeader("ascii", "4000000000", "1") << "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  std::string why = refusal(dir + "/billions.ply");
+  EXPECT_NE(why.find("4000000000"), std::string::npos) << why;
+  // Under the limit, but more than the bytes after the header can hold: assimp would zero
+  // 100M vertices (1.2 GB) before noticing.
+  std::ofstream(dir + "/hollow.ply", std::ios::binary)
+      << plyHeader("binary_little_endian", "100000000", "1") << std::string(64, '\0');
+  why = refusal(dir + "/hollow.ply");
+  EXPECT_NE(why.find("claims 100000000 'vertex' elements"), std::string::npos) << why;
+  EXPECT_NE(why.find("at most 5"), std::string::npos) << why;  // 64 bytes / 12 per vertex
+  std::ofstream(dir + "/faces.ply")
+      << plyHeader("ascii", "3", "99999999999999999999999") << "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  why = refusal(dir + "/faces.ply");
+  EXPECT_NE(why.find("'face' elements"), std::string::npos) << why;
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
+}
+
+TEST(UntrustedScene, ConfiguredLimitsAreEnforced) {
+  const std::string dir = testing::scratchDir("limits");
+  const std::string ply =
+      plyHeader("ascii", "4", "2") + "0 0 0\n1 0 0\n1 1 0\n0 1 0\n" + "3 0 1 2\n3 0 2 3\n";
+  std::ofstream(dir + "/quad.ply") << ply;
+  EXPECT_NO_THROW(loadScene(dir + "/quad.ply"));
+  LoadOptions fewFaces;
+  fewFaces.maxTriangles = 1;
+  EXPECT_NE(refusal(dir + "/quad.ply", fewFaces).find("more than the limit of 1"),
+            std::string::npos);
+  LoadOptions fewVertices;
+  fewVertices.maxVertices = 3;
+  EXPECT_NE(refusal(dir + "/quad.ply", fewVertices).find("vertices, more than the limit of 3"),
+            std::string::npos);
+  // OBJ states no counts: the file size bounds what assimp builds.
+  std::ofstream obj(dir + "/big.obj");
+  for (int i = 0; i < 2000; ++i) obj << "v " << i << " " << i % 7 << " 0\n";
+  for (int i = 1; i + 2 <= 2000; ++i) obj << "f " << i << " " << i + 1 << " " << i + 2 << "\n";
+  obj.close();
+  LoadOptions smallFiles;
+  smallFiles.maxFileBytes = 4096;
+  EXPECT_NE(refusal(dir + "/big.obj", smallFiles).find("larger than the limit"), std::string::npos);
+  LoadOptions fewObjVertices;
+  fewObjVertices.maxVertices = 100;
+  EXPECT_NE(refusal(dir + "/big.obj", fewObjVertices).find("more than the limit of 100"),
+            std::string::npos);
+}
+
+// A glTF whose one triangle is instanced by `nodes` nodes.
+std::string instancedGltf(int nodes) {
+  std::string nodeList, sceneNodes;
+  for (int i = 0; i < nodes; ++i) {
+    nodeList +=
+        std::string(i ? "," : "") + R"({"mesh":0,"translation":[)" + std::to_string(i) + ",0,0]}";
+    sceneNodes += (i ? "," : "") + std::to_string(i);
+  }
+  // Three float32 VEC3 positions (0,0,0), (1,0,0), (0,1,0), base64.
+  const std::string positions = "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA";
+  return R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[)" + sceneNodes +
+         R"(]}],"nodes":[)" + nodeList +
+         R"(],"meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],)"
+         R"("buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,)" +
+         positions +
+         R"("}],"bufferViews":[{"buffer":0,"byteLength":36}],)"
+         R"("accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",)"
+         R"("min":[0,0,0],"max":[1,1,0]}]})";
+}
+
+TEST(UntrustedScene, InstancingIsCountedAgainstTheLimitsWhileBuilding) {
+  const std::string path = testing::scratchDir("inst") + "/many.gltf";
+  std::ofstream(path) << instancedGltf(10);
+  EXPECT_EQ(loadScene(path).mesh.numTriangles(), 10u);
+  LoadOptions o;
+  o.maxTriangles = 5;
+  EXPECT_NE(refusal(path, o).find("after instancing"), std::string::npos);
+}
+
+TEST(UntrustedScene, NamedFilesMustBeRegularFiles) {
+  const std::string dir = testing::scratchDir("named");
+  // A FIFO would block assimp's open() of the material library forever, /dev/zero would never
+  // end as a texture: both are skipped and the geometry still loads.
+  ASSERT_EQ(::mkfifo((dir + "/pipe.mtl").c_str(), 0600), 0);
+  std::ofstream(dir + "/fifo.obj") << "mtllib pipe.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                      "f 1 2 3\n";
+  EXPECT_EQ(loadScene(dir + "/fifo.obj").mesh.numTriangles(), 1u);
+  std::ofstream(dir + "/dev.mtl") << "newmtl m\nKd 1 1 1\nmap_Kd /dev/zero\n";
+  std::ofstream(dir + "/dev.obj") << "mtllib dev.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"
+                                     "vt 0 0\nvt 1 0\nvt 0 1\nf 1/1 2/2 3/3\n";
+  const Scene s = loadScene(dir + "/dev.obj");
+  EXPECT_EQ(s.mesh.numTriangles(), 1u);
+  EXPECT_TRUE(s.mesh.textures.empty());
+  ASSERT_EQ(s.warnings.size(), 1u);
+  EXPECT_NE(s.warnings[0].find("/dev/zero: not a regular file"), std::string::npos)
+      << s.warnings[0];
+  // A texture larger than maxFileBytes is skipped the same way.
+  std::ofstream(dir + "/big.png") << std::string(5000, 'x');
+  std::ofstream(dir + "/bigtex.mtl") << "newmtl m\nmap_Kd big.png\n";
+  std::ofstream(dir + "/bigtex.obj") << "mtllib bigtex.mtl\nusemtl m\nv 0 0 0\nv 1 0 0\n"
+                                        "v 0 1 0\nf 1 2 3\n";
+  LoadOptions o;
+  o.maxFileBytes = 4096;
+  const Scene b = loadScene(dir + "/bigtex.obj", o);
+  ASSERT_EQ(b.warnings.size(), 1u);
+  EXPECT_NE(b.warnings[0].find("larger than the limit"), std::string::npos) << b.warnings[0];
+}
+
+TEST(UntrustedScene, GlbChunkLengthsAreCheckedAgainstTheFile) {
+  const std::string dir = testing::scratchDir("glb");
+  // Header (magic, version 2, total length), then a JSON chunk claiming 4 GB: assimp would
+  // allocate it before reading.
+  std::string glb = std::string("glTF\x02\0\0\0", 8) + std::string("\x1c\0\0\0", 4) +
+                    std::string("\0\xff\xff\xff", 4) + "JSON" + "{}          ";
+  std::ofstream(dir + "/chunk.glb", std::ios::binary) << glb;
+  EXPECT_NE(refusal(dir + "/chunk.glb").find("GLB chunk at byte 12 claims 4294967040 bytes"),
+            std::string::npos);
+  glb.replace(8, 4, std::string("\0\0\0\x10", 4));  // total length 256 MB
+  std::ofstream(dir + "/length.glb", std::ios::binary) << glb;
+  EXPECT_NE(refusal(dir + "/length.glb").find("GLB header claims 268435456 bytes"),
+            std::string::npos);
+}
+
+TEST(UntrustedCamera, SizesAreRangeCheckedBeforeNarrowing) {
+  nlohmann::json j = cameraToJson(Camera::fromHfov(64, 48, 60));
+  auto refused = [](const nlohmann::json& cam, const std::string& fragment) {
+    try {
+      cameraFromJson(cam, "cam.json");
+      ADD_FAILURE() << "accepted " << cam.dump();
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("cam.json: " + fragment), std::string::npos) << e.what();
+    }
+  };
+  EXPECT_EQ(cameraFromJson(j, "cam.json").width, 64);
+  j["width"] = 4294967297;  // 2^32 + 1: an int cast would make it 1
+  refused(j, "camera size must be in 1..16384");
+  j["width"] = -64;
+  refused(j, "camera size must be in 1..16384");
+  j["width"] = 64.5;
+  refused(j, "'width' is not an integer");
+  // Without a size, the principal point gives it: 2 cx must be a sane number too.
+  j.erase("width");
+  j["camera_intrinsics"][0][2] = 1e308;
+  refused(j, "no 'width' and the principal point implies no size in 1..16384");
+}
+
+}  // namespace
+}  // namespace paircast
