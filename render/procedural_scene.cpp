@@ -184,6 +184,8 @@ class Builder {
   float rnd(uint64_t a, uint64_t b = 0) { return hashUnit(seed_, a * 7919 + counter_++, b); }
 
   Mesh mesh;
+  // Floor rectangles (x0, z0, x1, z1) that furniture must leave free: the space before doors.
+  std::vector<Eigen::Vector4f> keepOut;
 
  private:
   uint64_t seed_;
@@ -191,6 +193,34 @@ class Builder {
 };
 
 using V3 = Eigen::Vector3f;
+
+// One piece of furniture: whatever it added to the mesh is taken out again when its footprint
+// reaches into a keep-out rectangle, so that no random plan has a door blocked by a sofa.
+class Piece {
+ public:
+  explicit Piece(Builder& b)
+      : b_(b), vertices_(b.mesh.positions.size()), triangles_(b.mesh.triangles.size()) {}
+  ~Piece() {
+    Mesh& m = b_.mesh;
+    if (m.positions.size() == vertices_) return;
+    Eigen::Vector3f lo = m.positions[vertices_], hi = lo;
+    for (size_t i = vertices_; i < m.positions.size(); ++i)
+      lo = lo.cwiseMin(m.positions[i]), hi = hi.cwiseMax(m.positions[i]);
+    for (const Eigen::Vector4f& r : b_.keepOut) {
+      if (hi.x() > r[0] && lo.x() < r[2] && hi.z() > r[1] && lo.z() < r[3]) {
+        m.positions.resize(vertices_), m.uvs.resize(vertices_), m.colors.resize(vertices_);
+        m.triangles.resize(triangles_), m.triangleMaterial.resize(triangles_);
+        return;
+      }
+    }
+  }
+  Piece(const Piece&) = delete;
+  Piece& operator=(const Piece&) = delete;
+
+ private:
+  Builder& b_;
+  size_t vertices_, triangles_;
+};
 
 // ---- furniture: each piece is a few boxes standing on the floor at (x, z), rotated by
 // multiples of 90 degrees (swap of extents) ----
@@ -214,6 +244,7 @@ void box(Builder& b, const Placement& p, float cx, float cz, float y0, float ex,
 }
 
 void table(Builder& b, const Placement& p, int wood, float w, float d) {
+  Piece piece(b);
   box(b, p, 0, 0, 0.72f, w, 0.04f, d, wood, 2.0f);
   for (int sx : {-1, 1})
     for (int sz : {-1, 1})
@@ -221,6 +252,7 @@ void table(Builder& b, const Placement& p, int wood, float w, float d) {
 }
 
 void chair(Builder& b, const Placement& p, int wood, int fabric, bool backAtPlusZ) {
+  Piece piece(b);
   box(b, p, 0, 0, 0.42f, 0.42f, 0.05f, 0.42f, fabric, 3.0f);
   for (int sx : {-1, 1})
     for (int sz : {-1, 1}) box(b, p, sx * 0.18f, sz * 0.18f, 0, 0.04f, 0.42f, 0.04f, wood);
@@ -228,12 +260,14 @@ void chair(Builder& b, const Placement& p, int wood, int fabric, bool backAtPlus
 }
 
 void sofa(Builder& b, const Placement& p, int fabric) {
+  Piece piece(b);
   box(b, p, 0, 0, 0.0f, 2.0f, 0.42f, 0.9f, fabric, 2.0f);
   box(b, p, 0, 0.35f, 0.42f, 2.0f, 0.45f, 0.2f, fabric, 2.0f);
   for (int s : {-1, 1}) box(b, p, s * 0.9f, 0, 0.42f, 0.2f, 0.22f, 0.9f, fabric, 2.0f);
 }
 
 void bed(Builder& b, const Placement& p, int wood, int fabric, int sheet) {
+  Piece piece(b);
   box(b, p, 0, 0, 0.0f, 1.6f, 0.3f, 2.0f, wood, 2.0f);
   box(b, p, 0, 0, 0.3f, 1.5f, 0.22f, 1.9f, sheet, 2.0f);
   box(b, p, 0, 0.55f, 0.52f, 1.4f, 0.1f, 0.7f, fabric, 3.0f);  // blanket fold
@@ -241,6 +275,7 @@ void bed(Builder& b, const Placement& p, int wood, int fabric, int sheet) {
 }
 
 void shelf(Builder& b, const Placement& p, int wood, uint64_t salt) {
+  Piece piece(b);
   const float w = 1.0f, d = 0.32f, h = 1.9f;
   for (int s : {-1, 1}) box(b, p, s * (w / 2 - 0.02f), 0, 0, 0.03f, h, d, wood, 2.0f);
   for (int level = 0; level < 5; ++level) {
@@ -261,11 +296,13 @@ void shelf(Builder& b, const Placement& p, int wood, uint64_t salt) {
 }
 
 void cabinet(Builder& b, const Placement& p, int wood, int top, float w, float h) {
+  Piece piece(b);
   box(b, p, 0, 0, 0, w, h, 0.55f, wood, 2.0f);
   box(b, p, 0, 0, h, w + 0.02f, 0.03f, 0.58f, top, 1.0f);
 }
 
 void lamp(Builder& b, const Placement& p, int metal, int shade) {
+  Piece piece(b);
   box(b, p, 0, 0, 0, 0.3f, 0.03f, 0.3f, metal);
   box(b, p, 0, 0, 0.03f, 0.03f, 1.45f, 0.03f, metal);
   box(b, p, 0, 0, 1.4f, 0.4f, 0.3f, 0.4f, shade, 2.0f);
@@ -385,7 +422,18 @@ Mesh buildLayout(const LayoutSpec& L) {
     }
   }
 
-  // Furniture per room kind, kept clear of the doors' swing area by using the room's far half.
+  // Furniture per room kind, mostly in the room's far half, and never in front of a door.
+  for (const auto& d : L.clearDoorways ? L.doors : std::vector<DoorSpec>{}) {
+    const RoomSpec &a = L.rooms[d.roomA], &o = L.rooms[d.roomB];
+    const float half = d.width / 2 + 0.1f, depth = 0.8f;
+    if (std::abs(a.x1 - o.x0) < 1e-3f || std::abs(a.x0 - o.x1) < 1e-3f) {
+      const float x = std::abs(a.x1 - o.x0) < 1e-3f ? a.x1 : a.x0;
+      b.keepOut.emplace_back(x - depth, d.at - half, x + depth, d.at + half);
+    } else {
+      const float z = std::abs(a.z1 - o.z0) < 1e-3f ? a.z1 : a.z0;
+      b.keepOut.emplace_back(d.at - half, z - depth, d.at + half, z + depth);
+    }
+  }
   for (size_t i = 0; i < L.rooms.size(); ++i) {
     const RoomSpec& r = L.rooms[i];
     const float cx = 0.5f * (r.x0 + r.x1), cz = 0.5f * (r.z0 + r.z1);
@@ -411,12 +459,15 @@ Mesh buildLayout(const LayoutSpec& L) {
       }
       case RoomKind::Kitchen: {
         // Counters along two walls, a table with chairs.
-        addBox(b.mesh, V3(r.x0 + 0.05f, 0.0f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 0.88f, r.z0 + 0.65f),
-               darkWood, 2.0f);
-        addBox(b.mesh, V3(r.x0 + 0.03f, 0.88f, r.z0 + 0.03f), V3(r.x1 - 0.03f, 0.92f, r.z0 + 0.68f),
-               marble, 1.0f);
-        addBox(b.mesh, V3(r.x0 + 0.05f, 1.5f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 2.2f, r.z0 + 0.4f),
-               wood, 2.0f);
+        {
+          Piece counters(b);
+          addBox(b.mesh, V3(r.x0 + 0.05f, 0.0f, r.z0 + 0.05f),
+                 V3(r.x1 - 0.05f, 0.88f, r.z0 + 0.65f), darkWood, 2.0f);
+          addBox(b.mesh, V3(r.x0 + 0.03f, 0.88f, r.z0 + 0.03f),
+                 V3(r.x1 - 0.03f, 0.92f, r.z0 + 0.68f), marble, 1.0f);
+          addBox(b.mesh, V3(r.x0 + 0.05f, 1.5f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 2.2f, r.z0 + 0.4f),
+                 wood, 2.0f);
+        }
         table(b, {cx, cz + 0.4f, false}, wood, 1.2f, 0.8f);
         chair(b, {cx - 0.35f, cz + 1.05f, false}, wood, fabric, true);
         chair(b, {cx + 0.35f, cz - 0.25f, false}, wood, fabric, false);
@@ -439,6 +490,65 @@ Mesh buildLayout(const LayoutSpec& L) {
   }
   b.mesh.validate(L.name);
   return std::move(b.mesh);
+}
+
+LayoutSpec randomLayout(const std::string& name, uint64_t seed) {
+  constexpr float kMinSide = 3.0f, kDoorOverlap = 1.6f;
+  auto u = [&](uint64_t a, uint64_t b = 0) { return hashUnit(seed, 0x5ca1ab1e + a, b); };
+  auto lerp = [](float a, float b, float t) { return a + (b - a) * t; };
+  auto roundTo = [](float v) { return std::round(v * 20.0f) / 20.0f; };  // 5 cm grid
+  LayoutSpec L;
+  L.name = name;
+  L.seed = seed;
+  L.clearDoorways = true;
+  L.height = roundTo(lerp(2.5f, 3.0f, u(1)));
+  const float W = roundTo(lerp(5.0f, 12.0f, u(2))), D = roundTo(lerp(4.0f, 9.0f, u(3)));
+  const RoomKind kinds[] = {RoomKind::Living, RoomKind::Bedroom, RoomKind::Kitchen,
+                            RoomKind::Office, RoomKind::Hall};
+  L.rooms.push_back({0, 0, W, D, kinds[static_cast<int>(u(5) * 5.0f) % 5]});
+  const int target = 1 + static_cast<int>(u(4) * 5.0f);
+  // Split the largest room that can be split, across its longer side, until `target` rooms.
+  for (int k = 0; static_cast<int>(L.rooms.size()) < target && k < 16; ++k) {
+    int best = -1;
+    float bestArea = 0;
+    for (size_t i = 0; i < L.rooms.size(); ++i) {
+      const RoomSpec& r = L.rooms[i];
+      const float area = (r.x1 - r.x0) * (r.z1 - r.z0);
+      if (std::max(r.x1 - r.x0, r.z1 - r.z0) >= 2 * kMinSide && area > bestArea)
+        best = static_cast<int>(i), bestArea = area;
+    }
+    if (best < 0) break;
+    RoomSpec a = L.rooms[best], b = a;
+    const bool alongX = a.x1 - a.x0 >= a.z1 - a.z0;
+    const float lo = (alongX ? a.x0 : a.z0) + kMinSide, hi = (alongX ? a.x1 : a.z1) - kMinSide;
+    const float cut = roundTo(lerp(lo, hi, u(10 + k)));
+    (alongX ? a.x1 : a.z1) = cut;
+    (alongX ? b.x0 : b.z0) = cut;
+    b.kind = kinds[static_cast<int>(u(30 + k) * 5.0f) % 5];
+    L.rooms[best] = a;
+    L.rooms.push_back(b);
+  }
+  // Doors: a spanning tree over the rooms that share enough wall, plus a chance of more.
+  std::vector<int> component(L.rooms.size());
+  for (size_t i = 0; i < component.size(); ++i) component[i] = static_cast<int>(i);
+  for (size_t i = 0; i < L.rooms.size(); ++i) {
+    for (size_t j = i + 1; j < L.rooms.size(); ++j) {
+      const RoomSpec &a = L.rooms[i], &b = L.rooms[j];
+      float from = 0, to = 0;
+      if (std::abs(a.z1 - b.z0) < 1e-3f || std::abs(a.z0 - b.z1) < 1e-3f)
+        from = std::max(a.x0, b.x0), to = std::min(a.x1, b.x1);
+      else if (std::abs(a.x1 - b.x0) < 1e-3f || std::abs(a.x0 - b.x1) < 1e-3f)
+        from = std::max(a.z0, b.z0), to = std::min(a.z1, b.z1);
+      if (to - from < kDoorOverlap) continue;
+      const int ci = component[i], cj = component[j];
+      if (ci == cj && u(50 + i, j) > 0.3f) continue;  // already connected: rarely a second door
+      for (int& c : component)
+        if (c == cj) c = ci;
+      const float at = roundTo(lerp(from + 0.7f, to - 0.7f, u(70 + i, j)));
+      L.doors.push_back({static_cast<int>(i), static_cast<int>(j), at});
+    }
+  }
+  return L;
 }
 
 std::vector<LayoutSpec> shippedLayouts() {

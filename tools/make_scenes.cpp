@@ -1,4 +1,5 @@
-// make_scenes: writes the procedural scenes paircast ships (scenes/<name>/<name>.obj).
+// make_scenes: writes the procedural scenes paircast ships (scenes/<name>/<name>.obj), or any
+// number of random ones.
 #include <cstdio>
 #include <filesystem>
 
@@ -11,11 +12,25 @@ using namespace paircast;
 int main(int argc, char** argv) {
   std::string out = "scenes";
   bool list = false;
+  int random = 0;
+  uint64_t seed = 0;
   CLI::App app{"Write the shipped procedural indoor scenes as OBJ + MTL + PNG textures"};
   app.add_option("--out", out, "Output folder (default: scenes)");
+  app.add_option("--random", random,
+                 "Write N random floor plans (random_<seed>_<i>) instead of the shipped scenes")
+      ->check(CLI::Range(1, 100000));
+  app.add_option("--seed", seed, "Seed of the random floor plans");
   app.add_flag("--list", list, "Only list the scenes");
   return runTool("make_scenes", app, argc, argv, [&] {
-    for (const LayoutSpec& layout : shippedLayouts()) {
+    std::vector<LayoutSpec> layouts = shippedLayouts();
+    if (random > 0) {
+      layouts.clear();
+      for (int i = 0; i < random; ++i) {
+        const std::string name = "random_" + std::to_string(seed) + "_" + std::to_string(i);
+        layouts.push_back(randomLayout(name, seed * 100003 + static_cast<uint64_t>(i) + 1));
+      }
+    }
+    for (const LayoutSpec& layout : layouts) {
       if (list) {
         std::printf("%s: %zu rooms, %zu doors\n", layout.name.c_str(), layout.rooms.size(),
                     layout.doors.size());

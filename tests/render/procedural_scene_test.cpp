@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <set>
+
 #include "render/obj_writer.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
@@ -31,38 +34,37 @@ TEST(ProceduralScene, SameSeedSameMesh) {
   EXPECT_NE(buildLayout(other).textures[0].texels, a.textures[0].texels);
 }
 
-TEST(ProceduralScene, EveryShippedLayoutIsValidAndEnclosed) {
-  for (const auto& layout : shippedLayouts()) {
-    SCOPED_TRACE(layout.name);
-    const Mesh mesh = buildLayout(layout);
-    EXPECT_NO_THROW(mesh.validate(layout.name));
-    EXPECT_LT(mesh.numTriangles(), 20000u);
-    RayCaster caster(mesh);
-    // From the middle of each room at 1.5 m: floor below, ceiling above, walls all around.
-    for (const auto& r : layout.rooms) {
-      const Eigen::Vector3f c(0.5f * (r.x0 + r.x1) + 0.13f, 1.5f, 0.5f * (r.z0 + r.z1) + 0.17f);
-      std::vector<Ray> rays = {{c, -Eigen::Vector3f::UnitY()}, {c, Eigen::Vector3f::UnitY()}};
-      for (int k = 0; k < 16; ++k) {
-        const float a = 2.0f * static_cast<float>(M_PI) * k / 16;
-        rays.push_back({c, Eigen::Vector3f(std::cos(a), 0.0f, std::sin(a))});
-      }
-      std::vector<Hit> hits(rays.size());
-      caster.intersect(rays.data(), hits.data(), rays.size());
-      EXPECT_NEAR(hits[1].t, layout.height - 1.5f, 1e-3f) << "ceiling";
-      EXPECT_LE(hits[0].t, 1.5f + 1e-3f) << "floor (or furniture on it)";
-      for (size_t k = 0; k < hits.size(); ++k)
-        EXPECT_GE(hits[k].triangle, 0) << "ray " << k << " escapes";
+// From the middle of each room at 1.5 m: floor below, ceiling above, walls all around.
+void expectValidAndEnclosed(const LayoutSpec& layout) {
+  SCOPED_TRACE(layout.name);
+  const Mesh mesh = buildLayout(layout);
+  EXPECT_NO_THROW(mesh.validate(layout.name));
+  EXPECT_LT(mesh.numTriangles(), 20000u);
+  RayCaster caster(mesh);
+  for (const auto& r : layout.rooms) {
+    const Eigen::Vector3f c(0.5f * (r.x0 + r.x1) + 0.13f, 1.5f, 0.5f * (r.z0 + r.z1) + 0.17f);
+    std::vector<Ray> rays = {{c, -Eigen::Vector3f::UnitY()}, {c, Eigen::Vector3f::UnitY()}};
+    for (int k = 0; k < 16; ++k) {
+      const float a = 2.0f * static_cast<float>(M_PI) * k / 16;
+      rays.push_back({c, Eigen::Vector3f(std::cos(a), 0.0f, std::sin(a))});
     }
+    std::vector<Hit> hits(rays.size());
+    caster.intersect(rays.data(), hits.data(), rays.size());
+    EXPECT_NEAR(hits[1].t, layout.height - 1.5f, 1e-3f) << "ceiling";
+    EXPECT_LE(hits[0].t, 1.5f + 1e-3f) << "floor (or furniture on it)";
+    for (size_t k = 0; k < hits.size(); ++k)
+      EXPECT_GE(hits[k].triangle, 0) << "ray " << k << " escapes";
   }
 }
 
-TEST(ProceduralScene, DoorsConnectRooms) {
-  const LayoutSpec& layout = apartment();
+// A horizontal ray at 1 m through each door's centre, from 0.3 m before to 0.3 m after the wall,
+// passes; one a door's width beside it hits the wall.
+void expectDoorsOpen(const LayoutSpec& layout) {
+  SCOPED_TRACE(layout.name);
   RayCaster caster(buildLayout(layout));
   for (const auto& d : layout.doors) {
     const RoomSpec& a = layout.rooms[d.roomA];
     const RoomSpec& b = layout.rooms[d.roomB];
-    // A horizontal ray at 1 m through the door's centre, from 0.3 m before to 0.3 m after the wall.
     const bool sharedX = std::abs(a.x1 - b.x0) < 1e-3f || std::abs(a.x0 - b.x1) < 1e-3f;
     const float wall = sharedX ? (std::abs(a.x1 - b.x0) < 1e-3f ? a.x1 : a.x0)
                                : (std::abs(a.z1 - b.z0) < 1e-3f ? a.z1 : a.z0);
@@ -76,11 +78,56 @@ TEST(ProceduralScene, DoorsConnectRooms) {
     caster.intersect(&through, &hit, 1);
     EXPECT_LT(hit.triangle, 0) << "door between rooms " << d.roomA << " and " << d.roomB
                                << " is blocked";
-    Ray beside{o + (sharedX ? Eigen::Vector3f(0, 0, d.width) : Eigen::Vector3f(d.width, 0, 0)), dir,
-               0.0f, 0.6f};
+    // Beside the door, on the side where more of the shared wall is left.
+    const float from = sharedX ? std::max(a.z0, b.z0) : std::max(a.x0, b.x0);
+    const float to = sharedX ? std::min(a.z1, b.z1) : std::min(a.x1, b.x1);
+    const float side = d.at - from > to - d.at ? -d.width : d.width;
+    Ray beside{o + (sharedX ? Eigen::Vector3f(0, 0, side) : Eigen::Vector3f(side, 0, 0)), dir, 0.0f,
+               0.6f};
     caster.intersect(&beside, &hit, 1);
     EXPECT_GE(hit.triangle, 0) << "no wall beside the door";
   }
+}
+
+TEST(ProceduralScene, EveryShippedLayoutIsValidAndEnclosed) {
+  for (const auto& layout : shippedLayouts()) expectValidAndEnclosed(layout);
+}
+
+TEST(ProceduralScene, DoorsConnectRooms) {
+  expectDoorsOpen(apartment());
+}
+
+TEST(ProceduralScene, RandomLayoutsAreValidEnclosedAndConnected) {
+  std::set<size_t> roomCounts;
+  for (uint64_t seed = 1; seed <= 20; ++seed) {
+    const LayoutSpec layout = randomLayout("random_" + std::to_string(seed), seed);
+    SCOPED_TRACE(layout.name);
+    roomCounts.insert(layout.rooms.size());
+    for (const auto& r : layout.rooms) {
+      EXPECT_GE(r.x1 - r.x0, 3.0f - 1e-3f);
+      EXPECT_GE(r.z1 - r.z0, 3.0f - 1e-3f);
+    }
+    // Rooms tile the rectangle: their areas add up to its area.
+    float area = 0, x1 = 0, z1 = 0;
+    for (const auto& r : layout.rooms)
+      area += (r.x1 - r.x0) * (r.z1 - r.z0), x1 = std::max(x1, r.x1), z1 = std::max(z1, r.z1);
+    EXPECT_NEAR(area, x1 * z1, 1e-2f);
+    // Every room is reachable from room 0 through doors.
+    std::vector<int> reached(layout.rooms.size(), 0);
+    reached[0] = 1;
+    for (size_t pass = 0; pass < layout.rooms.size(); ++pass)
+      for (const auto& d : layout.doors)
+        if (reached[d.roomA] || reached[d.roomB]) reached[d.roomA] = reached[d.roomB] = 1;
+    EXPECT_EQ(std::count(reached.begin(), reached.end(), 1),
+              static_cast<long>(layout.rooms.size()));
+    expectValidAndEnclosed(layout);
+    expectDoorsOpen(layout);
+    // Deterministic in the seed.
+    const LayoutSpec again = randomLayout(layout.name, seed);
+    EXPECT_EQ(again.rooms.size(), layout.rooms.size());
+    EXPECT_EQ(again.doors.size(), layout.doors.size());
+  }
+  EXPECT_GE(roomCounts.size(), 4u) << "the plans should vary in their number of rooms";
 }
 
 TEST(ObjWriter, RoundTripsThroughTheLoader) {
