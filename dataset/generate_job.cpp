@@ -56,7 +56,9 @@ void histogramAdd(std::vector<uint64_t>& h, double covis) {
   h[std::clamp(b, 0, kHistogramBins - 1)]++;
 }
 
-// Per-scene state, created once by the first worker that needs it.
+// Per-scene state, created once by the first worker that needs it, and freed when the worker
+// that finishes its last pair is done with it: items are in scene order, so a run over
+// thousands of scenes holds only the few its workers are on.
 struct SceneJob {
   std::string path, name;
   std::once_flag once;
@@ -64,7 +66,15 @@ struct SceneJob {
   std::unique_ptr<RayCaster> caster;
   std::unique_ptr<ViewpointSampler> sampler;
   std::unique_ptr<PairGenerator> generator;
-  std::string error;  // why the scene is skipped; empty when usable
+  std::string error;               // why the scene is skipped; empty when usable
+  std::atomic<size_t> pending{0};  // items of this run not yet finished
+
+  void release() {
+    generator.reset();
+    sampler.reset();
+    caster.reset();
+    scene.reset();
+  }
 };
 
 struct Result {
@@ -160,6 +170,19 @@ std::vector<std::string> expandSceneList(const std::vector<std::string>& args) {
   return out;
 }
 
+std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files) {
+  std::vector<std::string> out;
+  std::set<std::string> taken;
+  for (const auto& f : files) {
+    const std::string stem = sanitizeName(fs::path(f).stem().string());
+    std::string name = stem;
+    for (int k = 2; taken.count(name); ++k) name = stem + "_" + std::to_string(k);
+    taken.insert(name);
+    out.push_back(name);
+  }
+  return out;
+}
+
 nlohmann::json runGenerate(const GenerateConfig& cfg) {
   const auto start = Clock::now();
   if (cfg.out.empty()) throw Error("--out is required");
@@ -174,17 +197,13 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
   // Scenes: expand, name uniquely, keep this machine's part.
   const std::vector<std::string> all = expandSceneList(cfg.scenes);
   if (all.empty()) throw Error("no scene files found in --scenes");
+  const std::vector<std::string> names = uniqueSceneNames(all);
   std::vector<std::unique_ptr<SceneJob>> scenes;
-  std::set<std::string> names;
   for (size_t i = 0; i < all.size(); ++i) {
-    std::string name = sanitizeName(fs::path(all[i]).stem().string());
-    for (int k = 2; names.count(name); ++k)
-      name = sanitizeName(fs::path(all[i]).stem().string()) + "_" + std::to_string(k);
-    names.insert(name);
     if (static_cast<int>(i % cfg.numShards) != cfg.shardIndex) continue;
     auto job = std::make_unique<SceneJob>();
     job->path = all[i];
-    job->name = name;
+    job->name = names[i];
     scenes.push_back(std::move(job));
   }
 
@@ -233,7 +252,10 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
       const bool shardDone = !cfg.shards || inShards.count(sampleKey(scenes[s]->name, k));
       const bool crocoDone =
           !cfg.croco || (rec.is_object() && fs::exists(crocoStem(*scenes[s], k) + "_2.jpeg"));
-      if (!shardDone || !crocoDone) items.push_back({s, k, !shardDone, !crocoDone});
+      if (!shardDone || !crocoDone) {
+        items.push_back({s, k, !shardDone, !crocoDone});
+        scenes[s]->pending++;
+      }
     }
   }
 
@@ -252,11 +274,15 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
   double tRender = 0, tCovis = 0, tEncode = 0, tWrite = 0;
   std::mutex warnMu;
   std::vector<nlohmann::json> skipped;
+  std::atomic<int> scenesLoaded{0}, scenesPeak{0};
 
   auto prepareScene = [&](SceneJob& job) {
     std::call_once(job.once, [&] {
       try {
         job.scene = std::make_unique<Scene>(loadScene(job.path, cfg.load));
+        const int now = ++scenesLoaded;
+        for (int peak = scenesPeak; now > peak && !scenesPeak.compare_exchange_weak(peak, now);) {
+        }
         job.scene->name = job.name;
         job.caster = std::make_unique<RayCaster>(job.scene->mesh);
         job.sampler = std::make_unique<ViewpointSampler>(*job.scene, *job.caster, cfg.pair.sampler);
@@ -345,6 +371,10 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
             ++accepted;
             if (item.forShard) r.pair = std::move(enc);
           }
+        }
+        if (--job.pending == 0) {  // no other worker holds an item of it
+          if (job.scene) --scenesLoaded;
+          job.release();
         }
         std::lock_guard<std::mutex> lock(mu);
         results[i] = std::move(r);
@@ -518,6 +548,7 @@ nlohmann::json runGenerate(const GenerateConfig& cfg) {
       {"time_seconds",
        {{"render", tRender}, {"covis", tCovis}, {"encode", tEncode}, {"write", tWrite}}},
       {"skipped_scenes", skipped},
+      {"scenes_in_memory_max", scenesPeak.load()},
       {"jobs", jobs}};
   writeFileAtomic((fs::path(cfg.out) / ("summary" + part + ".json")).string(),
                   summary.dump(1) + "\n");

@@ -36,6 +36,10 @@ struct GenerateConfig {
 // Throws paircast::Error naming an argument that does not exist.
 std::vector<std::string> expandSceneList(const std::vector<std::string>& args);
 
+// The name of each scene file in outputs and keys: its sanitised stem, with _2, _3, ... added to
+// later files whose stem is taken.
+std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files);
+
 // Runs the job and returns the summary (also written to <out>/summary.json). Scenes that fail
 // to load or have no walkable floor or valid views are skipped with a warning and listed.
 nlohmann::json runGenerate(const GenerateConfig& config);

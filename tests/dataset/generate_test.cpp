@@ -186,6 +186,20 @@ TEST(GeneratePairs, BadScenesAreSkippedAndListed) {
   EXPECT_THROW(runGenerate(missing), Error);
 }
 
+TEST(GeneratePairs, ScenesAreFreedOnceTheirPairsAreDone) {
+  // Eight scenes, two workers: a scene stays in memory only while a worker is on it, so at most
+  // one per worker plus the one the next item opens.
+  const std::string dir = testing::scratchDir("release");
+  std::vector<std::string> scenes;
+  for (int i = 0; i < 8; ++i) scenes.push_back(writeRoom(dir, "room" + std::to_string(i)));
+  GenerateConfig c = smallConfig(scenes, dir + "/out");
+  c.pairsPerScene = 3;
+  const nlohmann::json summary = runGenerate(c);
+  EXPECT_EQ(summary["pairs"].get<int>(), 24);
+  EXPECT_GE(summary["scenes_in_memory_max"].get<int>(), 1);
+  EXPECT_LE(summary["scenes_in_memory_max"].get<int>(), c.jobs + 1);
+}
+
 TEST(GeneratePairs, SceneListsAndShardingSplitScenesDeterministically) {
   const std::string dir = testing::scratchDir("split");
   for (const char* n : {"a", "b", "c"}) writeRoom(dir, n);
