@@ -10,6 +10,7 @@
 #include <fstream>
 #include <map>
 #include <set>
+#include <thread>
 
 #include "dataset/dataset_report.h"
 #include "dataset/generate_job.h"
@@ -23,6 +24,7 @@
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
 #include "sweep/depth_probe.h"
+#include "trainer/distributed.h"
 #include "trainer/pair_dataset.h"
 #include "trainer/trainer.h"
 #include "util/atomic_file.h"
@@ -77,15 +79,13 @@ struct PoolScene {
 std::vector<std::unique_ptr<PoolScene>> loadScenes(const std::vector<std::string>& files,
                                                    const SamplerOptions& so, const char* role) {
   std::vector<std::unique_ptr<PoolScene>> out;
-  std::set<std::string> names;
-  for (const auto& f : files) {
+  const std::vector<std::string> names = uniqueSceneNames(files);
+  for (size_t i = 0; i < files.size(); ++i) {
     auto s = std::make_unique<PoolScene>();
-    s->path = f;
-    s->name = sanitizeName(fs::path(f).stem().string());
-    for (int k = 1; names.count(s->name); ++k)
-      s->name = sanitizeName(fs::path(f).stem().string()) + "_" + std::to_string(k);
+    s->path = files[i];
+    s->name = names[i];
     try {
-      s->scene = std::make_unique<Scene>(loadScene(f));
+      s->scene = std::make_unique<Scene>(loadScene(files[i]));
       s->scene->name = s->name;
       s->caster = std::make_unique<RayCaster>(s->scene->mesh);
       s->sampler = std::make_unique<ViewpointSampler>(*s->scene, *s->caster, so);
@@ -93,7 +93,6 @@ std::vector<std::unique_ptr<PoolScene>> loadScenes(const std::vector<std::string
       std::fprintf(stderr, "covis_sweep: warning: %s scene skipped: %s\n", role, e.what());
       continue;
     }
-    names.insert(s->name);
     out.push_back(std::move(s));
   }
   if (out.empty()) throw Error(std::string("no usable ") + role + " scene");
@@ -254,7 +253,7 @@ ProbeData probeViews(const SweepConfig& c, const std::vector<std::unique_ptr<Poo
 
 struct HeldOut {
   torch::Tensor img1, img2, mask;  // cross-view completion pairs at covis ~0.5
-  ProbeData probeTrain, probeTest;
+  ProbeData probeA, probeB;        // the depth probe's two halves (crossFitProbe)
 };
 
 nlohmann::json evaluate(CroCoNet& model, const HeldOut& h) {
@@ -268,8 +267,7 @@ nlohmann::json evaluate(CroCoNet& model, const HeldOut& h) {
     lossSum += maskedMse(out.prediction, out.mask, out.target).item<double>() * (j - i);
     n += j - i;
   }
-  const DepthProbe probe(model, h.probeTrain);
-  const DepthMetrics m = probe.evaluate(h.probeTest);
+  const DepthMetrics m = crossFitProbe(model, h.probeA, h.probeB);
   return {{"xv_loss", lossSum / n},
           {"probe_delta1", m.delta1},
           {"probe_absrel", m.absRel},
@@ -290,7 +288,7 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
   struct Metric {
     const char* key;
     const char* label;
-  } metrics[] = {{"xv_loss", "cross-view completion loss (held-out, covis ~0.5), lower is better"},
+  } metrics[] = {{"xv_loss", "held-out completion loss (covis ~0.5), lower is better"},
                  {"probe_delta1", "depth probe delta1, higher is better"},
                  {"probe_absrel", "depth probe AbsRel, lower is better"},
                  {"probe_rmse", "depth probe RMSE (m), lower is better"}};
@@ -305,18 +303,104 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
         if (r["mode"] == mode) s.x.push_back(r["center"]), s.y.push_back(r[m.key]);
       series.push_back(s);
     }
-    svg::Series base;
-    base.label = "random encoder";
-    base.color = "#7f7f7f";
-    base.dashed = true;
-    base.markers = false;
-    base.x = {c.centers.front(), c.centers.back()};
-    base.y = {random[m.key].get<double>(), random[m.key].get<double>()};
-    series.push_back(base);
+    // The random encoder as a dashed line, unless it lies so far from the sets that the line
+    // would flatten them (the completion loss: 1.28 against 0.61-0.63); then in the title.
+    const double baseline = random[m.key].get<double>();
+    double lo = INFINITY, hi = -INFINITY;
+    for (const auto& s : series)
+      for (double y : s.y) lo = std::min(lo, y), hi = std::max(hi, y);
+    std::string title = m.label;
+    if (lo <= hi && (baseline < lo - 3 * (hi - lo) || baseline > hi + 3 * (hi - lo))) {
+      char note[96];
+      std::snprintf(note, sizeof note, "; random encoder %.3f", baseline);
+      title += note;
+    } else {
+      svg::Series base;
+      base.label = "random encoder";
+      base.color = "#7f7f7f";
+      base.dashed = true;
+      base.markers = false;
+      base.x = {c.centers.front(), c.centers.back()};
+      base.y = {baseline, baseline};
+      series.push_back(base);
+    }
     writeFileAtomic(
         (out / (std::string("plot_") + m.key + ".svg")).string(),
-        svg::lines(series, {m.label, "covis centre of the training set", m.key, 620, 340}));
+        svg::lines(series, {title, "covis centre of the training set", m.key, 620, 340}));
   }
+}
+
+// Pre-trains (or resumes) the model of one set, unless its run is complete. Every rank of a
+// multi-process sweep calls it for every set, in the same order: runPretrain is data-parallel.
+void trainSet(const SweepConfig& c, const CroCoConfig& mc, const SweepSet& set, Distributed* dist) {
+  const fs::path out(c.out), run = out / "runs" / set.name;
+  const nlohmann::json done = readJson((run / "summary.json").string());
+  if (done.is_object() && done.value("steps", int64_t{0}) >= c.steps &&
+      !done.value("interrupted", false))
+    return;
+  TrainConfig t;
+  t.shards = {(out / "pool" / "pool-*.tar").string()};
+  t.keysFile = (out / "sets" / (set.name + ".keys")).string();
+  t.model = mc;
+  t.batchSize = c.batchSize;
+  // --batch-size is per process, as in pretrain: epochs count the global batch.
+  const int world = dist ? dist->worldSize() : 1;
+  const int64_t perEpoch = std::max(1, c.pairsPerSet / (c.batchSize * world));
+  t.epochs = static_cast<int>((c.steps + perEpoch - 1) / perEpoch);
+  t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
+  t.maxSteps = c.steps;
+  t.blr = c.blr;
+  t.seed = c.seed;
+  t.workers = c.workers;
+  t.saveEvery = std::max<int64_t>(25, c.steps / 4);
+  t.out = run.string();
+  t.resume = true;
+  t.progress = false;
+  say(c, "training " + set.name + " (" + std::to_string(c.steps) + " steps)");
+  const nlohmann::json r = runPretrain(t, dist);
+  if (r.value("interrupted", false))
+    throw Error(run.string(), "interrupted; run covis_sweep again to resume");
+}
+
+// What every rank must agree on before training: the sets, and how they are trained.
+nlohmann::json rankSettings(const SweepConfig& c) {
+  return {{"scenes", c.scenes},        {"heldout", c.heldout},   {"modes", c.modes},
+          {"centers", c.centers},      {"pairs", c.pairsPerSet}, {"steps", c.steps},
+          {"preset", c.preset},        {"img_size", c.imgSize},  {"patch_size", c.patchSize},
+          {"batch", c.batchSize},      {"blr", c.blr},           {"seed", c.seed},
+          {"resolution", c.resolution}};
+}
+
+// Ranks other than 0 wait for rank 0 to write `ready.json` (the pool, the sets and the held-out
+// data are done, on a folder all ranks share), then train every set with it.
+nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
+                           const std::vector<SweepSet>& sets, int rank) {
+  const std::string ready = (fs::path(c.out) / "ready.json").string();
+  const char* env = std::getenv("PAIRCAST_SWEEP_WAIT");
+  const double limit = env && *env ? std::atof(env) : 24 * 3600.0;
+  const auto start = SteadyClock::now();
+  double said = 0;
+  while (true) {
+    std::error_code ec;
+    if (fs::exists(ready, ec)) {
+      const nlohmann::json j = nlohmann::json::parse(readFile(ready), nullptr, false);
+      if (j.is_object() && j.value("settings", nlohmann::json()) == rankSettings(c)) break;
+    }
+    const double waited = secondsSince(start);
+    if (waited > limit)
+      throw Error(ready, "rank " + std::to_string(rank) + " waited " +
+                             std::to_string(static_cast<int>(waited)) +
+                             " s for rank 0 to prepare the sets (PAIRCAST_SWEEP_WAIT); is rank 0 "
+                             "running the same command on the same --out?");
+    if (waited >= said) {
+      say(c, "rank " + std::to_string(rank) + ": waiting for rank 0's pool and sets");
+      said = waited + 60;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  }
+  const auto dist = Distributed::fromEnvironment("cpu");
+  for (const auto& set : sets) trainSet(c, mc, set, dist.get());
+  return {{"rank", rank}, {"sets_trained", sets.size()}};
 }
 
 }  // namespace
@@ -402,6 +486,8 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
     if (trainIds.count(fs::weakly_canonical(f).string()) ||
         trainIds.count("name:" + sanitizeName(fs::path(f).stem().string())))
       throw Error(f, "is both a training and a held-out scene");
+  const int rank = environmentRole().rank;
+  if (rank != 0) return followSweep(c, mc, sets, rank);
   makeDirs(c.out);
   const fs::path out(c.out);
   const auto start = SteadyClock::now();
@@ -468,17 +554,20 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
              mc.numMasked();
     auto heldScenes = loadScenes(held, SamplerOptions(), "held-out");
     const int half = c.probeViews / 2;
-    h.probeTrain = probeViews(c, heldScenes, 0, half);
-    h.probeTest = probeViews(c, heldScenes, half, c.probeViews - half);
+    h.probeA = probeViews(c, heldScenes, 0, half);
+    h.probeB = probeViews(c, heldScenes, half, c.probeViews - half);
   }
 
-  // A floor for the probe: the training views' mean log depth, everywhere.
+  // A floor for the probe: one half's mean log depth, everywhere in the other half (and back).
   nlohmann::json constant;
   {
-    const auto d = h.probeTrain.depth;
-    const double meanLog = torch::log(d.masked_select(d > 0)).mean().item<double>();
+    auto meanDepth = [](const torch::Tensor& d) {
+      return std::exp(torch::log(d.masked_select(d > 0)).mean().item<double>());
+    };
     const DepthMetrics m =
-        depthMetrics(torch::full_like(h.probeTest.depth, std::exp(meanLog)), h.probeTest.depth);
+        depthMetrics(torch::cat({torch::full_like(h.probeB.depth, meanDepth(h.probeA.depth)),
+                                 torch::full_like(h.probeA.depth, meanDepth(h.probeB.depth))}),
+                     torch::cat({h.probeB.depth, h.probeA.depth}));
     constant = {{"probe_delta1", m.delta1}, {"probe_absrel", m.absRel}, {"probe_rmse", m.rmse}};
   }
 
@@ -492,6 +581,10 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
     makeDirs(randomEval.parent_path().string());
     writeFileAtomic(randomEval.string(), random.dump(1) + "\n");
   }
+  // Other ranks (WORLD_SIZE > 1) start training from here, in one process group for all sets.
+  writeFileAtomic((out / "ready.json").string(),
+                  nlohmann::json({{"settings", rankSettings(c)}}).dump(1) + "\n");
+  const auto dist = Distributed::fromEnvironment("cpu");
 
   // 4. Train and evaluate each set.
   nlohmann::json rows = nlohmann::json::array();
@@ -499,30 +592,7 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
     const fs::path run = out / "runs" / sets[s].name;
     nlohmann::json ev = readJson((run / "eval.json").string());
     if (!ev.is_object()) {
-      const nlohmann::json done = readJson((run / "summary.json").string());
-      if (!done.is_object() || done.value("steps", int64_t{0}) < c.steps ||
-          done.value("interrupted", false)) {
-        TrainConfig t;
-        t.shards = {(out / "pool" / "pool-*.tar").string()};
-        t.keysFile = (out / "sets" / (sets[s].name + ".keys")).string();
-        t.model = mc;
-        t.batchSize = c.batchSize;
-        const int64_t perEpoch = std::max(1, c.pairsPerSet / c.batchSize);
-        t.epochs = static_cast<int>((c.steps + perEpoch - 1) / perEpoch);
-        t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
-        t.maxSteps = c.steps;
-        t.blr = c.blr;
-        t.seed = c.seed;
-        t.workers = c.workers;
-        t.saveEvery = std::max<int64_t>(25, c.steps / 4);
-        t.out = run.string();
-        t.resume = true;
-        t.progress = false;
-        say(c, "training " + sets[s].name + " (" + std::to_string(c.steps) + " steps)");
-        const nlohmann::json r = runPretrain(t);
-        if (r.value("interrupted", false))
-          throw Error(run.string(), "interrupted; run covis_sweep again to resume");
-      }
+      trainSet(c, mc, sets[s], dist.get());
       CroCoNet model(mc);
       const Checkpoint ck = loadCheckpoint((run / "checkpoint-last.pth").string());
       loadStateDictStrict(model, ck.model, (run / "checkpoint-last.pth").string());

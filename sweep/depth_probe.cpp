@@ -109,4 +109,11 @@ DepthMetrics DepthProbe::evaluate(const ProbeData& test) const {
   return depthMetrics(predict(test.images), test.depth);
 }
 
+DepthMetrics crossFitProbe(CroCoNet& model, const ProbeData& a, const ProbeData& b,
+                           const ProbeOptions& options) {
+  const auto predB = DepthProbe(model, a, options).predict(b.images);
+  const auto predA = DepthProbe(model, b, options).predict(a.images);
+  return depthMetrics(torch::cat({predB, predA}), torch::cat({b.depth, a.depth}));
+}
+
 }  // namespace paircast

@@ -57,4 +57,10 @@ class DepthProbe {
   double ridge() const { return ridge_; }
 };
 
+// Two-fold cross-fitting: a head fit on `a` is tested on `b` and one fit on `b` on `a`; the
+// metrics are over the predictions of both. Every view is tested once, so the figures are less
+// noisy than one split's for the same views.
+DepthMetrics crossFitProbe(CroCoNet& model, const ProbeData& a, const ProbeData& b,
+                           const ProbeOptions& options = {});
+
 }  // namespace paircast

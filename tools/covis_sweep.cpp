@@ -34,7 +34,8 @@ int main(int argc, char** argv) {
   app.add_option("--seed", c.seed, "Random seed (the same for every set)");
   app.add_option("--jobs", c.jobs, "Render threads (0: all cores)");
   app.add_option("--eval-pairs", c.evalPairs, "Held-out pairs at covis ~0.5");
-  app.add_option("--probe-views", c.probeViews, "Held-out views for the depth probe (half fit)");
+  app.add_option("--probe-views", c.probeViews,
+                 "Held-out views for the depth probe (two halves, each fits the other's probe)");
   app.add_option("--min-walk-scale", c.minWalkScale,
                  "Smallest walk scale of the pool's second views (metres)");
   bool noReports = false, quiet = false;
@@ -44,9 +45,13 @@ int main(int argc, char** argv) {
     c.reports = !noReports;
     c.progress = !quiet;
     const nlohmann::json r = runCovisSweep(c);
+    if (r.contains("rank")) {  // a rank > 0 of a multi-process sweep: rank 0 writes the results
+      std::printf("%s\n", r.dump().c_str());
+      return 0;
+    }
     std::printf("%s\n", nlohmann::json({{"results", c.out + "/results.csv"},
                                         {"summary", c.out + "/summary.html"},
-                                        {"seconds", r["seconds_this_run"]}})
+                                        {"seconds", r.at("seconds_this_run")}})
                             .dump()
                             .c_str());
     return 0;

@@ -1,5 +1,6 @@
 #include "trainer/distributed.h"
 
+#include <algorithm>
 #include <cstdlib>
 
 #include "util/error.h"
@@ -32,6 +33,16 @@ int envInt(const char* name, int fallback) {
 
 }  // namespace
 
+EnvironmentRole environmentRole() {
+  EnvironmentRole role;
+  role.world = std::max(1, envInt("WORLD_SIZE", 1));
+  if (role.world == 1) return role;
+  role.rank = envInt("RANK", -1);
+  if (role.rank < 0 || role.rank >= role.world)
+    throw Error("RANK must be set and in [0, WORLD_SIZE)");
+  return role;
+}
+
 #if defined(PAIRCAST_HAVE_C10D)
 struct Distributed::Impl {
   c10::intrusive_ptr<c10d::Store> store;
@@ -57,9 +68,8 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
 #else
   auto d = std::unique_ptr<Distributed>(new Distributed());
   d->world_ = world;
-  d->rank_ = envInt("RANK", -1);
+  d->rank_ = environmentRole().rank;
   d->localRank_ = envInt("LOCAL_RANK", 0);
-  if (d->rank_ < 0 || d->rank_ >= world) throw Error("RANK must be set and in [0, WORLD_SIZE)");
   const char* addr = std::getenv("MASTER_ADDR");
   const std::string host = addr && *addr ? addr : "127.0.0.1";
   const int port = envInt("MASTER_PORT", 29500);

@@ -11,6 +11,13 @@
 
 namespace paircast {
 
+// This process's place from RANK and WORLD_SIZE ({0, 1} when WORLD_SIZE is unset or 1), for
+// work outside any process group. Throws paircast::Error on a bad environment.
+struct EnvironmentRole {
+  int rank = 0, world = 1;
+};
+EnvironmentRole environmentRole();
+
 class Distributed {
  public:
   // nullptr when WORLD_SIZE is unset or 1. Throws paircast::Error on a bad environment.

@@ -383,6 +383,12 @@ double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs
 }
 
 nlohmann::json runPretrain(const TrainConfig& c) {
+  if (c.device != "cpu" && c.device != "cuda") throw Error("--device must be cpu or cuda");
+  const std::unique_ptr<Distributed> dist = Distributed::fromEnvironment(c.device);
+  return runPretrain(c, dist.get());
+}
+
+nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
   if (c.shards.empty() && c.crocoDir.empty() && c.live.empty())
     throw Error("give a data source: --data, --croco-dir or --live (or several, with weights)");
   if (c.amp != "bf16" && c.amp != "fp16" && c.amp != "none")
@@ -392,7 +398,6 @@ nlohmann::json runPretrain(const TrainConfig& c) {
     throw Error("batch size, accum-iter and epochs must be >= 1");
   c.model.validate();
   if (c.device != "cpu" && c.device != "cuda") throw Error("--device must be cpu or cuda");
-  const std::unique_ptr<Distributed> dist = Distributed::fromEnvironment(c.device);
   const int rank = dist ? dist->rank() : 0, world = dist ? dist->worldSize() : 1;
   const bool lead = rank == 0;  // writes checkpoints, logs and images
   torch::Device device(torch::kCPU);

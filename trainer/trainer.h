@@ -12,6 +12,8 @@
 
 namespace paircast {
 
+class Distributed;
+
 struct TrainConfig {
   // Data: one or more of these. With one source, each epoch is a permutation of it. With
   // several, each sample comes from a source drawn with these weights (normalised; samples
@@ -65,6 +67,10 @@ DecayGroups weightDecayGroups(
 
 // Trains and returns the summary (also written to <out>/summary.json). Throws paircast::Error on
 // bad input or when the loss stays non-finite (no checkpoint is written from poisoned weights).
+// Data-parallel when WORLD_SIZE > 1: the process group is made from the environment.
 nlohmann::json runPretrain(const TrainConfig& config);
+// The same over a process group the caller owns (nullptr: one process), for callers that train
+// several runs in a row: one rendezvous serves them all.
+nlohmann::json runPretrain(const TrainConfig& config, Distributed* dist);
 
 }  // namespace paircast

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <regex>
 
+#include "model/checkpoint.h"
 #include "sweep/depth_probe.h"
 #include "test_paths.h"
 #include "test_process.h"
@@ -117,6 +118,17 @@ TEST(DepthProbe, FitsDepthThatIsLinearInTheFeatures) {
   // Against predicting the mean depth everywhere, the probe is far better.
   const auto mean = torch::full_like(test.depth, train.depth.mean().item<double>());
   EXPECT_LT(m.absRel, 0.5 * depthMetrics(mean, test.depth).absRel);
+
+  // Cross-fitting tests every view once: its metrics are over both halves' pixels, and equal
+  // the two one-way fits' predictions scored together.
+  const DepthMetrics both = crossFitProbe(model, train, test);
+  EXPECT_EQ(both.pixels, 40 * 32 * 32);
+  const auto pooled = depthMetrics(
+      torch::cat({probe.predict(test.images), DepthProbe(model, test).predict(train.images)}),
+      torch::cat({test.depth, train.depth}));
+  EXPECT_DOUBLE_EQ(both.absRel, pooled.absRel);
+  EXPECT_DOUBLE_EQ(both.delta1, pooled.delta1);
+  EXPECT_GT(both.delta1, 0.9) << both.toJson().dump();
 }
 
 SweepConfig miniSweep(const std::string& out) {
@@ -182,6 +194,55 @@ std::vector<std::string> miniArgs(const std::string& out) {
           "--jobs",
           "2",
           "--quiet"};
+}
+
+std::vector<std::string> withOption(std::vector<std::string> args, const std::string& option,
+                                    const std::string& value) {
+  const auto it = std::find(args.begin(), args.end(), option);
+  if (it != args.end()) *(it + 1) = value;
+  return args;
+}
+
+TEST(CovisSweep, TwoRanksTrainEachSetLikeOneWithTheDoubledBatch) {
+  const std::string dir = testing::scratchDir("ranks");
+  // A small rate, as in Pretrain.TwoGlooProcessesEqualOneWithTheDoubledBatch: Adam scales every
+  // step to about lr, so the two reduction orders' rounding differences grow with it.
+  auto args = [&](const std::string& out, const char* batch) {
+    auto a = withOption(miniArgs(out), "--batch-size", batch);
+    a.insert(a.end(), {"--blr", "1.5e-4"});
+    return a;
+  };
+  ASSERT_EQ(testing::runProcess(args(dir + "/one", "8")), 0);
+  // Two processes over loopback; rank 1 waits for rank 0's pool and sets, then trains with it.
+  const std::string port = "MASTER_PORT=" + std::to_string(20000 + (getpid() + 7) % 20000);
+  std::vector<pid_t> ranks;
+  for (int r = 1; r >= 0; --r)  // rank 1 first: it must wait
+    ranks.push_back(testing::spawnProcess(
+        args(dir + "/two", "4"),
+        {"WORLD_SIZE=2", "RANK=" + std::to_string(r), "LOCAL_RANK=" + std::to_string(r),
+         "MASTER_ADDR=127.0.0.1", port, "PAIRCAST_SWEEP_WAIT=300"}));
+  for (pid_t p : ranks) ASSERT_EQ(testing::waitProcess(p), 0);
+  const auto one = nlohmann::json::parse(readFile(dir + "/one/results.json"));
+  const auto two = nlohmann::json::parse(readFile(dir + "/two/results.json"));
+  ASSERT_EQ(one["rows"].size(), two["rows"].size());
+  for (size_t i = 0; i < one["rows"].size(); ++i) {
+    const std::string set = one["rows"][i]["set"];
+    const Checkpoint a = loadCheckpoint(dir + "/one/runs/" + set + "/checkpoint-last.pth");
+    const Checkpoint b = loadCheckpoint(dir + "/two/runs/" + set + "/checkpoint-last.pth");
+    double worst = 0;
+    for (const auto& [k, t] : a.model)
+      worst = std::max(worst, (t - b.model.at(k)).abs().max().item<double>());
+    EXPECT_LT(worst, 1e-5) << set;
+    EXPECT_NEAR(one["rows"][i]["xv_loss"].get<double>(), two["rows"][i]["xv_loss"].get<double>(),
+                1e-4)
+        << set;
+  }
+  // A rank that never sees rank 0 gives up after PAIRCAST_SWEEP_WAIT instead of hanging.
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ(testing::runProcess(miniArgs(dir + "/alone"), -1,
+                                {"WORLD_SIZE=2", "RANK=1", "PAIRCAST_SWEEP_WAIT=1"}),
+            1);
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(30));
 }
 
 TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
