@@ -5,8 +5,10 @@
 #include <assimp/scene.h>
 #include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -14,6 +16,7 @@
 #include <map>
 #include <sstream>
 
+#include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
 
@@ -115,9 +118,19 @@ PlyHeader readPlyHeader(const std::string& path) {
           return (static_cast<unsigned char>(c) < 0x20 && c != '\t') || c == 0x7f;
         }))
       throw bad("holds a control character");
-    std::istringstream words(line);
-    std::string word;
-    words >> word;
+    std::istringstream stream(line);
+    std::vector<std::string> w;
+    for (std::string t; stream >> t;) w.push_back(t);
+    const std::string word = w.empty() ? "" : w[0];
+    // Names are identifiers: assimp reads a name that starts with digits as the count
+    // ("element 5555555555face 3" made it allocate 30 GB; fuzz_scene_ply found it).
+    auto checkName = [&](const std::string& name) {
+      if (name.empty() || !(std::isalpha(static_cast<unsigned char>(name[0])) || name[0] == '_') ||
+          !std::all_of(name.begin(), name.end(), [](char c) {
+            return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-';
+          }))
+        throw bad("'" + name + "' is not a name (letters, digits, '_' or '-', not first a digit)");
+    };
     if (number == 1) {
       if (line != "ply") throw bad("not a PLY file (the first line is not 'ply')");
     } else if (line == "end_header") {
@@ -125,33 +138,32 @@ PlyHeader readPlyHeader(const std::string& path) {
     } else if (word == "comment" || word == "obj_info") {
       continue;
     } else if (word == "format") {
-      std::string format;
-      words >> format;
-      if (format != "ascii" && format != "binary_little_endian" && format != "binary_big_endian")
-        throw bad("unknown format '" + format + "'");
-      ascii = format == "ascii";
+      if (w.size() != 3 || w[2] != "1.0") throw bad("expected 'format <type> 1.0'");
+      if (w[1] != "ascii" && w[1] != "binary_little_endian" && w[1] != "binary_big_endian")
+        throw bad("unknown format '" + w[1] + "'");
+      ascii = w[1] == "ascii";
       hasFormat = true;
     } else if (word == "element") {
       if (!hasFormat) throw bad("element before the format line");
+      if (w.size() != 3 || w[2].find_first_not_of("0123456789") != std::string::npos)
+        throw bad("expected 'element <name> <count>'");
+      checkName(w[1]);
       PlyElement e;
-      std::string count;
-      words >> e.name >> count;
-      if (e.name.empty() || count.empty() ||
-          count.find_first_not_of("0123456789") != std::string::npos)
-        throw bad("an element needs a name and a count");
+      e.name = w[1];
       errno = 0;
-      e.count = std::strtoull(count.c_str(), nullptr, 10);
+      e.count = std::strtoull(w[2].c_str(), nullptr, 10);
       if (errno == ERANGE) e.count = UINT64_MAX;
       h.elements.push_back(e);
     } else if (word == "property") {
       if (h.elements.empty()) throw bad("property before any element");
-      std::string type, itemType;
-      words >> type;
-      if (type == "list") {
-        words >> type >> itemType;  // a list may be empty: only its count is certain
-        if (plyValueBytes(itemType, ascii) == 0) throw bad("unknown type '" + itemType + "'");
-      }
-      const uint64_t bytes = plyValueBytes(type, ascii);
+      const bool list = w.size() > 1 && w[1] == "list";
+      if (w.size() != (list ? 5u : 3u))
+        throw bad(list ? "expected 'property list <count type> <item type> <name>'"
+                       : "expected 'property <type> <name>'");
+      checkName(w.back());
+      const std::string& type = w[list ? 2 : 1];
+      if (list && plyValueBytes(w[3], ascii) == 0) throw bad("unknown type '" + w[3] + "'");
+      const uint64_t bytes = plyValueBytes(type, ascii);  // a list may be empty: only its count
       if (bytes == 0) throw bad("unknown type '" + type + "'");
       h.elements.back().minBytes += bytes;
     } else {
@@ -189,6 +201,37 @@ void checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptio
   }
 }
 
+// assimp 5.2.5 takes strchr(mimeType, '/') + 1 for an embedded image without checking it, so a
+// media type without '/' makes it read address 1 (fuzz_scene_glb found it). The glTF JSON is
+// parsed here first: it must be valid JSON (UTF-8 included), and every image's media type
+// (mimeType, or that of a data: URI) must be "type/subtype".
+void checkGltfJson(const std::string& path, const std::string& text) {
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object())
+    throw Error(path, "cannot load scene: the glTF JSON is not a valid JSON object");
+  const auto images = j.find("images");
+  if (images == j.end()) return;
+  if (!images->is_array()) throw Error(path, "cannot load scene: glTF 'images' is not an array");
+  for (size_t i = 0; i < images->size(); ++i) {
+    const nlohmann::json& image = (*images)[i];
+    std::string type;
+    bool has = false;
+    if (image.is_object() && image.contains("mimeType")) {
+      has = true;
+      type = image["mimeType"].is_string() ? image["mimeType"].get<std::string>() : "";
+    } else if (image.is_object() && image.contains("uri") && image["uri"].is_string() &&
+               image["uri"].get<std::string>().rfind("data:", 0) == 0) {
+      has = true;
+      const std::string uri = image["uri"];
+      type = uri.substr(5, uri.find_first_of(";,") - 5);
+    }
+    const size_t slash = type.find('/');
+    if (has && (slash == std::string::npos || slash == 0 || slash + 1 == type.size()))
+      throw Error(path, "cannot load scene: glTF image " + std::to_string(i) + " has media type '" +
+                            type.substr(0, 64) + "', not type/subtype");
+  }
+}
+
 uint32_t le32(const unsigned char* p) {
   return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
 }
@@ -220,6 +263,12 @@ void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
       throw Error(path, "cannot load scene: GLB chunk at byte " + std::to_string(offset) +
                             " claims " + std::to_string(chunk) + " bytes, but only " +
                             std::to_string(fileBytes - offset - 8) + " follow");
+    if (offset == 12 && std::memcmp(header + 4, "JSON", 4) == 0) {
+      std::string json(chunk, '\0');
+      if (!in.read(json.data(), static_cast<std::streamsize>(chunk)))
+        throw Error(path, "cannot load scene: cannot read the GLB's JSON chunk");
+      checkGltfJson(path, json);
+    }
     offset += 8 + chunk;
   }
 }
@@ -406,6 +455,7 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   const std::string ext = lower(fs::path(path).extension().string());
   if (ext == ".ply") checkPlyHeader(path, bytes, options);
   if (ext == ".glb") checkGlbHeader(path, bytes);
+  if (ext == ".gltf") checkGltfJson(path, readFile(path));  // within maxFileBytes, checked above
 
   Assimp::Importer importer;
   importer.SetIOHandler(new LimitedIOSystem(options.maxFileBytes));  // the importer owns it

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <fstream>
 
+#include "test_errors.h"
 #include "test_paths.h"
 #include "trainer/pair_dataset.h"
 #include "util/error.h"
@@ -109,15 +110,8 @@ TEST(UntrustedShardIndex, AMemberThatDoesNotDecodeNamesTheShardAndThePair) {
       write("corrupt.tar", ustar({{"a-0.1.jpg", j}, {"a-0.2.jpg", "not a jpeg at all"}}));
   const PairDataset ds = PairDataset::fromShards({path});
   ASSERT_EQ(ds.size(), 1u);
-  try {
-    ds.load(0);
-    ADD_FAILURE() << "a corrupt member decoded";
-  } catch (const Error& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find(path), std::string::npos) << what;
-    EXPECT_NE(what.find("a-0.2.jpg"), std::string::npos) << what;
-    EXPECT_EQ(what.find('\n'), std::string::npos) << what;
-  }
+  const std::string why = testing::refusalOf(path, [&] { ds.load(0); });
+  EXPECT_NE(why.find("a-0.2.jpg"), std::string::npos) << why;
 }
 
 }  // namespace
