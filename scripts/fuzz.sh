@@ -4,7 +4,8 @@
 #
 #   scripts/fuzz.sh [SECONDS]
 #
-# Prints the executions per target (libFuzzer's stat::number_of_executed_units) and what each
+# Prints the executions per target (libFuzzer's stat::number_of_executed_units), its coverage of
+# our code (libFuzzer's last "cov:", in edges) and what each
 # run left in build-fuzz/fuzz-work/<target>/artifacts/ (crash-*, leak-*, timeout-*, oom-*).
 # A finding is fixed in our code and its input kept as a regression test under
 # tests/regressions/<target>/ (tests/<module>/regression_inputs_test.cpp replays them).
@@ -21,6 +22,7 @@ ALL_TARGETS="fuzz_scene_obj fuzz_scene_ply fuzz_scene_glb fuzz_camera_json fuzz_
   fuzz_shard_index fuzz_sample_json fuzz_checkpoint"
 TARGETS=${TARGETS:-$ALL_TARGETS}
 
+scripts/setup.sh clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes
 if [[ ! -f "$BUILD_DIR/CMakeCache.txt" ]]; then
   CC=clang CXX=clang++ cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
     -DPAIRCAST_FUZZ=ON -DPAIRCAST_BUILD_TESTS=OFF -DPAIRCAST_BUILD_BENCH=OFF
@@ -55,9 +57,10 @@ for target in $TARGETS; do
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
   corpus=$(find "$work/corpus" -type f | wc -l)
+  cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | tr -dc '0-9')
   found=$(($(find "$work/artifacts" -type f | wc -l) - before))
-  line=$(printf '%-18s %10s execs %7s/s  corpus %5d  exit %3d  new findings %d' "$target" \
-    "${execs:-?}" "${rate:-?}" "$corpus" "$rc" "$found")
+  line=$(printf '%-18s %10s execs %7s/s  corpus %5d  cov %5s  exit %3d  new findings %d' \
+    "$target" "${execs:-?}" "${rate:-?}" "$corpus" "${cov:-?}" "$rc" "$found")
   summary+=("$line")
   if ((rc != 0 || found > 0)); then
     status=1

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Installs the Debian 12 packages paircast needs. Idempotent: installs only what is missing,
-# and runs `apt-get update` once, only when something is missing.
+# Installs the Debian 12 packages paircast needs, plus any named as arguments (scripts/fuzz.sh
+# adds clang's). Idempotent: installs only what is missing, and runs `apt-get update` once, only
+# when something is missing.
 set -euo pipefail
 
 PACKAGES=(
@@ -14,6 +15,8 @@ if [[ "${PAIRCAST_WITH_REFERENCES:-1}" == 1 ]]; then
   PACKAGES+=(python3-numpy python3-torch python3-open3d python3-sklearn python3-openimageio)
   PACKAGES+=(chromium)  # the dataset report is checked in headless Chromium
 fi
+
+PACKAGES+=("$@")
 
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -1,7 +1,10 @@
 # Sourced by scripts/test.sh --sanitize and scripts/soak.sh: the AddressSanitizer +
 # UndefinedBehaviorSanitizer build (build-asan/) and the options its programs run with.
 # shellcheck shell=bash
+# -O1 -g1: half the compile time of -O2 -g on 2 cores (4 min against 8 for the whole suite), and
+# still line numbers in every report.
 PAIRCAST_ASAN_CMAKE_ARGS=(-DPAIRCAST_SANITIZE=address,undefined -DCMAKE_BUILD_TYPE=RelWithDebInfo
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG"
   -DPAIRCAST_WITH_TORCH=OFF -DPAIRCAST_BUILD_BENCH=OFF)
 _supp="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 # Full unwinding on malloc, so that a leak's stack reaches the library the suppressions name.
