@@ -343,6 +343,7 @@ void trainSet(const SweepConfig& c, const CroCoConfig& mc, const SweepSet& set, 
   t.keysFile = (out / "sets" / (set.name + ".keys")).string();
   t.model = mc;
   t.batchSize = c.batchSize;
+  t.device = c.device;
   // --batch-size is per process, as in pretrain: epochs count the global batch.
   const int world = dist ? dist->worldSize() : 1;
   const int64_t perEpoch = std::max(1, c.pairsPerSet / (c.batchSize * world));
@@ -364,11 +365,11 @@ void trainSet(const SweepConfig& c, const CroCoConfig& mc, const SweepSet& set, 
 
 // What every rank must agree on before training: the sets, and how they are trained.
 nlohmann::json rankSettings(const SweepConfig& c) {
-  return {{"scenes", c.scenes},        {"heldout", c.heldout},   {"modes", c.modes},
-          {"centers", c.centers},      {"pairs", c.pairsPerSet}, {"steps", c.steps},
-          {"preset", c.preset},        {"img_size", c.imgSize},  {"patch_size", c.patchSize},
-          {"batch", c.batchSize},      {"blr", c.blr},           {"seed", c.seed},
-          {"resolution", c.resolution}};
+  return {{"scenes", c.scenes},         {"heldout", c.heldout},   {"modes", c.modes},
+          {"centers", c.centers},       {"pairs", c.pairsPerSet}, {"steps", c.steps},
+          {"preset", c.preset},         {"img_size", c.imgSize},  {"patch_size", c.patchSize},
+          {"batch", c.batchSize},       {"blr", c.blr},           {"seed", c.seed},
+          {"resolution", c.resolution}, {"device", c.device}};
 }
 
 // Ranks other than 0 wait for rank 0 to write `ready.json` (the pool, the sets and the held-out
@@ -398,7 +399,7 @@ nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
   }
-  const auto dist = Distributed::fromEnvironment("cpu");
+  const auto dist = Distributed::fromEnvironment(c.device);
   for (const auto& set : sets) trainSet(c, mc, set, dist.get());
   return {{"rank", rank}, {"sets_trained", sets.size()}};
 }
@@ -584,7 +585,7 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   // Other ranks (WORLD_SIZE > 1) start training from here, in one process group for all sets.
   writeFileAtomic((out / "ready.json").string(),
                   nlohmann::json({{"settings", rankSettings(c)}}).dump(1) + "\n");
-  const auto dist = Distributed::fromEnvironment("cpu");
+  const auto dist = Distributed::fromEnvironment(c.device);
 
   // 4. Train and evaluate each set.
   nlohmann::json rows = nlohmann::json::array();

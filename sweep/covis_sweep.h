@@ -48,8 +48,9 @@ struct SweepConfig {
   std::string preset = "tiny";
   int imgSize = 112;  // training crop and probe size
   int patchSize = 16;
-  int resolution = 128;  // rendered pair size
-  int batchSize = 16;
+  int resolution = 128;        // rendered pair size
+  int batchSize = 16;          // per process
+  std::string device = "cpu";  // training: cpu or cuda (evaluation runs on the CPU)
   double blr = 6e-3;  // high for so few steps: at 1.5e-3, 700 steps barely move the encoder
   uint64_t seed = 0;
   int jobs = 0;                // render threads (0: all cores)

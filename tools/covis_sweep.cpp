@@ -29,7 +29,10 @@ int main(int argc, char** argv) {
   app.add_option("--img-size", c.imgSize, "Training crop and probe size");
   app.add_option("--patch-size", c.patchSize, "ViT patch size");
   app.add_option("--resolution", c.resolution, "Rendered pair size");
-  app.add_option("--batch-size", c.batchSize, "Pairs per iteration")->check(CLI::Range(1, 65536));
+  app.add_option("--batch-size", c.batchSize, "Pairs per iteration and process")
+      ->check(CLI::Range(1, 65536));
+  app.add_option("--device", c.device, "Training device (evaluation runs on the CPU)")
+      ->check(CLI::IsMember({"cpu", "cuda"}));
   app.add_option("--blr", c.blr, "Base learning rate (lr = blr * batch / 256)");
   app.add_option("--seed", c.seed, "Random seed (the same for every set)");
   app.add_option("--jobs", c.jobs, "Render threads (0: all cores)");
