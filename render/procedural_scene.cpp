@@ -194,6 +194,26 @@ class Builder {
 
 using V3 = Eigen::Vector3f;
 
+// The wall two rooms of a plan share: on the line x = at (atX) or z = at, spanning [from, to]
+// along it; to - from <= 0 when they share no wall.
+struct SharedWall {
+  bool atX = false;
+  float at = 0, from = 0, to = 0;
+};
+SharedWall sharedWall(const RoomSpec& a, const RoomSpec& b) {
+  SharedWall w;
+  if (std::abs(a.z1 - b.z0) < 1e-3f || std::abs(a.z0 - b.z1) < 1e-3f) {
+    w.at = std::abs(a.z1 - b.z0) < 1e-3f ? a.z1 : a.z0;
+    w.from = std::max(a.x0, b.x0), w.to = std::min(a.x1, b.x1);
+  }
+  if (std::abs(a.x1 - b.x0) < 1e-3f || std::abs(a.x0 - b.x1) < 1e-3f) {
+    const float from = std::max(a.z0, b.z0), to = std::min(a.z1, b.z1);
+    if (to - from > w.to - w.from)
+      w = {true, std::abs(a.x1 - b.x0) < 1e-3f ? a.x1 : a.x0, from, to};
+  }
+  return w;
+}
+
 // One piece of furniture: whatever it added to the mesh is taken out again when its footprint
 // reaches into a keep-out rectangle, so that no random plan has a door blocked by a sofa.
 class Piece {
@@ -424,15 +444,12 @@ Mesh buildLayout(const LayoutSpec& L) {
 
   // Furniture per room kind, mostly in the room's far half, and never in front of a door.
   for (const auto& d : L.clearDoorways ? L.doors : std::vector<DoorSpec>{}) {
-    const RoomSpec &a = L.rooms[d.roomA], &o = L.rooms[d.roomB];
+    const SharedWall w = sharedWall(L.rooms[d.roomA], L.rooms[d.roomB]);
     const float half = d.width / 2 + 0.1f, depth = 0.8f;
-    if (std::abs(a.x1 - o.x0) < 1e-3f || std::abs(a.x0 - o.x1) < 1e-3f) {
-      const float x = std::abs(a.x1 - o.x0) < 1e-3f ? a.x1 : a.x0;
-      b.keepOut.emplace_back(x - depth, d.at - half, x + depth, d.at + half);
-    } else {
-      const float z = std::abs(a.z1 - o.z0) < 1e-3f ? a.z1 : a.z0;
-      b.keepOut.emplace_back(d.at - half, z - depth, d.at + half, z + depth);
-    }
+    if (w.atX)
+      b.keepOut.emplace_back(w.at - depth, d.at - half, w.at + depth, d.at + half);
+    else
+      b.keepOut.emplace_back(d.at - half, w.at - depth, d.at + half, w.at + depth);
   }
   for (size_t i = 0; i < L.rooms.size(); ++i) {
     const RoomSpec& r = L.rooms[i];
@@ -533,18 +550,13 @@ LayoutSpec randomLayout(const std::string& name, uint64_t seed) {
   for (size_t i = 0; i < component.size(); ++i) component[i] = static_cast<int>(i);
   for (size_t i = 0; i < L.rooms.size(); ++i) {
     for (size_t j = i + 1; j < L.rooms.size(); ++j) {
-      const RoomSpec &a = L.rooms[i], &b = L.rooms[j];
-      float from = 0, to = 0;
-      if (std::abs(a.z1 - b.z0) < 1e-3f || std::abs(a.z0 - b.z1) < 1e-3f)
-        from = std::max(a.x0, b.x0), to = std::min(a.x1, b.x1);
-      else if (std::abs(a.x1 - b.x0) < 1e-3f || std::abs(a.x0 - b.x1) < 1e-3f)
-        from = std::max(a.z0, b.z0), to = std::min(a.z1, b.z1);
-      if (to - from < kDoorOverlap) continue;
+      const SharedWall w = sharedWall(L.rooms[i], L.rooms[j]);
+      if (w.to - w.from < kDoorOverlap) continue;
       const int ci = component[i], cj = component[j];
       if (ci == cj && u(50 + i, j) > 0.3f) continue;  // already connected: rarely a second door
       for (int& c : component)
         if (c == cj) c = ci;
-      const float at = roundTo(lerp(from + 0.7f, to - 0.7f, u(70 + i, j)));
+      const float at = roundTo(lerp(w.from + 0.7f, w.to - 0.7f, u(70 + i, j)));
       L.doors.push_back({static_cast<int>(i), static_cast<int>(j), at});
     }
   }
