@@ -19,6 +19,8 @@
 #include <set>
 #include <thread>
 
+#include "dataset/croco_layout.h"
+#include "dataset/habitat_frame.h"
 #include "dataset/journal.h"
 #include "dataset/shard.h"
 #include "util/atomic_file.h"
@@ -36,23 +38,7 @@ constexpr auto since = secondsSince;
 
 constexpr int kHistogramBins = 20;
 
-std::string fmtIndex(uint64_t i) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%08llu", static_cast<unsigned long long>(i));
-  return b;
-}
-
-std::string bytesView(const std::vector<unsigned char>& v) {
-  return std::string(reinterpret_cast<const char*>(v.data()), v.size());
-}
-
-// Habitat's quaternion (w, x, y, z) of a pose, as CroCo's metadata stores it: the rotation of
-// habitat's camera axes (x right, y up, z back), i.e. R_cam2world * diag(1, -1, -1).
-nlohmann::json habitatQuaternion(const Eigen::Matrix3d& R) {
-  const Eigen::Matrix3d H = R * Eigen::Vector3d(1, -1, -1).asDiagonal();
-  const Eigen::Quaterniond q(H);
-  return {q.w(), q.x(), q.y(), q.z()};
-}
+constexpr auto fmtIndex = crocoIndex;
 
 void histogramAdd(std::vector<uint64_t>& h, double covis) {
   int b = static_cast<int>(covis * kHistogramBins);
@@ -191,8 +177,6 @@ class GenerateRun {
   void loadScene(SceneJob& job);
   void worker();
   Result makeItem(const Item& item);
-  void writeCroco(const SceneJob& job, uint64_t index, const PairSample& s,
-                  const EncodedPair& enc) const;
   void fail();
   // The writer, on the calling thread.
   void writeInOrder();
@@ -411,7 +395,10 @@ Result GenerateRun::makeItem(const Item& item) {
   enc.record["screened"] = sample->screened;
   const double encode = since(t0);
   t0 = Clock::now();
-  if (item.forCroco) writeCroco(job, item.index, *sample, enc);
+  if (item.forCroco) {
+    makeDirs((fs::path(cfg_.out) / job.name).string());
+    writeCrocoSample(crocoStem(job, item.index), enc, sample->camera);
+  }
   {
     std::lock_guard<std::mutex> lock(timeMu_);
     tRender_ += sample->renderSeconds;
@@ -426,29 +413,6 @@ Result GenerateRun::makeItem(const Item& item) {
   r.record = enc.record;
   if (item.forShard) r.pair = std::move(enc);
   return r;
-}
-
-// <stem>_<k>.jpeg, and _<k>_depth.exr, _<k>_camera_params.json, _<k>_covis.png when asked for.
-void GenerateRun::writeCroco(const SceneJob& job, uint64_t index, const PairSample& s,
-                             const EncodedPair& enc) const {
-  makeDirs((fs::path(cfg_.out) / job.name).string());
-  const std::string stem = crocoStem(job, index);
-  // The last view's image is written last: resuming checks it.
-  for (int k = s.views() - 1; k >= 0; --k) {
-    const std::string view = stem + "_" + std::to_string(k + 1);
-    if (cfg_.saveDepth) {
-      writeFileAtomic(view + "_depth.exr", bytesView(enc.depthExr[k]), Durability::NoSync);
-      nlohmann::json cam = cameraToJson(s.camera[k]);
-      cam.erase("width");
-      cam.erase("height");
-      writeFileAtomic(view + "_camera_params.json", cam.dump() + "\n", Durability::NoSync);
-    }
-    if (!enc.covisPng.empty())
-      writeFileAtomic(view + "_covis.png", bytesView(enc.covisPng[k]), Durability::NoSync);
-  }
-  for (int k = 0; k < s.views(); ++k)
-    writeFileAtomic(stem + "_" + std::to_string(k + 1) + ".jpeg", bytesView(enc.jpeg[k]),
-                    Durability::NoSync);
 }
 
 // Takes results in item order: journal first, then the shard, so that every sample of a
@@ -534,12 +498,12 @@ nlohmann::json GenerateRun::summarise() {
 
 // CroCo's metadata entry of one sample, from its journal record.
 nlohmann::json multiviewEntry(const nlohmann::json& rec, const std::string& source) {
-  nlohmann::json positions = nlohmann::json::array(), orientations = nlohmann::json::array();
+  nlohmann::json positions = nlohmann::json::array();
   for (const auto& c : rec.at("cameras")) {
     const Camera cam = cameraFromJson(c, source);
     positions.push_back({cam.t_cam2world.x(), cam.t_cam2world.y(), cam.t_cam2world.z()});
-    orientations.push_back(habitatQuaternion(cam.R_cam2world));
   }
+  const nlohmann::json& orientations = rec.at("orientations");
   return {{"positions", positions},
           {"orientations", orientations},
           {"covisibility_ratios", rec.at("covisibility_ratios")},
@@ -565,9 +529,7 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
     if (rec.contains("covis")) histogramAdd(histogram_, rec["covis"].get<double>());
     if (!cfg_.croco) continue;
     multiviews[fmtIndex(k)] = multiviewEntry(rec, journal_->path() + ": " + recordKey(rec));
-    const std::string first = job.name + "/" + fmtIndex(k) + "_1.jpeg ";
-    for (int v = 2; v <= cfg_.pair.views; ++v)
-      pairsTxt += first + job.name + "/" + fmtIndex(k) + "_" + std::to_string(v) + ".jpeg\n";
+    pairsTxt += crocoPairLines(job.name, fmtIndex(k), cfg_.pair.views);
   }
   perScene[job.name] = scenePairs;
   if (!cfg_.croco) return;
@@ -581,6 +543,7 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
                                {"maximum_covisibility", cfg_.pair.maxCovis},
                                {"seed", cfg_.seed},
                                {"generator", "paircast"},
+                               {"up", cfg_.load.up == UpAxis::Z ? "z" : "y"},
                                {"multiviews", multiviews}};
   makeDirs((fs::path(cfg_.out) / job.name).string());
   writeFileAtomic((fs::path(cfg_.out) / job.name / "metadata.json").string(), meta.dump() + "\n");

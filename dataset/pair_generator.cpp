@@ -232,6 +232,7 @@ void PairGenerator::finish(std::vector<View>& views, PairSample& s) const {
   s.covisSeconds += since(t0);
   for (View& v : views) {
     s.camera.push_back(v.at.camera);
+    s.orientation.push_back(v.at.orientation);
     s.rgb.push_back(std::move(v.rgb));
     s.depth.push_back(options_.keepDepth ? std::move(v.depth) : ImageF());
   }

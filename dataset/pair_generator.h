@@ -63,7 +63,10 @@ struct PairSample {
   uint64_t index = 0;
   uint64_t seed = 0;
   std::vector<Camera> camera;  // [V]
-  std::vector<Image8> rgb;     // [V] [H, W, 3] sRGB
+  // [V] the habitat quaternions the rotations were made from (metadata.json's "orientations");
+  // may be empty (then computed from the rotations)
+  std::vector<HabitatQuaternion> orientation;
+  std::vector<Image8> rgb;    // [V] [H, W, 3] sRGB
   std::vector<ImageF> depth;  // [V] [H, W, 1] z-depth, metres, 0 on a miss (empty unless keepDepth)
   // [V] covis[k]: view 0 (i) against view k (j). covis[0] is view 0 against itself: all ratios 1,
   // valid fractions its own.

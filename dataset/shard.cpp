@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <map>
 
+#include "dataset/habitat_frame.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
@@ -39,6 +40,11 @@ nlohmann::json sampleRecord(const PairSample& s) {
   j["views"] = V;
   j["cameras"] = nlohmann::json::array();
   for (const Camera& c : s.camera) j["cameras"].push_back(cameraToJson(c));
+  j["orientations"] = nlohmann::json::array();  // habitat quaternions (w, x, y, z)
+  for (int k = 0; k < V; ++k)
+    j["orientations"].push_back(k < static_cast<int>(s.orientation.size())
+                                    ? s.orientation[k]
+                                    : habitatQuaternion(s.camera[k].R_cam2world));
   j["camera1"] = j["cameras"][0];
   if (V >= 2) {
     j["camera2"] = j["cameras"][1];

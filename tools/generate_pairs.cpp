@@ -4,6 +4,7 @@
 
 #include "dataset/dataset_report.h"
 #include "dataset/generate_job.h"
+#include "dataset/replay.h"
 #include "tool_main.h"
 
 using namespace paircast;
@@ -27,9 +28,16 @@ int main(int argc, char** argv) {
   GenerateConfig cfg;
   std::string up = "y", format = "shards", normalize = "valid";
   CLI::App app{"Render CroCo pre-training pairs (co-visibility in a band) from mesh scenes"};
-  app.add_option("--scenes", cfg.scenes,
-                 "Scene files, folders (searched recursively) or .txt lists")
-      ->required();
+  auto* scenesOpt = app.add_option("--scenes", cfg.scenes,
+                                   "Scene files, folders (searched recursively) or .txt lists");
+  ReplayConfig replay;
+  auto* replayOpt =
+      app.add_option("--from-metadata", replay.metadata,
+                     "Render the poses of these metadata.json files (CroCo's or ours; folders "
+                     "are searched) instead of sampling")
+          ->excludes(scenesOpt);
+  app.add_option("--scene-root", replay.sceneRoot,
+                 "With --from-metadata: folder under which the metadata's scene paths are found");
   app.add_option("--out", cfg.out, "Output folder")->required();
   app.add_option("--pairs-per-scene", cfg.pairsPerScene, "Pairs to make in each scene")
       ->check(CLI::Range(1, 100000000));
@@ -45,7 +53,8 @@ int main(int argc, char** argv) {
          "--covis-normalize", normalize,
          "valid: divide by valid pixels (the paper); all: by all pixels (CroCo's generator)")
       ->check(CLI::IsMember({"valid", "all"}));
-  app.add_option("--up", up, "Up axis of the scenes: y or z")->check(CLI::IsMember({"y", "z"}));
+  auto* upOpt =
+      app.add_option("--up", up, "Up axis of the scenes: y or z")->check(CLI::IsMember({"y", "z"}));
   app.add_option("--scale", cfg.load.scale, "Multiply scene positions by this (to metres)");
   app.add_flag("--save-depth", cfg.saveDepth,
                "Also write z-depth EXR (and camera JSON in croco layout)");
@@ -86,6 +95,20 @@ int main(int argc, char** argv) {
   app.add_flag("--report", report, "Write OUT/report.html (dataset_report) at the end");
   return runTool("generate_pairs", app, argc, argv, [&] {
     cfg.load.up = parseUpAxis(up);
+    if (replayOpt->count()) {
+      replay.out = cfg.out;
+      replay.load = cfg.load;
+      replay.upGiven = upOpt->count() > 0;
+      replay.jpegQuality = cfg.jpegQuality;
+      replay.render = cfg.pair.render;
+      replay.progress = !quiet;
+      const nlohmann::json summary = runReplay(replay);
+      std::printf("%s\n", summary.dump().c_str());
+      if (summary["samples"].get<size_t>() == 0)
+        throw Error(cfg.out + "/summary.json", "no sample could be replayed");
+      return summary["skipped"].empty() || allowSkipped ? 0 : 4;
+    }
+    if (cfg.scenes.empty()) throw Error("--scenes (or --from-metadata) is required");
     cfg.shards = format != "croco";
     cfg.croco = format != "shards";
     cfg.pair.covis.normalize =
