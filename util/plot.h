@@ -28,7 +28,7 @@ struct Ticks {
   double step = 0;  // 0 when there is at most one tick
   std::vector<double> values;
 };
-Ticks ticks(double lo, double hi, int target = 5);
+Ticks ticks(double lo, double hi, int target = 6);
 // A tick's label with as many decimals as the step needs: 0.25 -> "0.25", 1e6 steps -> "2e+06".
 std::string tickLabel(double value, double step);
 

@@ -67,16 +67,19 @@ TEST(PlotTicks, ReadableLabelsOnTypicalAxes) {
   EXPECT_EQ(labels(plot::ticks(0, 24.16)), (std::vector<std::string>{"0", "5", "10", "15", "20"}));
   EXPECT_EQ(labels(plot::ticks(0, 1)),
             (std::vector<std::string>{"0.0", "0.2", "0.4", "0.6", "0.8", "1.0"}));
-  EXPECT_EQ(labels(plot::ticks(0.1, 0.7)), (std::vector<std::string>{"0.2", "0.4", "0.6"}));
-  EXPECT_EQ(labels(plot::ticks(-0.3, 0.3)), (std::vector<std::string>{"-0.2", "0.0", "0.2"}));
+  EXPECT_EQ(labels(plot::ticks(0.1, 0.5)),
+            (std::vector<std::string>{"0.1", "0.2", "0.3", "0.4", "0.5"}));
+  EXPECT_EQ(labels(plot::ticks(-0.5, 0.5)),
+            (std::vector<std::string>{"-0.4", "-0.2", "0.0", "0.2", "0.4"}));
   EXPECT_EQ(labels(plot::ticks(0, 180)), (std::vector<std::string>{"0", "50", "100", "150"}));
-  EXPECT_EQ(labels(plot::ticks(0, 600)), (std::vector<std::string>{"0", "200", "400", "600"}));
+  EXPECT_EQ(labels(plot::ticks(0, 599)),
+            (std::vector<std::string>{"0", "100", "200", "300", "400", "500"}));
   EXPECT_EQ(labels(plot::ticks(0.612, 0.655)),
             (std::vector<std::string>{"0.62", "0.63", "0.64", "0.65"}));
-  EXPECT_EQ(labels(plot::ticks(0, 3e6)),
-            (std::vector<std::string>{"0", "1e+06", "2e+06", "3e+06"}));
-  EXPECT_EQ(labels(plot::ticks(0, 3e-5)),
-            (std::vector<std::string>{"0", "1e-05", "2e-05", "3e-05"}));
+  EXPECT_EQ(labels(plot::ticks(0, 4e6)),
+            (std::vector<std::string>{"0", "1e+06", "2e+06", "3e+06", "4e+06"}));
+  EXPECT_EQ(labels(plot::ticks(0, 4e-5)),
+            (std::vector<std::string>{"0", "1e-05", "2e-05", "3e-05", "4e-05"}));
   for (double hi : {1.0, 7.5, 24.16, 180.0, 999.0, 5e4})
     for (const auto& s : labels(plot::ticks(0, hi))) EXPECT_LE(s.size(), 5u) << s;
 }
