@@ -1,5 +1,7 @@
 #include "dataset/pair_stream.h"
 
+#include <omp.h>
+
 #include <cstdio>
 
 #include "dataset/generate_job.h"
@@ -47,6 +49,9 @@ void PairStream::stop() {
 }
 
 void PairStream::work() {
+  // Each worker renders its own pairs on one core, as generate_pairs' workers do: the threads
+  // already fill the cores, and nested OpenMP teams would oversubscribe them.
+  omp_set_num_threads(1);
   while (!stopped_) {
     // The counter interleaves this part's pairs over all scenes.
     const uint64_t n = counter_++;
