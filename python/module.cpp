@@ -92,7 +92,8 @@ nlohmann::json toJson(py::handle h, const std::string& name) {
   if (py::isinstance<py::str>(h)) return h.cast<std::string>();
   if (py::isinstance<py::dict>(h)) {
     nlohmann::json j = nlohmann::json::object();
-    for (auto item : h.cast<py::dict>()) j[py::str(item.first).cast<std::string>()] = toJson(item.second, name);
+    for (auto item : h.cast<py::dict>())
+      j[py::str(item.first).cast<std::string>()] = toJson(item.second, name);
     return j;
   }
   if (py::isinstance<py::list>(h) || py::isinstance<py::tuple>(h)) {
@@ -143,7 +144,7 @@ py::dict sampleToDict(PairSample&& s) {
     cameras.append(cameraToPy(s.camera[k]));
   }
   py::dict d;
-  d["images"] = stack(rgb);  // uint8 [V, H, W, 3]
+  d["images"] = stack(rgb);                                    // uint8 [V, H, W, 3]
   if (depth.size() == rgb.size()) d["depths"] = stack(depth);  // float32 [V, H, W]
   d["cameras"] = cameras;
   // Co-visibility of each view k >= 1 with view 0 (the reference): [V - 1].
@@ -162,8 +163,7 @@ struct PyScene {
   std::unique_ptr<RayCaster> caster;
 };
 
-std::unique_ptr<PyScene> loadPyScene(const std::string& path, const std::string& up,
-                                     double scale) {
+std::unique_ptr<PyScene> loadPyScene(const std::string& path, const std::string& up, double scale) {
   LoadOptions options;
   options.up = parseUpAxis(up);
   options.scale = scale;
@@ -426,8 +426,7 @@ py::bytes encodeImagePy(const py::array& array, const std::string& format, int q
   if (!a || a.dtype().kind() != 'u' || !(a.ndim() == 2 || (a.ndim() == 3 && a.shape(2) == 3)))
     throw Error("image must be uint8 [H, W, 3] or [H, W]");
   if (quality < 1 || quality > 100) throw Error("quality must be in 1..100");
-  Image8 image(static_cast<int>(a.shape(1)), static_cast<int>(a.shape(0)),
-               a.ndim() == 3 ? 3 : 1);
+  Image8 image(static_cast<int>(a.shape(1)), static_cast<int>(a.shape(0)), a.ndim() == 3 ? 3 : 1);
   std::memcpy(image.data.data(), a.data(), image.size());
   std::vector<unsigned char> bytes;
   {
@@ -492,8 +491,8 @@ PYBIND11_MODULE(_paircast, m) {
            py::arg("scenes"), py::arg("seed") = 0, py::arg("resolution") = 256,
            py::arg("hfov") = 60.0, py::arg("min_covis") = 0.5, py::arg("max_covis") = 1.0,
            py::arg("views") = 2, py::arg("up") = "y", py::arg("scale") = 1.0,
-           py::arg("threads") = 0, py::arg("start") = 0, py::arg("step") = 1,
-           py::arg("offset") = 0, py::arg("queue") = 16)
+           py::arg("threads") = 0, py::arg("start") = 0, py::arg("step") = 1, py::arg("offset") = 0,
+           py::arg("queue") = 16)
       .def("__iter__", [](py::object self) { return self; })
       .def("__next__", &PyPairStream::next)
       .def("close", &PyPairStream::close)

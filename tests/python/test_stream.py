@@ -52,8 +52,6 @@ def test_stream_gives_generate_pairs_pixels(croco_pairs):
                 np.testing.assert_allclose(s["cameras"][k][key], camera[key], rtol=0, atol=1e-12)
             jpeg = Path(f"{stem}.jpeg").read_bytes()
             assert paircast.encode_image(s["images"][k], "jpg", quality=100) == jpeg
-            decoded = paircast.decode_image(jpeg, "view.jpeg")
-            assert np.abs(decoded.astype(int) - s["images"][k]).mean() < 2.0
 
 
 def test_parts_are_disjoint_and_cover_the_stream():

@@ -124,7 +124,7 @@ def test_training_on_live_pairs_lowers_the_loss():
     torch.manual_seed(0)
     model = TinyCroCo()
     optimizer = torch.optim.AdamW(model.parameters(), lr=2e-3, betas=(0.9, 0.95))
-    loader = DataLoader(live(length=4 * 40, seed=1), batch_size=4)
+    loader = DataLoader(live(length=4 * 20, seed=1), batch_size=4)
     losses = []
     for image1, image2 in loader:
         n = model.patchify(image1).shape[1]
@@ -137,6 +137,7 @@ def test_training_on_live_pairs_lowers_the_loss():
         loss.backward()
         optimizer.step()
         losses.append(loss.item())
-    assert len(losses) == 40
-    first, last = np.mean(losses[:5]), np.mean(losses[-5:])
+    assert len(losses) == 20
+    first, last = np.mean(losses[:4]), np.mean(losses[-4:])
+    print(f"loss {first:.3f} -> {last:.3f}")
     assert last < 0.8 * first, f"loss did not fall: {first:.3f} -> {last:.3f}"
