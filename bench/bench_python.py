@@ -83,16 +83,23 @@ def main():
         g_pairs, g_seconds, g_rate = run_generate_pairs(args, Path(tmp) / "pairs")
     l_pairs, l_seconds, l_rate, startup, torch_version = run_loader(args)
     ratio = l_rate / g_rate if g_rate > 0 else float("nan")
+    # generate_pairs' seconds include its start-up (scene loading, floor maps): the loader's
+    # rate with its start-up (first batch included) is the like-for-like figure at small N.
+    l_rate_all = (l_pairs + args.batch_size) / (l_seconds + startup)
     print(f"{'':<34}{'pairs':>8}{'seconds':>10}{'pairs/s':>10}")
     print(f"{'generate_pairs --jobs %d' % args.threads:<34}{g_pairs:>8}{g_seconds:>10.2f}"
           f"{g_rate:>10.1f}")
     print(f"{'DataLoader(LivePairs) %d workers' % args.workers:<34}{l_pairs:>8}{l_seconds:>10.2f}"
           f"{l_rate:>10.1f}   (start-up {startup:.2f} s)")
-    print(f"ratio {ratio:.2f} (target >= 0.80)")
+    print(f"{'  the same, start-up included':<34}{l_pairs + args.batch_size:>8}"
+          f"{l_seconds + startup:>10.2f}{l_rate_all:>10.1f}")
+    print(f"ratio {ratio:.2f} steady, {l_rate_all / g_rate:.2f} with start-up (target >= 0.80)")
     print(json.dumps({"bench": "python", "resolution": args.resolution, "threads": args.threads,
                       "workers": args.workers, "scenes": args.scenes, "torch": torch_version,
                       "generate_pairs_per_second": g_rate, "loader_pairs_per_second": l_rate,
-                      "loader_startup_seconds": startup, "ratio": ratio}))
+                      "loader_startup_seconds": startup,
+                      "loader_pairs_per_second_with_startup": l_rate_all, "ratio": ratio,
+                      "ratio_with_startup": l_rate_all / g_rate}))
 
 
 if __name__ == "__main__":
