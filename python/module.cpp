@@ -163,7 +163,21 @@ struct PyScene {
   std::unique_ptr<RayCaster> caster;
 };
 
-std::unique_ptr<PyScene> loadPyScene(const std::string& path, const std::string& up, double scale) {
+// A str or os.PathLike as a path.
+std::string pathFromPy(py::handle h) {
+  return py::module_::import("os").attr("fspath")(h).cast<std::string>();
+}
+
+// One path, or an iterable of them (scene files, folders, .txt lists).
+std::vector<std::string> pathsFromPy(py::handle h) {
+  if (py::isinstance<py::str>(h) || py::hasattr(h, "__fspath__")) return {pathFromPy(h)};
+  std::vector<std::string> out;
+  for (auto item : h) out.push_back(pathFromPy(item));
+  return out;
+}
+
+std::unique_ptr<PyScene> loadPyScene(py::handle pathObject, const std::string& up, double scale) {
+  const std::string path = pathFromPy(pathObject);
   LoadOptions options;
   options.up = parseUpAxis(up);
   options.scale = scale;
@@ -223,9 +237,9 @@ py::dict covisibilityPy(py::handle cam1, const py::array& depth1, py::handle cam
 
 class PyPairStream {
  public:
-  PyPairStream(std::vector<std::string> scenes, uint64_t seed, int resolution, double hfov,
-               double minCovis, double maxCovis, int views, const std::string& up, double scale,
-               int threads, int start, int step, uint64_t offset, size_t queue) {
+  PyPairStream(py::handle scenes, uint64_t seed, int resolution, double hfov, double minCovis,
+               double maxCovis, int views, const std::string& up, double scale, int threads,
+               int start, int step, uint64_t offset, size_t queue) {
     if (views != 2)
       throw py::value_error("views=" + std::to_string(views) +
                             ": this build makes pairs only (views=2)");
@@ -236,7 +250,7 @@ class PyPairStream {
       throw Error("the covis band must satisfy 0 <= min_covis <= max_covis <= 1");
     if (!(scale > 0) || !std::isfinite(scale)) throw Error("scale must be positive");
     PairStreamOptions o;
-    o.scenes = std::move(scenes);
+    o.scenes = pathsFromPy(scenes);
     o.load.up = parseUpAxis(up);
     o.load.scale = scale;
     o.pair.resolution = resolution;
@@ -290,8 +304,8 @@ class PyShardReader {
     nlohmann::json record;
   };
 
-  PyShardReader(std::string path, bool depth, size_t queue)
-      : path_(std::move(path)), depth_(depth), capacity_(std::max<size_t>(1, queue)) {
+  PyShardReader(py::handle path, bool depth, size_t queue)
+      : path_(pathFromPy(path)), depth_(depth), capacity_(std::max<size_t>(1, queue)) {
     thread_ = std::thread([this] { run(); });
   }
   ~PyShardReader() { close(); }
@@ -486,8 +500,8 @@ PYBIND11_MODULE(_paircast, m) {
 
   py::class_<PyPairStream>(m, "PairStream",
                            "Pairs rendered live by worker threads, as generate_pairs makes them")
-      .def(py::init<std::vector<std::string>, uint64_t, int, double, double, double, int,
-                    const std::string&, double, int, int, int, uint64_t, size_t>(),
+      .def(py::init<py::handle, uint64_t, int, double, double, double, int, const std::string&,
+                    double, int, int, int, uint64_t, size_t>(),
            py::arg("scenes"), py::arg("seed") = 0, py::arg("resolution") = 256,
            py::arg("hfov") = 60.0, py::arg("min_covis") = 0.5, py::arg("max_covis") = 1.0,
            py::arg("views") = 2, py::arg("up") = "y", py::arg("scale") = 1.0,
@@ -502,7 +516,7 @@ PYBIND11_MODULE(_paircast, m) {
       .def_property_readonly("position", &PyPairStream::position);
 
   py::class_<PyShardReader>(m, "ShardReader", "The samples of one tar shard, decoded")
-      .def(py::init<std::string, bool, size_t>(), py::arg("path"), py::arg("depth") = false,
+      .def(py::init<py::handle, bool, size_t>(), py::arg("path"), py::arg("depth") = false,
            py::arg("queue") = 8)
       .def("__iter__", [](py::object self) { return self; })
       .def("__next__", &PyShardReader::next)

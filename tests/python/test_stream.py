@@ -69,3 +69,13 @@ def test_offset_resumes_the_stream():
 def test_only_pairs_until_multi_view():
     with pytest.raises(ValueError, match="views"):
         paircast.PairStream([str(ROOM)], views=3)
+
+
+def test_scenes_may_be_paths_or_one_path(tmp_path):
+    with paircast.PairStream(ROOM, seed=3, resolution=RESOLUTION, threads=1) as one:
+        same(next(one), take(1)[0])
+    listing = tmp_path / "scenes.txt"
+    listing.write_text(f"{ROOM}\n")
+    with paircast.PairStream([listing], seed=3, resolution=RESOLUTION, threads=1) as listed:
+        same(next(listed), take(1)[0])
+    assert paircast.load_scene(ROOM).name == "room"
