@@ -264,30 +264,35 @@ class PyPairStream {
     o.partIndex = start;
     o.partCount = step;
     py::gil_scoped_release release;
-    stream_ = std::make_unique<PairStream>(o);
+    stream_ = std::make_shared<PairStream>(o);
   }
 
   py::dict next() {
-    if (!stream_) throw py::stop_iteration();
+    // A local owner: close() from another thread must not free the stream under next().
+    std::shared_ptr<PairStream> stream = stream_;
+    if (!stream) throw py::stop_iteration();
     std::optional<PairSample> s;
     {
       py::gil_scoped_release release;
-      s = stream_->next();
+      s = stream->next();
     }
     if (!s) throw py::stop_iteration();
     return sampleToDict(std::move(*s));
   }
 
   void close() {
+    std::shared_ptr<PairStream> stream = std::move(stream_);
+    if (!stream) return;
+    stream->stop();  // wakes a next() waiting in another thread
     py::gil_scoped_release release;
-    stream_.reset();  // stops and joins the workers
+    stream.reset();  // joins the workers, unless a next() still holds it
   }
 
   size_t scenes() const { return stream_ ? stream_->usableScenes() : 0; }
   uint64_t position() const { return stream_ ? stream_->position() : 0; }
 
  private:
-  std::unique_ptr<PairStream> stream_;
+  std::shared_ptr<PairStream> stream_;
 };
 
 // ---- Shards -------------------------------------------------------------------------------------
