@@ -87,6 +87,7 @@ std::vector<PairRecord> readRecords(const std::string& dir, const std::string& k
           shard,
           [&](ShardSample&& s) {
             if (!keys.empty() && !keys.count(s.key)) return;
+            if (!s.record.contains("camera2")) return;  // a one-view sample is no pair
             PairRecord r;
             r.key = s.key;
             r.scene = s.record.value("scene", std::string("?"));

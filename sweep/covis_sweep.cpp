@@ -178,12 +178,12 @@ Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
     nlohmann::json added = nlohmann::json::array();
     for (int i = 0; i < m; ++i) {
       if (!got[i]) continue;
-      const int b = covisBucket(got[i]->covis.covis);
+      const int b = covisBucket(got[i]->covis[1].covis);
       if (left[b] <= 0) continue;
       --left[b];
       const EncodedPair enc = encodePair(*got[i], false, 90);
       writer.add(enc);
-      added.push_back({{"key", enc.key}, {"covis", got[i]->covis.covis}});
+      added.push_back({{"key", enc.key}, {"covis", got[i]->covis[1].covis}});
     }
     if (!added.empty()) writer.close();  // an empty round leaves no shard
     nextIndex += m;

@@ -8,6 +8,21 @@
 
 using namespace paircast;
 
+// 0: done. 1 (with an error line): no pair could be made. 4: done, but scenes were skipped (they
+// are listed in summary.json), unless --allow-skipped-scenes.
+int exitStatus(const nlohmann::json& summary, const std::string& out, bool allowSkipped) {
+  const size_t skipped = summary["skipped_scenes"].size();
+  if (summary["pairs"].get<uint64_t>() == 0)
+    throw Error(out + "/summary.json", "no pair could be made (" + std::to_string(skipped) +
+                                           " scene(s) skipped; reasons listed there)");
+  if (skipped == 0 || allowSkipped) return 0;
+  std::fprintf(stderr,
+               "generate_pairs: %zu scene(s) skipped (listed in %s/summary.json); exit status 4 "
+               "(--allow-skipped-scenes makes it 0)\n",
+               skipped, out.c_str());
+  return 4;
+}
+
 int main(int argc, char** argv) {
   GenerateConfig cfg;
   std::string up = "y", format = "shards", normalize = "valid";
@@ -53,6 +68,18 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100000));
   app.add_option("--min-valid", cfg.pair.minValidFraction, "Minimum fraction of pixels with depth")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--views", cfg.pair.views,
+                 "Views per sample (CroCo's views_count): view 1 and views-1 others, each with "
+                 "covis in the band with view 1");
+  app.add_option("--screen-resolution", cfg.pair.screenResolution,
+                 "Screen candidates on depth at this resolution first (0: off; default: a "
+                 "quarter of --resolution, off below 64)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
+               "Also write 8-bit co-visibility masks (255: seen by the other view)");
+  bool allowSkipped = false;
+  app.add_flag("--allow-skipped-scenes", allowSkipped,
+               "Exit 0 when some scenes were skipped (default: exit 4)");
   bool quiet = false;
   app.add_flag("--quiet", quiet, "No progress line");
   bool report = false;
@@ -73,6 +100,6 @@ int main(int argc, char** argv) {
       summary["report"] = writeDatasetReport(ro)["report"];
     }
     std::printf("%s\n", summary.dump().c_str());
-    return 0;
+    return exitStatus(summary, cfg.out, allowSkipped);
   });
 }
