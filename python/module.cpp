@@ -133,22 +133,33 @@ py::dict cameraToPy(const Camera& c) {
 // ---- Samples ------------------------------------------------------------------------------------
 
 // The one conversion of a PairSample to Python, shared by every sample source.
-py::dict sampleToDict(PairSample&& s) {
-  constexpr int kViews = 2;
+py::dict sampleToDict(const PairSample& s) {
+  const int V = s.views();
+  PAIRCAST_CHECK(V >= 1 && s.rgb.size() == static_cast<size_t>(V) &&
+                 s.covis.size() == static_cast<size_t>(V));
   std::vector<const Image8*> rgb;
   std::vector<const ImageF*> depth;
   py::list cameras;
-  for (int k = 0; k < kViews; ++k) {
+  py::array_t<double> covis(V - 1);
+  for (int k = 0; k < V; ++k) {
     rgb.push_back(&s.rgb[k]);
-    if (!s.depth[k].data.empty()) depth.push_back(&s.depth[k]);
+    if (k < static_cast<int>(s.depth.size()) && !s.depth[k].data.empty())
+      depth.push_back(&s.depth[k]);
     cameras.append(cameraToPy(s.camera[k]));
+    if (k > 0) covis.mutable_at(k - 1) = s.covis[k].covis;
   }
   py::dict d;
   d["images"] = stack(rgb);                                    // uint8 [V, H, W, 3]
   if (depth.size() == rgb.size()) d["depths"] = stack(depth);  // float32 [V, H, W]
   d["cameras"] = cameras;
-  // Co-visibility of each view k >= 1 with view 0 (the reference): [V - 1].
-  d["covis"] = py::array_t<double>(py::ssize_t{kViews - 1}, &s.covis.covis);
+  d["covis"] = covis;  // [V - 1]: covis of each view k >= 1 with view 0 (the reference)
+  if (s.visibility.size() == static_cast<size_t>(V)) {
+    // [V, V]: v_ij, the share of view i seen by view j; each view's valid fraction on the diagonal.
+    py::array_t<double> visibility({V, V});
+    for (int i = 0; i < V; ++i)
+      for (int j = 0; j < V; ++j) visibility.mutable_at(i, j) = s.visibility[i].at(j);
+    d["visibility"] = visibility;
+  }
   d["scene"] = s.scene;
   d["index"] = s.index;
   d["seed"] = s.seed;
@@ -240,9 +251,9 @@ class PyPairStream {
   PyPairStream(py::handle scenes, uint64_t seed, int resolution, double hfov, double minCovis,
                double maxCovis, int views, const std::string& up, double scale, int threads,
                int start, int step, uint64_t offset, size_t queue) {
-    if (views != 2)
-      throw py::value_error("views=" + std::to_string(views) +
-                            ": this build makes pairs only (views=2)");
+    if (views < 1 || views > kMaxViews)
+      throw py::value_error("views must be in 1.." + std::to_string(kMaxViews) + ", got " +
+                            std::to_string(views));
     if (resolution < 8 || resolution > 8192) throw Error("resolution must be in 8..8192");
     if (!(hfov > 0 && hfov < 180)) throw Error("hfov must be in (0, 180) degrees");
     if (threads < 0) throw Error("threads must be >= 0 (0: one per core)");
@@ -257,6 +268,8 @@ class PyPairStream {
     o.pair.hfov = hfov;
     o.pair.minCovis = minCovis;
     o.pair.maxCovis = maxCovis;
+    o.pair.views = views;
+    validatePairOptions(o.pair);  // here, not per scene inside PairStream, where it would skip
     o.seed = seed;
     o.firstIndex = offset;
     o.threads = threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency());
@@ -277,7 +290,7 @@ class PyPairStream {
       s = stream->next();
     }
     if (!s) throw py::stop_iteration();
-    return sampleToDict(std::move(*s));
+    return sampleToDict(*s);
   }
 
   void close() {
@@ -366,10 +379,10 @@ class PyShardReader {
           [&](ShardSample&& s) {
             Decoded d;
             d.key = s.key;
-            for (int k = 0; k < 2; ++k) {
+            for (size_t k = 0; k < s.jpeg.size(); ++k) {
               const std::string name = path_ + ": " + s.key + "." + std::to_string(k + 1);
               d.rgb.push_back(decodeImage8(s.jpeg[k].data(), s.jpeg[k].size(), name + ".jpg"));
-              if (depth_ && !s.depthExr[k].empty())
+              if (depth_ && k < s.depthExr.size() && !s.depthExr[k].empty())
                 d.depth.push_back(
                     decodeImageF(s.depthExr[k].data(), s.depthExr[k].size(), name + ".depth.exr"));
             }
@@ -402,17 +415,38 @@ class PyShardReader {
     s.index = r.index;
     const auto seed = d.record.find("seed");
     if (seed != d.record.end() && seed->is_number_unsigned()) s.seed = seed->get<uint64_t>();
-    for (int k = 0; k < 2; ++k) {
-      s.camera[k] = r.camera[k];
-      s.rgb[k] = std::move(d.rgb[k]);
-      if (d.depth.size() == 2) s.depth[k] = std::move(d.depth[k]);
+    const size_t V = static_cast<size_t>(r.views);
+    if (d.rgb.size() != V || r.camera.size() != V)
+      throw Error(path_, "sample '" + d.key + "' does not have the views its record names");
+    for (const Image8& image : d.rgb)
+      if (image.size() != d.rgb[0].size())
+        throw Error(path_, "sample '" + d.key + "' has views of different sizes");
+    s.camera = r.camera;
+    s.rgb = std::move(d.rgb);
+    if (d.depth.size() == V) s.depth = std::move(d.depth);
+    s.covis.resize(V);
+    s.covis[0].covis = 1.0;
+    // Each view's covis with view 1: CroCo's covisibility_ratios after view 1's valid fraction.
+    const auto ratios = d.record.find("covisibility_ratios");
+    for (size_t k = 1; k < V; ++k) {
+      if (ratios != d.record.end() && ratios->is_array() && ratios->size() == V &&
+          (*ratios)[k].is_number())
+        s.covis[k].covis = (*ratios)[k].get<double>();
+      else if (k == 1)
+        s.covis[k].covis = r.covis;
     }
-    s.covis.covis = r.covis;
-    s.covis.v_ij = r.v_ij;
-    s.covis.v_ji = r.v_ji;
-    if (s.rgb[0].size() != s.rgb[1].size())
-      throw Error(path_, "sample '" + d.key + "' has views of different sizes");
-    py::dict out = sampleToDict(std::move(s));
+    // CroCo's pairwise_visibility_ratios, when whole: [V][V].
+    const auto pairwise = d.record.find("pairwise_visibility_ratios");
+    if (pairwise != d.record.end() && pairwise->is_array() && pairwise->size() == V) {
+      std::vector<std::vector<double>> visibility;
+      for (const auto& row : *pairwise) {
+        if (!row.is_array() || row.size() != V) break;
+        visibility.emplace_back();
+        for (const auto& v : row) visibility.back().push_back(v.is_number() ? v.get<double>() : 0);
+      }
+      if (visibility.size() == V) s.visibility = std::move(visibility);
+    }
+    py::dict out = sampleToDict(s);
     out["key"] = d.key;
     return out;
   }

@@ -12,7 +12,8 @@ DataLoader needs no sampler:
 return_dict=True yields dicts instead: image1, image2 (as above), view2 (the view image2 shows),
 crop1, crop2 (the (top, left) of each crop), plus the sample's own keys: images (uint8
 [V, H, W, 3]), depths (float32 [V, H, W], z-depth, 0 on a miss), cameras (one dict per view),
-covis ([V - 1], of each view with view 0), scene, index.
+covis ([V - 1], of each view with view 0), visibility ([V, V], v_ij, valid fractions on the
+diagonal), scene, index.
 """
 
 import glob
@@ -96,6 +97,8 @@ class _Pairs(IterableDataset):
     def _pair(self, sample, rng):
         """View 0 (the reference) and one other view, drawn when there are several."""
         images = sample["images"]
+        if images.shape[0] < 2:
+            raise Error(f"sample {sample.get('key', sample['index'])} has one view: no pair")
         other = 1 if images.shape[0] == 2 else int(rng.integers(1, images.shape[0]))
         image1, crop1 = self._image(images[0], rng)
         image2, crop2 = self._image(images[other], rng)
@@ -122,6 +125,8 @@ class LivePairs(_Pairs):
                  views=2, up="y", scale=1.0, threads=0, crop=None, normalize=True,
                  return_dict=False, length=None, rank=None, world_size=None, queue=16):
         super().__init__(seed, crop, normalize, return_dict, rank, world_size)
+        if int(views) < 2:
+            raise ValueError(f"views={views}: a pair needs at least 2 views")
         if isinstance(scenes, (str, os.PathLike)):
             scenes = [scenes]
         self.scenes = [os.fspath(s) for s in scenes]

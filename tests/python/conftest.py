@@ -64,6 +64,16 @@ def croco_pairs(tmp_path_factory):
     return out
 
 
+@pytest.fixture(scope="session")
+def multiview_shards(tmp_path_factory):
+    """generate_pairs' shards of 3-view samples with depth: 3 samples of the room, seed 3."""
+    out = tmp_path_factory.mktemp("views3")
+    run_tool("generate_pairs", "--scenes", ROOM, "--out", out, "--pairs-per-scene", 3,
+             "--resolution", RESOLUTION, "--seed", 3, "--jobs", 1, "--format", "shards",
+             "--save-depth", "--views", 3)
+    return out
+
+
 def stream(**kwargs):
     options = dict(seed=3, resolution=RESOLUTION, threads=1)
     options.update(kwargs)

@@ -66,9 +66,23 @@ def test_offset_resumes_the_stream():
     same(take(3)[2], take(1, offset=2)[0])
 
 
-def test_only_pairs_until_multi_view():
-    with pytest.raises(ValueError, match="views"):
-        paircast.PairStream([str(ROOM)], views=3)
+def test_multi_view_samples():
+    for s in take(2, views=3):
+        assert s["images"].shape == (3, RESOLUTION, RESOLUTION, 3)
+        assert s["depths"].shape == (3, RESOLUTION, RESOLUTION)
+        assert len(s["cameras"]) == 3 and s["covis"].shape == (2,)
+        assert s["visibility"].shape == (3, 3)
+        for k in (1, 2):  # each view against the reference, as the generator computed it
+            c = paircast.covisibility(s["cameras"][0], s["depths"][0], s["cameras"][k],
+                                      s["depths"][k])
+            assert c["covis"] == s["covis"][k - 1] and 0.5 <= c["covis"] <= 1.0
+            assert (c["v12"], c["v21"]) == (s["visibility"][0, k], s["visibility"][k, 0])
+
+
+def test_views_out_of_range():
+    for views in (0, 100):
+        with pytest.raises(ValueError, match="views"):
+            paircast.PairStream([str(ROOM)], views=views)
 
 
 def test_scenes_may_be_paths_or_one_path(tmp_path):

@@ -84,6 +84,24 @@ def test_shard_pairs_split_among_workers_and_ranks(croco_pairs):
         assert sorted(i for _, i in seen) == [0, 1, 2]
 
 
+def test_multi_view_shards_and_live_pairs(multiview_shards):
+    stream = {s["index"]: s for s in take(3, views=3)}
+    items = list(ShardPairs(str(multiview_shards / "pairs-*.tar"), return_dict=True, depth=True))
+    assert sorted(int(i["index"]) for i in items) == sorted(stream)
+    for item in items:
+        s = stream[int(item["index"])]
+        assert item["images"].shape == (3, RESOLUTION, RESOLUTION, 3)
+        np.testing.assert_array_equal(item["depths"], s["depths"])
+        np.testing.assert_allclose(item["covis"], s["covis"], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(item["visibility"], s["visibility"], rtol=0, atol=1e-12)
+        assert item["view2"] in (1, 2)
+        torch.testing.assert_close(item["image2"], normalised(item["images"][item["view2"]]))
+    views2 = {item["view2"] for item in live(views=3, length=8, return_dict=True)}
+    assert views2 <= {1, 2}
+    with pytest.raises(ValueError, match="views"):
+        live(views=1)
+
+
 def test_missing_shards_raise():
     with pytest.raises(paircast.Error, match="no such shard"):
         ShardPairs("/nonexistent/pairs-*.tar")
