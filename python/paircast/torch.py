@@ -19,6 +19,7 @@ diagonal), scene, index.
 import glob
 import math
 import os
+import zlib
 
 import numpy as np
 import torch
@@ -28,6 +29,13 @@ from . import Error, PairStream, ShardReader
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
+
+
+def _cores():
+    """Cores this process may run on."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def reader_part(rank=None, world_size=None):
@@ -72,8 +80,11 @@ class _Pairs(IterableDataset):
         iteration, as DistributedSampler.set_epoch does."""
         self.epoch = int(epoch)
 
-    def _generator(self, part):
-        return np.random.default_rng([self.seed, part, self.epoch])
+    def _generator(self, sample):
+        """The random draws of one sample (crops, the second view): a function of (seed, epoch,
+        scene, index), so they do not depend on workers, ranks or threads."""
+        scene = zlib.crc32(str(sample["scene"]).encode())
+        return np.random.default_rng([self.seed, self.epoch, scene, int(sample["index"])])
 
     def _image(self, image, rng):
         """uint8 [H, W, 3] -> float32 [3, h, w] in [0, 1] (normalised), and the crop's corner.
@@ -94,8 +105,9 @@ class _Pairs(IterableDataset):
             out.sub_(self._mean).div_(self._std)
         return out, (top, left)
 
-    def _pair(self, sample, rng):
+    def _pair(self, sample):
         """View 0 (the reference) and one other view, drawn when there are several."""
+        rng = self._generator(sample)
         images = sample["images"]
         if images.shape[0] < 2:
             raise Error(f"sample {sample.get('key', sample['index'])} has one view: no pair")
@@ -150,7 +162,7 @@ class LivePairs(_Pairs):
 
     def __iter__(self):
         part, parts, workers = reader_part(self.rank, self.world_size)
-        threads = self.threads or max(1, (os.cpu_count() or 1) // workers)
+        threads = self.threads or max(1, _cores() // workers)
         count, offset = None, 0
         if self.length is not None:
             per_rank = self.length // (parts // workers)
@@ -161,10 +173,9 @@ class LivePairs(_Pairs):
                 return
         stream = PairStream(self.scenes, seed=self.seed, threads=threads, start=part, step=parts,
                             offset=offset, **self.stream_options)
-        rng = self._generator(part)
         try:
             for n, sample in enumerate(stream):
-                yield self._pair(sample, rng)
+                yield self._pair(sample)
                 if count is not None and n + 1 >= count:
                     break
         finally:
@@ -202,11 +213,10 @@ class ShardPairs(_Pairs):
             np.random.default_rng([self.seed, self.epoch]).shuffle(files)
         by_file = len(files) >= parts
         mine = files[part::parts] if by_file else files
-        rng = self._generator(part)
         n = 0
         for path in mine:
             with ShardReader(path, depth=self.depth) as reader:
                 for sample in reader:
                     n += 1
                     if by_file or (n - 1) % parts == part:
-                        yield self._pair(sample, rng)
+                        yield self._pair(sample)

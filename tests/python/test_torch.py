@@ -43,6 +43,25 @@ def test_crops_are_drawn_per_image():
             torch.testing.assert_close(item["image" + key], expected)
 
 
+def test_draws_depend_on_the_pair_only():
+    """Crops and the second view are the same whatever the threads and the order."""
+    def draws(**kwargs):
+        items = live(views=3, length=6, crop=32, return_dict=True, **kwargs)
+        return {int(i["index"]): (i["crop1"], i["crop2"], i["view2"]) for i in items}
+    one = draws(threads=1)
+    two = draws(threads=2)
+    common = one.keys() & two.keys()
+    assert common and {k: one[k] for k in common} == {k: two[k] for k in common}
+
+
+def test_set_epoch_moves_on_to_fresh_pairs():
+    dataset = live(length=3, return_dict=True)
+    first = {int(i["index"]) for i in dataset}
+    dataset.set_epoch(1)
+    second = {int(i["index"]) for i in dataset}
+    assert len(first) == len(second) == 3 and not first & second
+
+
 def keys(loader):
     return [(s["scene"], int(s["index"])) for s in loader]
 
