@@ -105,7 +105,7 @@ double secondsPerRender(const RayCaster& caster, const std::vector<Camera>& view
 }
 
 struct RenderLimit {
-  double rgbDepthSeconds = 0, depthSeconds = 0;
+  double rgbDepthSeconds = 0, depthSeconds = 0, screenDepthSeconds = 0;
   double pairsPerSecond() const { return 1.0 / (2.0 * rgbDepthSeconds); }
 };
 
@@ -123,6 +123,15 @@ RenderLimit measureRenderLimit(const SceneArg& arg, unsigned threads, int resolu
   RenderLimit r;
   r.rgbDepthSeconds = secondsPerRender(caster, views, threads, true);
   r.depthSeconds = secondsPerRender(caster, views, threads, false);
+  for (Camera& c : views) {
+    Camera small = Camera::fromHfov(resolution / 4, resolution / 4, 60);
+    small.R_cam2world = c.R_cam2world;
+    small.t_cam2world = c.t_cam2world;
+    c = small;
+  }
+  r.screenDepthSeconds = secondsPerRender(caster, views, threads, false);
+  std::printf("    per render: RGB+depth %.3f ms, depth %.3f ms, depth at 1/4 size %.3f ms\n",
+              1e3 * r.rgbDepthSeconds, 1e3 * r.depthSeconds, 1e3 * r.screenDepthSeconds);
   return r;
 }
 
@@ -205,7 +214,8 @@ int main(int argc, char** argv) {
           "(x%.2f)  acceptance %4.1f%%\n"
           "    screened %.0f%% of candidates, false rejections %.4f (%.0f of %.0f)  "
           "RGB+depth / depth-only render %.2fx\n"
-          "    time: render %4.1f%%  covis %4.1f%%  encode %4.1f%%  write %4.1f%%\n",
+          "    time: render %4.1f%%  screen %4.1f%%  sampling %4.1f%%  covis %4.1f%%  encode "
+          "%4.1f%%  write %4.1f%%\n",
           name.c_str(), stats["triangles"].get<size_t>(), stats["load_seconds"].get<double>(),
           stats["build_seconds"].get<double>(), stats["bytes"].get<double>() / 1e6, rate,
           limit.pairsPerSecond(), rate / limit.pairsPerSecond(), plainRate, rate / plainRate,
@@ -214,7 +224,8 @@ int main(int argc, char** argv) {
               std::max(1.0, screening["candidates_this_run"].get<double>()),
           falseRate, screening["false_rejections"].get<double>(),
           screening["screened"].get<double>(), limit.rgbDepthSeconds / limit.depthSeconds,
-          100 * split["render"].get<double>(), 100 * split["covis"].get<double>(),
+          100 * split["render"].get<double>(), 100 * split["screen"].get<double>(),
+          100 * split["sampling"].get<double>(), 100 * split["covis"].get<double>(),
           100 * split["encode"].get<double>(), 100 * split["write"].get<double>());
       std::fflush(stdout);
       results.push_back({{"scene", name},
@@ -233,6 +244,7 @@ int main(int argc, char** argv) {
       c.load.up = scenes[s].up;
       c.jobs = static_cast<int>(threads);
       c.progress = false;
+      if (refPairs < 1) continue;
       // A few pairs with depth, for the co-visibility comparison.
       c.out = tmp + "/depth" + std::to_string(s);
       c.pairsPerScene = refPairs;

@@ -225,7 +225,7 @@ class GenerateRun {
   std::atomic<size_t> accepted_{0}, failedPairs_{0}, candidates_{0}, screened_{0},
       falseRejections_{0};
   std::mutex timeMu_;
-  double tRender_ = 0, tCovis_ = 0, tEncode_ = 0, tWrite_ = 0;
+  double tRender_ = 0, tScreen_ = 0, tSampling_ = 0, tCovis_ = 0, tEncode_ = 0, tWrite_ = 0;
   std::mutex warnMu_;
   std::vector<nlohmann::json> skipped_;
   std::atomic<int> scenesLoaded_{0}, scenesPeak_{0};
@@ -295,10 +295,6 @@ void GenerateRun::planItems() {
 
 void GenerateRun::run() {
   results_.resize(items_.size());
-  // Nested parallelism off: each worker renders its own samples on one core.
-  omp_set_max_active_levels(1);
-  const int ompThreadsBefore = omp_get_max_threads();
-  omp_set_num_threads(1);
   std::vector<std::thread> threads;
   for (int t = 0; t < jobs_; ++t) threads.emplace_back([this] { worker(); });
   try {
@@ -307,7 +303,6 @@ void GenerateRun::run() {
     fail();
   }
   for (auto& t : threads) t.join();
-  omp_set_num_threads(ompThreadsBefore);
   journal_->sync();
   if (failure_) std::rethrow_exception(failure_);
 }
@@ -364,6 +359,8 @@ void GenerateRun::loadScene(SceneJob& job) {
 }
 
 void GenerateRun::worker() {
+  // OpenMP's thread count is per thread: each worker renders on one core.
+  omp_set_num_threads(1);
   try {
     const size_t window = static_cast<size_t>(4 * jobs_ + 4);
     while (!stop_) {
@@ -418,6 +415,9 @@ Result GenerateRun::makeItem(const Item& item) {
   {
     std::lock_guard<std::mutex> lock(timeMu_);
     tRender_ += sample->renderSeconds;
+    tScreen_ += sample->screenSeconds;
+    tSampling_ += std::max(0.0, sample->totalSeconds - sample->renderSeconds -
+                                    sample->screenSeconds - sample->covisSeconds);
     tCovis_ += sample->covisSeconds;
     tEncode_ += encode;
     tWrite_ += since(t0);
@@ -587,7 +587,8 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
 }
 
 nlohmann::json GenerateRun::summaryJson(double seconds) const {
-  const double split = std::max(tRender_ + tCovis_ + tEncode_ + tWrite_, 1e-12);
+  const double split =
+      std::max(tRender_ + tScreen_ + tSampling_ + tCovis_ + tEncode_ + tWrite_, 1e-12);
   nlohmann::json sceneStats = nlohmann::json::array();
   for (const auto& job : scenes_)
     if (!job->stats.is_null()) sceneStats.push_back(job->stats);
@@ -609,11 +610,18 @@ nlohmann::json GenerateRun::summaryJson(double seconds) const {
           {"candidate_covis_histogram", candidateHistogram_},
           {"time_split",
            {{"render", tRender_ / split},
+            {"screen", tScreen_ / split},
+            {"sampling", tSampling_ / split},
             {"covis", tCovis_ / split},
             {"encode", tEncode_ / split},
             {"write", tWrite_ / split}}},
           {"time_seconds",
-           {{"render", tRender_}, {"covis", tCovis_}, {"encode", tEncode_}, {"write", tWrite_}}},
+           {{"render", tRender_},
+            {"screen", tScreen_},
+            {"sampling", tSampling_},
+            {"covis", tCovis_},
+            {"encode", tEncode_},
+            {"write", tWrite_}}},
           {"skipped_scenes", skipped_},
           {"scene_stats", sceneStats},
           {"scenes_in_memory_max", scenesPeak_.load()},

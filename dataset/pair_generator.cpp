@@ -83,6 +83,7 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
                                                   std::vector<float>* candidates) const {
+  const auto start = Clock::now();
   Rng rng(mixSeed(seed, scene_.name, index));
   PairSample s;
   s.scene = scene_.name;
@@ -104,6 +105,7 @@ std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
     if (static_cast<int>(views.size()) < options_.views) continue;
     finish(views, s);
     if (candidates) *candidates = s.candidateCovis;
+    s.totalSeconds = since(start);
     return s;
   }
   if (candidates) *candidates = s.candidateCovis;
@@ -152,7 +154,7 @@ bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
   cam.t_cam2world = v.at.camera.t_cam2world;
   auto t0 = Clock::now();
   caster_.renderDepth(cam, v.screenDepth);
-  s.renderSeconds += since(t0);
+  s.screenSeconds += since(t0);
   bool out = validFraction(v.screenDepth) < options_.minValidFraction - options_.screenValidMargin;
   if (!out && ref && !options_.accept) {
     Camera refCam = screenIntrinsics_;
@@ -161,7 +163,7 @@ bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
     t0 = Clock::now();
     const double estimate =
         computeCovisibility(refCam, ref->screenDepth, cam, v.screenDepth, options_.covis).covis;
-    s.covisSeconds += since(t0);
+    s.screenSeconds += since(t0);
     out = estimate < options_.minCovis - options_.screenCovisMargin ||
           estimate > options_.maxCovis + options_.screenCovisMargin;
     if (out) s.candidateCovis.push_back(static_cast<float>(estimate));

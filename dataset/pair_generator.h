@@ -77,8 +77,10 @@ struct PairSample {
   std::vector<float> candidateCovis;  // covis of every candidate tried (screened ones: estimate)
   size_t screened = 0;                // candidates and references turned down by screening
   size_t falseRejections = 0;         // of those, the ones full resolution would have kept (audit)
-  double renderSeconds = 0;
+  double renderSeconds = 0;           // full resolution
+  double screenSeconds = 0;           // screening: low-resolution renders and covis estimates
   double covisSeconds = 0;
+  double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
 
   int views() const { return static_cast<int>(camera.size()); }
 };

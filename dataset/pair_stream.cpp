@@ -49,9 +49,7 @@ void PairStream::stop() {
 }
 
 void PairStream::work() {
-  // Each worker renders its own pairs on one core, as generate_pairs' workers do: the threads
-  // already fill the cores, and nested OpenMP teams would oversubscribe them.
-  omp_set_num_threads(1);
+  omp_set_num_threads(1);  // per thread: each worker renders on one core
   while (!stopped_) {
     // The counter interleaves this part's pairs over all scenes.
     const uint64_t n = counter_++;
