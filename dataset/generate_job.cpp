@@ -26,6 +26,7 @@
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
+#include "util/progress_line.h"
 #include "util/timer.h"
 
 namespace paircast {
@@ -120,29 +121,18 @@ void removeTemporaries(const std::string& dir) {
   }
 }
 
-class ProgressLine {
- public:
-  ProgressLine(bool enabled, size_t total)
-      : enabled_(enabled), tty_(isatty(2)), total_(total), start_(Clock::now()) {}
-  // On a terminal the line is redrawn twice a second; in a log, one line every 10 s.
-  void update(size_t done, size_t accepted, size_t candidates, bool force = false) {
-    if (!enabled_ || (!force && since(last_) < (tty_ ? 0.5 : 10.0))) return;
-    last_ = Clock::now();
-    const double t = since(start_);
-    const double rate = done / std::max(t, 1e-9);
-    const double eta = rate > 0 ? (total_ - done) / rate : 0;
-    std::fprintf(
-        stderr, "%s[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds%s",
-        tty_ ? "\r" : "", done, total_, accepted / std::max(t, 1e-9),
-        candidates ? 100.0 * accepted / candidates : 0.0, static_cast<int>(eta) / 60,
-        static_cast<int>(eta) % 60, tty_ && !force ? "   " : "\n");
-  }
-
- private:
-  bool enabled_, tty_;
-  size_t total_;
-  Clock::time_point start_, last_{};
-};
+// "[generate_pairs] 120/500 pairs  38.1 pairs/s  acceptance 6%  ETA 0m10s"
+std::string progressText(size_t done, size_t total, size_t accepted, size_t candidates,
+                         double seconds) {
+  const double rate = done / std::max(seconds, 1e-9);
+  const int eta = rate > 0 ? static_cast<int>((total - done) / rate) : 0;
+  char line[160];
+  std::snprintf(line, sizeof line,
+                "[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds",
+                done, total, accepted / std::max(seconds, 1e-9),
+                candidates ? 100.0 * accepted / candidates : 0.0, eta / 60, eta % 60);
+  return line;
+}
 
 void validateConfig(const GenerateConfig& cfg) {
   if (cfg.out.empty()) throw Error("--out is required");
@@ -418,7 +408,13 @@ Result GenerateRun::makeItem(const Item& item) {
 // Takes results in item order: journal first, then the shard, so that every sample of a
 // completed shard is in the journal.
 void GenerateRun::writeInOrder() {
-  ProgressLine progress(cfg_.progress, items_.size());
+  ProgressLine progress(cfg_.progress);
+  const auto started = Clock::now();
+  auto show = [&](size_t done, bool last) {
+    if (last || progress.due())
+      progress.show(progressText(done, items_.size(), accepted_, candidates_, since(started)),
+                    last);
+  };
   for (size_t i = 0; i < items_.size(); ++i) {
     Result r;
     {
@@ -437,10 +433,10 @@ void GenerateRun::writeInOrder() {
       std::lock_guard<std::mutex> lock(timeMu_);
       tWrite_ += since(t0);
     }
-    progress.update(i + 1, accepted_, candidates_);
+    show(i + 1, false);
   }
   if (shard_ && !stop_) closeShard();
-  progress.update(items_.size(), accepted_, candidates_, true);
+  show(items_.size(), true);
 }
 
 void GenerateRun::addToShard(const EncodedPair& pair) {
