@@ -87,13 +87,20 @@ uint64_t plyValueBytes(const std::string& type, bool ascii) {
   return ascii ? 2 : it->second;
 }
 
+struct PlyProperty {
+  std::string name;
+  std::string type;       // of the value, or of a list's items
+  std::string countType;  // of a list's length; empty for a scalar property
+};
 struct PlyElement {
   std::string name;
   uint64_t count = 0;
   uint64_t minBytes = 0;  // per instance
+  std::vector<PlyProperty> properties;
 };
 struct PlyHeader {
   uint64_t bytes = 0;  // up to and including the end_header line
+  std::string format;  // ascii, binary_little_endian or binary_big_endian
   std::vector<PlyElement> elements;
 };
 
@@ -142,6 +149,7 @@ PlyHeader readPlyHeader(const std::string& path) {
       if (w[1] != "ascii" && w[1] != "binary_little_endian" && w[1] != "binary_big_endian")
         throw bad("unknown format '" + w[1] + "'");
       ascii = w[1] == "ascii";
+      h.format = w[1];
       hasFormat = true;
     } else if (word == "element") {
       if (!hasFormat) throw bad("element before the format line");
@@ -166,6 +174,7 @@ PlyHeader readPlyHeader(const std::string& path) {
       const uint64_t bytes = plyValueBytes(type, ascii);  // a list may be empty: only its count
       if (bytes == 0) throw bad("unknown type '" + type + "'");
       h.elements.back().minBytes += bytes;
+      h.elements.back().properties.push_back({w.back(), w[list ? 3 : 1], list ? type : ""});
     } else {
       throw bad("unknown keyword '" + word + "'");
     }
@@ -180,8 +189,8 @@ PlyHeader readPlyHeader(const std::string& path) {
 // that many vertices before reading one: a 200-byte file claiming 3e8 vertices made it touch
 // 9 GB for 195 s. Counts the rest of the file cannot hold, and counts over the limits, are
 // refused here.
-void checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptions& options) {
-  const PlyHeader h = readPlyHeader(path);
+PlyHeader checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptions& options) {
+  PlyHeader h = readPlyHeader(path);
   const uint64_t body = fileBytes > h.bytes ? fileBytes - h.bytes : 0;
   for (const PlyElement& e : h.elements) {
     const uint64_t atMost = body / std::max<uint64_t>(e.minBytes, 1);
@@ -199,6 +208,213 @@ void checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptio
                             " faces, more than the limit of " +
                             std::to_string(options.maxTriangles));
   }
+  return h;
+}
+
+// The binary little-endian PLY files that scans ship (ScanNet's *_vh_clean_2.ply, Replica's
+// mesh.ply) are read here directly: assimp's PLY importer keeps every property of every vertex
+// in generic containers and took most of the load time and memory of a million-triangle scan.
+enum class PlyType { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
+
+PlyType plyType(const std::string& type) {
+  static const std::map<std::string, PlyType> types = {
+      {"char", PlyType::Int8},      {"int8", PlyType::Int8},       {"uchar", PlyType::UInt8},
+      {"uint8", PlyType::UInt8},    {"short", PlyType::Int16},     {"int16", PlyType::Int16},
+      {"ushort", PlyType::UInt16},  {"uint16", PlyType::UInt16},   {"int", PlyType::Int32},
+      {"int32", PlyType::Int32},    {"uint", PlyType::UInt32},     {"uint32", PlyType::UInt32},
+      {"float", PlyType::Float32},  {"float32", PlyType::Float32}, {"double", PlyType::Float64},
+      {"float64", PlyType::Float64}};
+  return types.at(type);  // readPlyHeader accepted only these
+}
+
+size_t plySize(PlyType t) {
+  static constexpr size_t sizes[] = {1, 1, 2, 2, 4, 4, 4, 8};
+  return sizes[static_cast<int>(t)];
+}
+
+double plyRead(PlyType t, const char* p) {
+  switch (t) {
+    case PlyType::Int8:
+      return static_cast<int8_t>(*p);
+    case PlyType::UInt8:
+      return static_cast<uint8_t>(*p);
+    case PlyType::Int16: {
+      int16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case PlyType::UInt16: {
+      uint16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case PlyType::Int32: {
+      int32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::UInt32: {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::Float32: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::Float64: {
+      double v;
+      std::memcpy(&v, p, 8);
+      return v;
+    }
+  }
+  return 0;
+}
+
+bool isIntegerType(PlyType t) {
+  return t != PlyType::Float32 && t != PlyType::Float64;
+}
+
+// Whether the fast reader handles the file: binary little-endian, one vertex element with x y z,
+// one face element whose only list is the vertex indices, and no other lists.
+bool plyFastPathApplies(const PlyHeader& h) {
+  if (h.format != "binary_little_endian") return false;
+  int vertexElements = 0, faceElements = 0;
+  for (const PlyElement& e : h.elements) {
+    int lists = 0, xyz = 0;
+    for (const PlyProperty& p : e.properties) {
+      if (!p.countType.empty()) {
+        if (e.name != "face" || (p.name != "vertex_indices" && p.name != "vertex_index") ||
+            !isIntegerType(plyType(p.type)) || !isIntegerType(plyType(p.countType)))
+          return false;
+        ++lists;
+      }
+      xyz += p.name == "x" || p.name == "y" || p.name == "z";
+    }
+    if (e.name == "vertex") {
+      ++vertexElements;
+      if (xyz != 3) return false;
+    } else if (e.name == "face") {
+      ++faceElements;
+      if (lists != 1) return false;
+    } else if (lists != 0) {
+      return false;
+    }
+  }
+  return vertexElements == 1 && faceElements == 1;
+}
+
+// Reads the body of a PLY file plyFastPathApplies accepted into `mesh` (positions scaled, sRGB
+// 8-bit colours made linear, polygons fanned into triangles, one white material). Every count,
+// length and index is checked against the bytes there are and the vertices read.
+void readBinaryPly(const std::string& path, const PlyHeader& h, const LoadOptions& options,
+                   Mesh& mesh) {
+  const std::string data = readFile(path);  // within maxFileBytes, checked by the caller
+  const char* const end = data.data() + data.size();
+  const char* p = data.data() + std::min<uint64_t>(h.bytes, data.size());
+  auto truncated = [&](const PlyElement& e, uint64_t index) {
+    return Error(path, "cannot load scene: PLY file is truncated: it ends in '" + e.name +
+                           "' element " + std::to_string(index) + " of " + std::to_string(e.count));
+  };
+  const float scale = static_cast<float>(options.scale);
+  std::array<float, 256> linear;
+  for (int i = 0; i < 256; ++i) linear[i] = srgbToLinear(i / 255.0f);
+  mesh.addMaterial(Material{});
+  uint64_t vertexCount = 0;
+  bool verticesRead = false;
+  for (const PlyElement& e : h.elements) {
+    std::vector<PlyType> types;
+    std::vector<size_t> offsets;
+    size_t stride = 0;
+    for (const PlyProperty& prop : e.properties) {
+      types.push_back(plyType(prop.type));
+      offsets.push_back(stride);
+      stride += prop.countType.empty() ? plySize(types.back()) : 0;
+    }
+    if (e.name != "face") {  // fixed-size records
+      if (e.count > static_cast<uint64_t>(end - p) / std::max<size_t>(stride, 1))
+        throw truncated(e, static_cast<uint64_t>(end - p) / std::max<size_t>(stride, 1));
+      if (e.name == "vertex") {
+        int x = -1, y = -1, z = -1, r = -1, g = -1, b = -1;
+        for (size_t k = 0; k < e.properties.size(); ++k) {
+          const std::string& n = e.properties[k].name;
+          const int ik = static_cast<int>(k);
+          if (n == "x") x = ik;
+          if (n == "y") y = ik;
+          if (n == "z") z = ik;
+          if (n == "red" || n == "diffuse_red") r = ik;
+          if (n == "green" || n == "diffuse_green") g = ik;
+          if (n == "blue" || n == "diffuse_blue") b = ik;
+        }
+        const bool rgb8 = r >= 0 && g >= 0 && b >= 0 && types[r] == PlyType::UInt8 &&
+                          types[g] == PlyType::UInt8 && types[b] == PlyType::UInt8;
+        const bool rgbFloat = !rgb8 && r >= 0 && g >= 0 && b >= 0;
+        mesh.positions.resize(e.count);
+        mesh.uvs.assign(e.count, Eigen::Vector2f::Zero());
+        mesh.colors.resize(e.count);
+        auto channel = [&](const char* rec, int k) {
+          return srgbToLinear(std::clamp(static_cast<float>(plyRead(types[k], rec + offsets[k])) /
+                                             (isIntegerType(types[k]) ? 255.0f : 1.0f),
+                                         0.0f, 1.0f));
+        };
+        for (uint64_t i = 0; i < e.count; ++i, p += stride) {
+          mesh.positions[i] = scale * Eigen::Vector3f(plyRead(types[x], p + offsets[x]),
+                                                      plyRead(types[y], p + offsets[y]),
+                                                      plyRead(types[z], p + offsets[z]));
+          if (rgb8)
+            mesh.colors[i] = {linear[static_cast<uint8_t>(p[offsets[r]])],
+                              linear[static_cast<uint8_t>(p[offsets[g]])],
+                              linear[static_cast<uint8_t>(p[offsets[b]])]};
+          else if (rgbFloat)
+            mesh.colors[i] = {channel(p, r), channel(p, g), channel(p, b)};
+          else
+            mesh.colors[i].setOnes();
+        }
+        vertexCount = e.count;
+        verticesRead = true;
+      } else {
+        p += e.count * stride;
+      }
+      continue;
+    }
+    if (!verticesRead)
+      throw Error(path, "cannot load scene: PLY faces come before the vertices they index");
+    mesh.triangles.reserve(std::min<uint64_t>(e.count, options.maxTriangles));
+    for (uint64_t f = 0; f < e.count; ++f) {
+      for (size_t k = 0; k < types.size(); ++k) {
+        if (e.properties[k].countType.empty()) {
+          if (static_cast<size_t>(end - p) < plySize(types[k])) throw truncated(e, f);
+          p += plySize(types[k]);
+          continue;
+        }
+        const PlyType countType = plyType(e.properties[k].countType);
+        if (static_cast<size_t>(end - p) < plySize(countType)) throw truncated(e, f);
+        const double n = plyRead(countType, p);
+        p += plySize(countType);
+        if (n < 0 || n > static_cast<double>(end - p) / plySize(types[k])) throw truncated(e, f);
+        const size_t corners = static_cast<size_t>(n), itemSize = plySize(types[k]);
+        auto index = [&](size_t c) {
+          const double v = plyRead(types[k], p + c * itemSize);
+          if (v < 0 || v >= static_cast<double>(vertexCount))
+            throw Error(path, "cannot load scene: PLY face " + std::to_string(f) +
+                                  " names vertex " + std::to_string(static_cast<int64_t>(v)) +
+                                  ", but the file has " + std::to_string(vertexCount) +
+                                  " vertices");
+          return static_cast<int>(v);
+        };
+        // Points and lines are dropped, as assimp's SortByPType does; polygons become fans.
+        for (size_t c = 2; c < corners; ++c) {
+          if (mesh.triangles.size() >= options.maxTriangles)
+            throw Error(path, "scene has more than " + std::to_string(options.maxTriangles) +
+                                  " triangles (the limit)");
+          mesh.triangles.emplace_back(index(0), index(c - 1), index(c));
+        }
+        p += corners * itemSize;
+      }
+    }
+  }
+  mesh.triangleMaterial.assign(mesh.triangles.size(), 0);
 }
 
 // assimp 5.2.5 takes strchr(mimeType, '/') + 1 for an embedded image without checking it, so a
@@ -452,8 +668,25 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
     throw Error(path, "unsupported scene format '" + fs::path(path).extension().string() +
                           "' (glb, gltf, obj, ply, fbx, dae, ifc, ... are supported)");
 
+  Scene out;
+  out.path = path;
+  out.name = fs::path(path).stem().string();
+  out.up = options.up;
+  // The checks every loader ends with: no triangles, bad indices, non-finite vertices.
+  auto checked = [&](Scene& scene) {
+    if (scene.mesh.numTriangles() == 0) throw Error(path, "scene has no triangles");
+    scene.mesh.validate(path);
+    return std::move(scene);
+  };
+
   const std::string ext = lower(fs::path(path).extension().string());
-  if (ext == ".ply") checkPlyHeader(path, bytes, options);
+  if (ext == ".ply") {
+    const PlyHeader header = checkPlyHeader(path, bytes, options);
+    if (options.plyFastPath && plyFastPathApplies(header)) {
+      readBinaryPly(path, header, options, out.mesh);
+      return checked(out);
+    }
+  }
   if (ext == ".glb") checkGlbHeader(path, bytes);
   if (ext == ".gltf") checkGltfJson(path, readFile(path));  // within maxFileBytes, checked above
 
@@ -492,10 +725,6 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
                           " vertices, more than the limit of " +
                           std::to_string(options.maxVertices));
 
-  Scene out;
-  out.path = path;
-  out.name = fs::path(path).stem().string();
-  out.up = options.up;
   out.mesh.positions.reserve(vertices);
   out.mesh.triangles.reserve(triangles);
 
@@ -508,9 +737,7 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   const bool linearVertexColors = ext == ".glb" || ext == ".gltf";
   appendNode(AppendContext{scene, path, options, materialMap, linearVertexColors}, scene->mRootNode,
              aiMatrix4x4(), out.mesh);
-  if (out.mesh.numTriangles() == 0) throw Error(path, "scene has no triangles");
-  out.mesh.validate(path);
-  return out;
+  return checked(out);
 }
 
 }  // namespace paircast
