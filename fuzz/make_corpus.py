@@ -69,8 +69,32 @@ def ply_binary(endian):
     return header.encode() + body
 
 
+def ply_scan(replica):
+    """Binary little-endian, as ScanNet (x y z, uchar RGBA, triangles) and Replica (x y z,
+    nx ny nz, uchar RGB, quads) write them: the files loadScene's own PLY reader takes."""
+    props = "property float x\nproperty float y\nproperty float z\n"
+    if replica:
+        props += "property float nx\nproperty float ny\nproperty float nz\n"
+    props += "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+    if not replica:
+        props += "property uchar alpha\n"
+    faces = [(0, 1, 2, 3)] if replica else [(0, 1, 2), (0, 2, 3)]
+    header = ("ply\nformat binary_little_endian 1.0\nelement vertex 4\n" + props +
+              "element face %d\nproperty list uchar int vertex_indices\nend_header\n" % len(faces))
+    body = b""
+    for x, y in [(0, 0), (1, 0), (1, 1), (0, 1)]:
+        body += struct.pack("<3f", x, y, 0)
+        body += struct.pack("<3f", 0, 0, 1) if replica else b""
+        body += bytes([200, 100, 50]) + (b"" if replica else b"\xff")
+    for face in faces:
+        body += struct.pack("<B%di" % len(face), len(face), *face)
+    return header.encode() + body
+
+
 def ply_seeds():
     write("fuzz_scene_ply", "triangle_ascii.ply", PLY_TRI_ASCII)
+    write("fuzz_scene_ply", "scannet_rgba_binary_le.ply", ply_scan(False))
+    write("fuzz_scene_ply", "replica_quads_binary_le.ply", ply_scan(True))
     write("fuzz_scene_ply", "quad_binary_le.ply", ply_binary("<"))
     write("fuzz_scene_ply", "quad_binary_be.ply", ply_binary(">"))
     write("fuzz_scene_ply", "quad_ascii_polygon.ply",

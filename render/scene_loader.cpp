@@ -3,6 +3,7 @@
 #include <assimp/DefaultIOSystem.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <Eigen/Geometry>
 #include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
 #include <nlohmann/json.hpp>
@@ -10,6 +11,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -26,11 +28,30 @@ namespace fs = std::filesystem;
 UpAxis parseUpAxis(const std::string& text) {
   if (text == "y" || text == "Y") return UpAxis::Y;
   if (text == "z" || text == "Z") return UpAxis::Z;
-  throw Error("invalid up axis '" + text + "' (use y or z)");
+  if (text == "auto") return UpAxis::Auto;
+  throw Error("invalid up axis '" + text + "' (use y, z or auto)");
 }
 
 Eigen::Vector3f upVector(UpAxis up) {
+  PAIRCAST_CHECK_MSG(up != UpAxis::Auto, "the up axis is resolved when the scene is loaded");
   return up == UpAxis::Y ? Eigen::Vector3f::UnitY() : Eigen::Vector3f::UnitZ();
+}
+
+UpAxis guessUpAxis(const Mesh& mesh, const std::string& path) {
+  const float cos30 = std::cos(static_cast<float>(M_PI) / 6.0f);
+  double across[2] = {0.0, 0.0};  // area of surfaces across y, across z
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    const Eigen::Vector3f& a = mesh.positions[t[0]];
+    const Eigen::Vector3f n = (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a);
+    const float area = 0.5f * n.norm();
+    if (!(area > 0.0f)) continue;
+    if (std::abs(n.y()) >= cos30 * 2.0f * area) across[0] += area;
+    if (std::abs(n.z()) >= cos30 * 2.0f * area) across[1] += area;
+  }
+  if (across[1] > 1.25 * across[0]) return UpAxis::Z;
+  if (across[0] > 1.25 * across[1]) return UpAxis::Y;
+  throw Error(path, "cannot tell the up axis (" + std::to_string(across[0]) + " m^2 across y, " +
+                        std::to_string(across[1]) + " m^2 across z): pass --up y or --up z");
 }
 
 bool isSupportedSceneFile(const std::string& path) {
@@ -398,7 +419,7 @@ void readBinaryPly(const std::string& path, const PlyHeader& h, const LoadOption
           const double v = plyRead(types[k], p + c * itemSize);
           if (v < 0 || v >= static_cast<double>(vertexCount))
             throw Error(path, "cannot load scene: PLY face " + std::to_string(f) +
-                                  " names vertex " + std::to_string(static_cast<int64_t>(v)) +
+                                  " has vertex index " + std::to_string(static_cast<int64_t>(v)) +
                                   ", but the file has " + std::to_string(vertexCount) +
                                   " vertices");
           return static_cast<int>(v);
@@ -421,12 +442,37 @@ void readBinaryPly(const std::string& path, const PlyHeader& h, const LoadOption
 // media type without '/' makes it read address 1 (fuzz_scene_glb found it). The glTF JSON is
 // parsed here first: it must be valid JSON (UTF-8 included), and every image's media type
 // (mimeType, or that of a data: URI) must be "type/subtype".
-void checkGltfJson(const std::string& path, const std::string& text) {
+//
+// It also looks at the extensions the habitat datasets use that assimp 5.2.5 does not decode:
+// EXT_meshopt_compression buffers are refused (assimp would read the uncompressed fallback,
+// often empty or garbage, and render garbled geometry silently); Basis Universal textures
+// (GOOGLE_texture_basis, KHR_texture_basisu) are reported, so that the scene renders with its
+// base colours and one warning. KHR_draco_mesh_compression is decoded by Debian's assimp.
+struct GltfCheck {
+  std::string basisExtension;  // the Basis Universal extension the textures use, or ""
+};
+
+GltfCheck checkGltfJson(const std::string& path, const std::string& text) {
   const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
   if (j.is_discarded() || !j.is_object())
     throw Error(path, "cannot load scene: the glTF JSON is not a valid JSON object");
+  GltfCheck check;
+  for (const char* key : {"extensionsUsed", "extensionsRequired"}) {
+    const auto list = j.find(key);
+    if (list == j.end() || !list->is_array()) continue;
+    for (const auto& name : *list) {
+      if (!name.is_string()) continue;
+      const std::string ext = name.get<std::string>();
+      if (ext == "EXT_meshopt_compression" || ext == "KHR_meshopt_compression")
+        throw Error(path, "cannot load scene: it uses " + ext +
+                              " (meshoptimizer-compressed buffers), which paircast does not "
+                              "decode; export the scene without it (as the habitat datasets' "
+                              "plain .glb files are)");
+      if (ext == "GOOGLE_texture_basis" || ext == "KHR_texture_basisu") check.basisExtension = ext;
+    }
+  }
   const auto images = j.find("images");
-  if (images == j.end()) return;
+  if (images == j.end()) return check;
   if (!images->is_array()) throw Error(path, "cannot load scene: glTF 'images' is not an array");
   for (size_t i = 0; i < images->size(); ++i) {
     const nlohmann::json& image = (*images)[i];
@@ -446,6 +492,7 @@ void checkGltfJson(const std::string& path, const std::string& text) {
       throw Error(path, "cannot load scene: glTF image " + std::to_string(i) + " has media type '" +
                             type.substr(0, 64) + "', not type/subtype");
   }
+  return check;
 }
 
 uint32_t le32(const unsigned char* p) {
@@ -456,10 +503,12 @@ uint32_t le32(const unsigned char* p) {
 // it: a 1 KB file claiming a 4 GB JSON chunk made it ask for 4 GB (fuzz_scene_glb found it).
 // Lengths the file cannot hold are refused here; files without the glTF magic are left to
 // assimp.
-void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
+GltfCheck checkGlbHeader(const std::string& path, uint64_t fileBytes) {
   std::ifstream in(path, std::ios::binary);
   unsigned char header[20];
-  if (!in.read(reinterpret_cast<char*>(header), 12) || std::memcmp(header, "glTF", 4) != 0) return;
+  GltfCheck check;
+  if (!in.read(reinterpret_cast<char*>(header), 12) || std::memcmp(header, "glTF", 4) != 0)
+    return check;
   const uint32_t version = le32(header + 4), length = le32(header + 8);
   if (length > fileBytes)
     throw Error(path, "cannot load scene: GLB header claims " + std::to_string(length) +
@@ -469,11 +518,11 @@ void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
       throw Error(path, "cannot load scene: GLB header claims a " +
                             std::to_string(le32(header + 12)) +
                             "-byte scene, more than the file holds");
-    return;
+    return check;
   }
   for (uint64_t offset = 12; offset + 8 <= fileBytes;) {  // chunks: length, type, data
     in.seekg(static_cast<std::streamoff>(offset));
-    if (!in.read(reinterpret_cast<char*>(header), 8)) return;
+    if (!in.read(reinterpret_cast<char*>(header), 8)) return check;
     const uint64_t chunk = le32(header);
     if (chunk > fileBytes - offset - 8)
       throw Error(path, "cannot load scene: GLB chunk at byte " + std::to_string(offset) +
@@ -483,21 +532,23 @@ void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
       std::string json(chunk, '\0');
       if (!in.read(json.data(), static_cast<std::streamsize>(chunk)))
         throw Error(path, "cannot load scene: cannot read the GLB's JSON chunk");
-      checkGltfJson(path, json);
+      check = checkGltfJson(path, json);
     }
     offset += 8 + chunk;
   }
+  return check;
 }
 
 // Converts one assimp material and its texture to ours, loading each texture file once.
 class MaterialBuilder {
  public:
-  MaterialBuilder(const aiScene* scene, const std::string& path, uint64_t maxFileBytes, Mesh& mesh,
-                  std::vector<std::string>& warnings)
+  MaterialBuilder(const aiScene* scene, const std::string& path, uint64_t maxFileBytes,
+                  bool noTextures, Mesh& mesh, std::vector<std::string>& warnings)
       : scene_(scene),
         path_(path),
         dir_(fs::path(path).parent_path()),
         maxFileBytes_(maxFileBytes),
+        noTextures_(noTextures),
         mesh_(mesh),
         warnings_(warnings) {}
 
@@ -511,6 +562,7 @@ class MaterialBuilder {
       m.baseColor = Eigen::Vector3f(color.r, color.g, color.b).cwiseMax(0.0f).cwiseMin(1.0f);
     }
     aiString texPath;
+    if (noTextures_) return mesh_.addMaterial(m);
     if (in->GetTexture(aiTextureType_BASE_COLOR, 0, &texPath) == AI_SUCCESS ||
         in->GetTexture(aiTextureType_DIFFUSE, 0, &texPath) == AI_SUCCESS) {
       m.texture = texture(texPath.C_Str());
@@ -568,6 +620,7 @@ class MaterialBuilder {
   std::string path_;
   fs::path dir_;
   uint64_t maxFileBytes_;
+  bool noTextures_;  // the textures are Basis Universal: base colours only, warned about once
   Mesh& mesh_;
   std::vector<std::string>& warnings_;
   std::map<std::string, int> cache_;
@@ -676,6 +729,7 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   auto checked = [&](Scene& scene) {
     if (scene.mesh.numTriangles() == 0) throw Error(path, "scene has no triangles");
     scene.mesh.validate(path);
+    if (scene.up == UpAxis::Auto) scene.up = guessUpAxis(scene.mesh, path);
     return std::move(scene);
   };
 
@@ -687,8 +741,14 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
       return checked(out);
     }
   }
-  if (ext == ".glb") checkGlbHeader(path, bytes);
-  if (ext == ".gltf") checkGltfJson(path, readFile(path));  // within maxFileBytes, checked above
+  GltfCheck gltf;
+  if (ext == ".glb") gltf = checkGlbHeader(path, bytes);
+  if (ext == ".gltf") gltf = checkGltfJson(path, readFile(path));  // within maxFileBytes
+  if (!gltf.basisExtension.empty())
+    out.warnings.push_back(path + ": textures use " + gltf.basisExtension +
+                           " (Basis Universal), which paircast cannot decode: rendering with base "
+                           "colours; for textures use the plain .glb with JPEG textures (HM3D "
+                           "ships both)");
 
   Assimp::Importer importer;
   importer.SetIOHandler(new LimitedIOSystem(options.maxFileBytes));  // the importer owns it
@@ -728,7 +788,8 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   out.mesh.positions.reserve(vertices);
   out.mesh.triangles.reserve(triangles);
 
-  MaterialBuilder materials(scene, path, options.maxFileBytes, out.mesh, out.warnings);
+  MaterialBuilder materials(scene, path, options.maxFileBytes, !gltf.basisExtension.empty(),
+                            out.mesh, out.warnings);
   std::vector<int> materialMap;
   for (unsigned i = 0; i < scene->mNumMaterials; ++i)
     materialMap.push_back(materials.build(scene->mMaterials[i]));
