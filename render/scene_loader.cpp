@@ -448,6 +448,35 @@ void readBinaryPly(const std::string& path, const PlyHeader& h, const LoadOption
 // often empty or garbage, and render garbled geometry silently); Basis Universal textures
 // (GOOGLE_texture_basis, KHR_texture_basisu) are reported, so that the scene renders with its
 // base colours and one warning. KHR_draco_mesh_compression is decoded by Debian's assimp.
+// Debian's assimp 5.2.5 decodes KHR_draco_mesh_compression, but drops the decoded indices when
+// they are 32-bit (SetDecodedIndexBuffer_Draco returns before attaching them when their size
+// matches Draco's own), and then fails with "Invalid accessor without data". Such files are
+// refused here with the reason; 8- and 16-bit indices decode.
+void checkDracoIndices(const std::string& path, const nlohmann::json& j) {
+  const auto meshes = j.find("meshes");
+  const auto accessors = j.find("accessors");
+  if (meshes == j.end() || !meshes->is_array() || accessors == j.end() || !accessors->is_array())
+    return;
+  for (const auto& mesh : *meshes) {
+    if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array())
+      continue;
+    for (const auto& prim : mesh["primitives"]) {
+      if (!prim.is_object() || !prim.contains("indices") || !prim["indices"].is_number_unsigned() ||
+          !prim.contains("extensions") || !prim["extensions"].is_object() ||
+          !prim["extensions"].contains("KHR_draco_mesh_compression"))
+        continue;
+      const uint64_t index = prim["indices"].get<uint64_t>();
+      if (index >= accessors->size() || !(*accessors)[index].is_object()) continue;
+      const auto& type = (*accessors)[index].value("componentType", nlohmann::json());
+      if (type.is_number() && type == 5125)
+        throw Error(path,
+                    "cannot load scene: a KHR_draco_mesh_compression primitive has 32-bit "
+                    "indices, which assimp 5.2.5 drops when it decodes them; re-encode it "
+                    "with 16-bit indices or without Draco");
+    }
+  }
+}
+
 struct GltfCheck {
   std::string basisExtension;  // the Basis Universal extension the textures use, or ""
 };
@@ -471,6 +500,7 @@ GltfCheck checkGltfJson(const std::string& path, const std::string& text) {
       if (ext == "GOOGLE_texture_basis" || ext == "KHR_texture_basisu") check.basisExtension = ext;
     }
   }
+  checkDracoIndices(path, j);
   const auto images = j.find("images");
   if (images == j.end()) return check;
   if (!images->is_array()) throw Error(path, "cannot load scene: glTF 'images' is not an array");
@@ -537,6 +567,17 @@ GltfCheck checkGlbHeader(const std::string& path, uint64_t fileBytes) {
     offset += 8 + chunk;
   }
   return check;
+}
+
+// assimp's validation messages name its own structures: say what they mean for the file too.
+std::string explainAssimpError(const std::string& message) {
+  if (message.find("contains no faces") != std::string::npos ||
+      message.find("No meshes remaining") != std::string::npos)
+    return "scene has no triangles (assimp: " + message + ")";
+  if (message.find("mIndices") != std::string::npos &&
+      message.find("out of range") != std::string::npos)
+    return "a face has a vertex index out of range (assimp: " + message + ")";
+  return message;
 }
 
 // Converts one assimp material and its texture to ours, loading each texture file once.
@@ -766,9 +807,10 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   } catch (const Error&) {
     throw;
   } catch (const std::exception& e) {
-    throw Error(path, std::string("cannot load scene: ") + e.what());
+    throw Error(path, "cannot load scene: " + explainAssimpError(e.what()));
   }
-  if (!scene) throw Error(path, std::string("cannot load scene: ") + importer.GetErrorString());
+  if (!scene)
+    throw Error(path, "cannot load scene: " + explainAssimpError(importer.GetErrorString()));
   if (!scene->mRootNode || (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE))
     throw Error(path, "scene is incomplete or has no geometry");
 
