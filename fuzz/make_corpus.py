@@ -139,6 +139,27 @@ def glb_seeds():
                       {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}],
     }, positions + indices))
 
+    # The same triangle with a Basis Universal texture, as HM3D's .basis.glb files hold
+    # (GOOGLE_texture_basis: a texture without a plain source, an image/basis image).
+    basis = b"sB" + bytes(range(30))
+    write("fuzz_scene_glb", "basis_texture.glb", glb({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.2, 0.2, 1],
+                                                "baseColorTexture": {"index": 0}}}],
+        "textures": [{"extensions": {"GOOGLE_texture_basis": {"source": 0}}}],
+        "images": [{"bufferView": 2, "mimeType": "image/basis"}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36},
+                        {"buffer": 0, "byteOffset": 36, "byteLength": 6},
+                        {"buffer": 0, "byteOffset": 44, "byteLength": len(basis)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 0]},
+                      {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}],
+        "extensionsUsed": ["GOOGLE_texture_basis"],
+        "extensionsRequired": ["GOOGLE_texture_basis"],
+    }, positions + indices + basis))
+
     # A quad with colours and UVs, instanced by two nodes under a rotated parent, and a texture
     # held in the file (a 1x1 PNG).
     quad = struct.pack("<12f", 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0)
