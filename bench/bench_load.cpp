@@ -33,7 +33,7 @@ int main(int argc, char** argv) {
   bool assimp = false;
   CLI::App app{"Load, BVH and floor-map time and peak RSS of big scenes"};
   app.add_option("--scene", scenes, "Scene files (default: generate scans)");
-  app.add_option("--up", up, "Up axis of --scene files (y or z)");
+  app.add_option("--up", up, "Up axis of --scene files (y, z or auto)");
   app.add_option("--scan", kinds, "Scan kind to generate: scannet, replica or mp3d");
   app.add_option("--triangles", triangles, "Triangles of the generated scan");
   app.add_option("--out", out, "Where generated scans go");
