@@ -86,13 +86,19 @@ std::pair<json, std::string> floorQuad(const std::string& extra = "") {
   return {j, bin};
 }
 
-TEST(Gltf, PlainFloorQuadLoads) {
+// Habitat's glbs (HM3D, MP3D, Gibson) are z-up whatever glTF's spec says: positions are never
+// rotated, so a floor in the xy plane stays there, and --up z (or auto) finds it.
+TEST(Gltf, ZUpFloorStaysInTheXyPlane) {
   auto [j, bin] = floorQuad();
   LoadOptions o;
-  o.up = UpAxis::Z;
+  o.up = UpAxis::Auto;
   const Scene scene = loadScene(writeGlb("plain", j, bin), o);
   EXPECT_EQ(scene.mesh.numTriangles(), 2u);
   EXPECT_TRUE(scene.warnings.empty());
+  EXPECT_EQ(scene.up, UpAxis::Z);
+  const MeshStats stats = computeStats(scene.mesh);
+  EXPECT_EQ(stats.boundsMin, Eigen::Vector3f(0, 0, 0));
+  EXPECT_EQ(stats.boundsMax, Eigen::Vector3f(4, 4, 0));
 }
 
 TEST(Gltf, BasisTexturesLoadWithOneWarningAndTheBaseColours) {
