@@ -201,11 +201,11 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
     covered += std::isfinite(headroom);
     open.push_back(candidates[k]);
   }
-  // A scene with ceilings over a good part (a fifth) of its open floor is an interior: then a
-  // standing point with nothing above is inside only when walls surround it (a gap in a scan's
-  // ceiling), not on a roof or the ground outside. A roof is about as large as the floors under
-  // it, so "most" would be the wrong test.
-  hasCeiling_ = !open.empty() && covered * 5 >= open.size();
+  // A scene with a ceiling over a room's worth of open floor (minRegionArea) is an interior: then
+  // a standing point with nothing above is inside only when walls surround it (a gap in a scan's
+  // ceiling), not on a roof or the ground outside. No share of the open floor would do: a roof
+  // is about as large as the floors under it, and the ground around a house can be far larger.
+  hasCeiling_ = covered * cell_ * cell_ >= o.minRegionArea;
   if (hasCeiling_) {
     std::vector<Candidate> uncovered;
     for (const Candidate& c : open)

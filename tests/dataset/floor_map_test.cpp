@@ -118,6 +118,23 @@ TEST(FloorMap, RoomWithoutCeilingHasAFloor) {
   for (const auto& p : floor.points()) ASSERT_NEAR(p.y(), 0.0f, 1e-3f);
 }
 
+TEST(FloorMap, GroundOutsideAndRoofAreNotInside) {
+  // The room on a 30 x 30 m ground: the ground and the roof have nothing above them and no walls
+  // around them; only the room's floor is walkable.
+  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+  boxes.push_back({{-15.0f, -0.2f, -15.0f}, {15.0f, -0.1f, 15.0f}});
+  const Scene scene = boxesScene(boxes);
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  ASSERT_FALSE(floor.empty());
+  EXPECT_TRUE(floor.hasCeiling());
+  for (const auto& p : floor.points()) {
+    ASSERT_NEAR(p.y(), 0.0f, 1e-3f) << p.transpose();
+    ASSERT_LT(std::abs(p.x()), 3.0f) << p.transpose();
+    ASSERT_LT(std::abs(p.z()), 2.5f) << p.transpose();
+  }
+}
+
 TEST(FloorMap, NobodyStandsOverAHoleInTheFloor) {
   // The floor slab has a 1 x 1 m hole over a basement 1.2 m below: what shows through it is
   // too small and too low (1.1 m of headroom around) to walk in.
