@@ -383,6 +383,7 @@ Result GenerateRun::makeItem(const Item& item) {
   EncodedPair enc = encodePair(*sample, cfg_.saveDepth, cfg_.jpegQuality);
   enc.record["candidate_covis"] = sample->candidateCovis;
   enc.record["screened"] = sample->screened;
+  enc.record["up"] = job.scene->up == UpAxis::Z ? "z" : "y";  // resolved (--up auto)
   const double encode = since(t0);
   t0 = Clock::now();
   if (item.forCroco) {
@@ -512,6 +513,7 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
                                  std::string& pairsTxt) {
   nlohmann::json multiviews = nlohmann::json::object();
   uint64_t scenePairs = 0;
+  std::string up = cfg_.load.up == UpAxis::Z ? "z" : "y";
   for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
     const nlohmann::json rec = journal_->find(sampleKey(job.name, k));
     if (!rec.is_object()) continue;
@@ -523,6 +525,7 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
     ++pairs_;
     ++scenePairs;
     if (rec.contains("covis")) histogramAdd(histogram_, rec["covis"].get<double>());
+    up = rec.value("up", up);
     if (!cfg_.croco) continue;
     multiviews[fmtIndex(k)] = multiviewEntry(rec, journal_->path() + ": " + recordKey(rec));
     pairsTxt += crocoPairLines(job.name, fmtIndex(k), cfg_.pair.views);
@@ -539,7 +542,7 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
                                {"maximum_covisibility", cfg_.pair.maxCovis},
                                {"seed", cfg_.seed},
                                {"generator", "paircast"},
-                               {"up", cfg_.load.up == UpAxis::Z ? "z" : "y"},
+                               {"up", up},
                                {"multiviews", multiviews}};
   makeDirs((fs::path(cfg_.out) / job.name).string());
   writeFileAtomic((fs::path(cfg_.out) / job.name / "metadata.json").string(), meta.dump() + "\n");

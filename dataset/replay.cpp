@@ -119,8 +119,9 @@ void Replayer::replay(ReplayFile& file) {
   lo.up = upOf(meta);
   // paircast's own metadata is in the scene file's frame; CroCo's in habitat's world.
   const bool own = meta.value("generator", std::string()) == "paircast";
-  const Eigen::Matrix3d sceneFromMeta = own ? Eigen::Matrix3d::Identity() : sceneFromHabitat(lo.up);
-  Scene scene = loadScene(file.scene, lo);
+  Scene scene = loadScene(file.scene, lo);  // resolves --up auto
+  const Eigen::Matrix3d sceneFromMeta =
+      own ? Eigen::Matrix3d::Identity() : sceneFromHabitat(scene.up);
   const RayCaster caster(scene.mesh);
   const Camera intrinsics = Camera::fromHfov(W, H, hfov);
   const fs::path dir = fs::path(cfg_.out) / file.name;

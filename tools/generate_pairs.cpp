@@ -54,7 +54,10 @@ int main(int argc, char** argv) {
          "valid: divide by valid pixels (the paper); all: by all pixels (CroCo's generator)")
       ->check(CLI::IsMember({"valid", "all"}));
   auto* upOpt =
-      app.add_option("--up", up, "Up axis of the scenes: y or z")->check(CLI::IsMember({"y", "z"}));
+      app.add_option("--up", up,
+                     "Up axis of the scenes: y, z, or auto (the axis with the larger floor and "
+                     "ceiling area)")
+          ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--scale", cfg.load.scale, "Multiply scene positions by this (to metres)");
   app.add_flag("--save-depth", cfg.saveDepth,
                "Also write z-depth EXR (and camera JSON in croco layout)");
