@@ -157,7 +157,8 @@ int main(int argc, char** argv) {
   int pairs = 100, jobs = 0, refPairs = 5;
   CLI::App app{"Pair generation speed and co-visibility cost"};
   app.add_option("--scenes", sceneArgs, "Scenes (default: scenes/ and ../shared/scenes)");
-  app.add_option("--up", up, "Up axis of --scenes")->check(CLI::IsMember({"y", "z"}));
+  app.add_option("--up", up, "Up axis of --scenes: y, z or auto")
+      ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--pairs", pairs, "Accepted pairs per scene");
   app.add_option("--jobs", jobs, "Worker threads (default: all cores)");
   app.add_option("--ref-pairs", refPairs, "Pairs compared with ref_covis.py");

@@ -13,6 +13,7 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -319,6 +320,11 @@ void GenerateRun::loadScene(SceneJob& job) {
   }
   job.scene->name = job.name;
   const double loadSeconds = since(t0);
+  for (const auto& w : job.scene->warnings) {
+    std::lock_guard<std::mutex> warn(warnMu_);
+    std::fprintf(stderr, "%sgenerate_pairs: warning: %s: %s\n", cfg_.progress ? "\n" : "",
+                 job.path.c_str(), w.c_str());
+  }
   t0 = Clock::now();
   job.caster = std::make_unique<RayCaster>(job.scene->mesh);
   job.sampler = std::make_unique<ViewpointSampler>(*job.scene, *job.caster, cfg_.pair.sampler);
@@ -326,7 +332,8 @@ void GenerateRun::loadScene(SceneJob& job) {
                {"triangles", job.scene->mesh.numTriangles()},
                {"load_seconds", loadSeconds},
                {"build_seconds", since(t0)},
-               {"bytes", residentBytes() - std::min(before, residentBytes())}};
+               {"bytes", residentBytes() - std::min(before, residentBytes())},
+               {"warnings", job.scene->warnings}};
   PairOptions po = cfg_.pair;
   po.keepDepth = cfg_.saveDepth;
   job.generator = std::make_unique<PairGenerator>(*job.scene, *job.caster, *job.sampler, po);
@@ -629,10 +636,19 @@ std::vector<std::string> expandSceneList(const std::vector<std::string>& args) {
 }
 
 std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files) {
+  // Datasets that name every scene file alike (Replica's <scene>/mesh.ply, MP3D's
+  // <scene>/matterport_mesh/<hash>.obj) are told apart by their folder: a stem that several
+  // files share becomes "<folder>_<stem>".
+  std::map<std::string, int> stems;
+  for (const auto& f : files) stems[fs::path(f).stem().string()]++;
   std::vector<std::string> out;
   std::set<std::string> taken;
   for (const auto& f : files) {
-    const std::string stem = sanitizeName(fs::path(f).stem().string());
+    const fs::path p(f);
+    std::string stem = p.stem().string();
+    const std::string folder = p.parent_path().filename().string();
+    if (stems[stem] > 1 && !folder.empty()) stem = folder + "_" + stem;
+    stem = sanitizeName(stem);
     std::string name = stem;
     for (int k = 2; taken.count(name); ++k) name = stem + "_" + std::to_string(k);
     taken.insert(name);

@@ -37,8 +37,9 @@ struct GenerateConfig {
 // Throws paircast::Error naming an argument that does not exist.
 std::vector<std::string> expandSceneList(const std::vector<std::string>& args);
 
-// The name of each scene file in outputs and keys: its sanitised stem, with _2, _3, ... added to
-// later files whose stem is taken.
+// The name of each scene file in outputs and keys: its sanitised stem, or "<folder>_<stem>" when
+// several files share the stem (Replica's mesh.ply), with _2, _3, ... added to later files whose
+// name is taken.
 std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files);
 
 // Runs the job and returns the summary (also written to <out>/summary.json). Scenes that fail

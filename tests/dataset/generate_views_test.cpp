@@ -308,3 +308,16 @@ TEST(GeneratePairsCli, BadNewOptionsAreClearErrors) {
 
 }  // namespace
 }  // namespace paircast
+
+namespace paircast {
+namespace {
+
+TEST(SceneNames, SharedStemsAreToldApartByTheirFolder) {
+  EXPECT_EQ(
+      uniqueSceneNames({"r/room_0/mesh.ply", "r/room_1/mesh.ply", "b/x.obj", "c/x.obj", "d/y.obj",
+                        "e/room_0_mesh.obj"}),
+      (std::vector<std::string>{"room_0_mesh", "room_1_mesh", "b_x", "c_x", "y", "room_0_mesh_2"}));
+}
+
+}  // namespace
+}  // namespace paircast
