@@ -76,20 +76,34 @@ std::vector<double> acceptedCovis(const Scene& scene, const RayCaster& caster,
   return out;
 }
 
+// The test room with its BVH and sampler, for PairGenerator.
+struct Room {
+  explicit Room(const std::string& name)
+      : scene(loadRoom(name)), caster(scene.mesh), sampler(scene, caster, {}) {}
+  static Scene loadRoom(const std::string& name) {
+    Scene s = loadScene(writeRoom(testing::scratchDir(name)), {});
+    s.name = "room";
+    return s;
+  }
+  std::vector<double> accepted(const PairOptions& o, int n, size_t* screened = nullptr,
+                               size_t* falseRejections = nullptr) const {
+    return acceptedCovis(scene, caster, sampler, o, n, screened, falseRejections);
+  }
+  Scene scene;
+  RayCaster caster;
+  ViewpointSampler sampler;
+};
+
 TEST(Screening, KeepsCrocosCovisDistribution) {
-  const std::string dir = testing::scratchDir("screen_ks");
-  Scene scene = loadScene(writeRoom(dir), {});
-  scene.name = "room";
-  const RayCaster caster(scene.mesh);
-  const ViewpointSampler sampler(scene, caster, {});
+  const Room room("screen_ks");
   PairOptions o;
   o.resolution = 128;
   o.keepDepth = false;
   o.screenResolution = 0;
-  const std::vector<double> plain = acceptedCovis(scene, caster, sampler, o, 300);
+  const std::vector<double> plain = room.accepted(o, 300);
   o.screenResolution = 32;
   size_t screened = 0;
-  const std::vector<double> fast = acceptedCovis(scene, caster, sampler, o, 300, &screened);
+  const std::vector<double> fast = room.accepted(o, 300, &screened);
   ASSERT_GE(plain.size(), 280u);
   ASSERT_GE(fast.size(), 280u);
   EXPECT_GT(screened, 300u) << "screening turned almost nothing down: the test tests nothing";
@@ -103,25 +117,20 @@ TEST(Screening, KeepsCrocosCovisDistribution) {
   PairOptions biased = o;
   biased.accept = nullptr;
   biased.maxCovis = 0.6;  // accepted covis now <= 0.6: a different distribution
-  const std::vector<double> shifted = acceptedCovis(scene, caster, sampler, biased, 300);
+  const std::vector<double> shifted = room.accepted(biased, 300);
   EXPECT_GT(ksStatistic(plain, shifted), critical);
 }
 
 TEST(Screening, AuditChangesNoOutputAndCountsFalseRejections) {
-  const std::string dir = testing::scratchDir("screen_audit");
-  Scene scene = loadScene(writeRoom(dir), {});
-  scene.name = "room";
-  const RayCaster caster(scene.mesh);
-  const ViewpointSampler sampler(scene, caster, {});
+  const Room room("screen_audit");
   PairOptions o;
   o.resolution = 96;
   o.screenResolution = 24;
   o.screenCovisMargin = 0.0;  // no margin: some candidates in the band are turned down
-  const std::vector<double> a = acceptedCovis(scene, caster, sampler, o, 60);
+  const std::vector<double> a = room.accepted(o, 60);
   o.auditScreening = true;
   size_t screened = 0, falseRejections = 0;
-  const std::vector<double> b =
-      acceptedCovis(scene, caster, sampler, o, 60, &screened, &falseRejections);
+  const std::vector<double> b = room.accepted(o, 60, &screened, &falseRejections);
   EXPECT_EQ(a, b);
   EXPECT_GT(falseRejections, 0u) << "without a margin, the estimate must miss some";
   EXPECT_LT(falseRejections, screened);
