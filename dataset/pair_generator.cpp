@@ -1,5 +1,6 @@
 #include "dataset/pair_generator.h"
 
+#include <algorithm>
 #include <chrono>
 #include <string>
 
@@ -38,7 +39,7 @@ Eigen::Vector3d meanWorldPoint(const Camera& camera, const ImageF& depth) {
 
 int screenResolution(const PairOptions& o) {
   if (o.screenResolution != kAutoScreen) return o.screenResolution;
-  return o.resolution >= 64 ? o.resolution / kAutoScreenDivisor : 0;
+  return o.resolution >= 64 ? std::max(kMinAutoScreen, o.resolution / kAutoScreenDivisor) : 0;
 }
 
 void validatePairOptions(const PairOptions& o) {

@@ -21,7 +21,8 @@ namespace paircast {
 constexpr int kMaxViews = 99;
 
 constexpr int kAutoScreen = -1;
-constexpr int kAutoScreenDivisor = 4;
+constexpr int kAutoScreenDivisor = 8;
+constexpr int kMinAutoScreen = 16;
 
 struct PairOptions {
   int resolution = 256;   // square images, pixels
@@ -39,7 +40,7 @@ struct PairOptions {
   bool covisMasks = false;        // fill PairSample::covisMask
   // Screening: each view is first rendered as a screenResolution^2 depth map, and only views whose
   // valid fraction and covis there come within the margins of passing go on to full resolution.
-  // 0 turns it off; kAutoScreen picks resolution / kAutoScreenDivisor, and off below 64 pixels.
+  // 0 turns it off; kAutoScreen picks resolution / 8 (at least 16), and off below 64 pixels.
   // docs/dataset.md has the measurements behind the defaults.
   int screenResolution = kAutoScreen;
   double screenCovisMargin = 0.1;

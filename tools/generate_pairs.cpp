@@ -84,8 +84,8 @@ int main(int argc, char** argv) {
                  "Views per sample (CroCo's views_count): view 1 and views-1 others, each with "
                  "covis in the band with view 1");
   app.add_option("--screen-resolution", cfg.pair.screenResolution,
-                 "Screen candidates on depth at this resolution first (0: off; default: a "
-                 "quarter of --resolution, off below 64)")
+                 "Screen candidates on depth at this resolution first (0: off; default: an "
+                 "eighth of --resolution, at least 16, off below 64)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
                "Also write 8-bit co-visibility masks (255: seen by the other view)");
