@@ -133,7 +133,7 @@ int main(int argc, char** argv) {
     // Rounds alternate the official model and ours, and each side keeps its best over all of
     // them: both get as many samples, and a busy spell of the machine hits both alike.
     double fwd = 1e30, train = 1e30;
-    nlohmann::json py;
+    nlohmann::json py = nlohmann::json::object();
     for (int round = 0; round < rounds; ++round) {
       const nlohmann::json p = pythonBench(crocoDir, preset, batch, threads, repeat, cpuTime);
       for (const char* k : {"forward_s", "train_s"})
