@@ -16,13 +16,16 @@
 #include <numeric>
 #include <thread>
 
+#if PAIRCAST_WITH_RENDER
 #include "dataset/pair_stream.h"
+#endif
 #include "model/autocast.h"
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
 #include "model/reconstruct.h"
 #include "trainer/augment.h"
 #include "trainer/distributed.h"
+#include "trainer/fused_adamw.h"
 #include "trainer/grad_scaler.h"
 #include "trainer/pair_dataset.h"
 #include "util/atomic_file.h"
@@ -65,6 +68,7 @@ torch::Tensor sampleMask(const CroCoConfig& m, uint64_t seed, const std::string&
   return mask;
 }
 
+#if PAIRCAST_WITH_RENDER
 // Live pairs: rendered by a PairStream, augmented like the others. The stream is read in
 // order by the training thread, so its position in a checkpoint resumes it exactly.
 class LiveLoader {
@@ -96,6 +100,18 @@ class LiveLoader {
   const TrainConfig& c_;
   std::unique_ptr<PairStream> stream_;
 };
+#else
+// The trainer-only build (PAIRCAST_WITH_RENDER=OFF) has no renderer.
+class LiveLoader {
+ public:
+  LiveLoader(const TrainConfig&, uint64_t, int, int) {
+    throw Error(
+        "--live needs the renderer: this is a trainer-only build (PAIRCAST_WITH_RENDER=OFF)");
+  }
+  void next(uint64_t, torch::Tensor&, torch::Tensor&, torch::Tensor&) {}
+  uint64_t position() const { return 0; }
+};
+#endif
 
 // One weighted data source: a dataset on disk, or the live stream (dataset == nullptr).
 struct Source {
@@ -456,6 +472,9 @@ nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
   GradScaler scaler((device.is_cuda() && c.amp == "fp16") || c.forceLossScaling, c.initScale,
                     c.scaleGrowthInterval);
 
+  // On the device before the optimizer state is restored, so that the state lands there too.
+  model->to(device);
+
   // Resume.
   int64_t iter = 0;
   uint64_t livePosition = 0;
@@ -491,7 +510,6 @@ nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
   } else if (!c.resume && lead) {
     writeFileAtomic(logPath, "");
   }
-  model->to(device);
   if (dist) dist->broadcast(ordered);  // every rank starts from rank 0's weights
 
   std::unique_ptr<LiveLoader> live;
@@ -581,7 +599,7 @@ nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
         // With a loss scale, gradients that overflowed skip the step (on every rank alike:
         // they were all-reduced) and the scale backs off.
         const bool finite = scaler.unscale(ordered);
-        if (finite) opt.step();
+        if (finite && !(c.fusedAdamW && fusedAdamWStep(opt))) opt.step();
         scaler.update(finite);
         if (!finite && lead)
           std::fprintf(stderr,
@@ -672,6 +690,7 @@ nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
       {"interrupted", interrupted},
       {"checkpoint", ckptPath}};
   summary["world_size"] = world;
+  summary["fused_adamw"] = c.fusedAdamW && device.is_cuda() && fusedAdamWCompiled();
   summary["pairs_by_source"] = loader->counts();
   if (scaler.enabled()) summary["loss_scale"] = scaler.scale();
   if (lead) writeFileAtomic((fs::path(c.out) / "summary.json").string(), summary.dump(1) + "\n");
