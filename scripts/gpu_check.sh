@@ -41,8 +41,13 @@ else
   TORCH_PREFIX=$("$PYTHON" -c 'import torch; print(torch.utils.cmake_prefix_path)')
   # pip's torch links NCCL from the nvidia-nccl package, whose header it does not ship.
   NCCL_INC=$("$PYTHON" -c 'import nvidia.nccl, os; print(os.path.join(list(nvidia.nccl.__path__)[0], "include"))' 2>/dev/null || true)
-  EXTRA=(-DCMAKE_CUDA_ARCHITECTURES=90 -DTORCH_CUDA_ARCH_LIST=9.0)
+  EXTRA=(-DCMAKE_CUDA_ARCHITECTURES=90)
+  export TORCH_CUDA_ARCH_LIST=${TORCH_CUDA_ARCH_LIST:-9.0}
+  # Torch's CMake config looks for the CUDA toolkit (nvcc) even though nothing here is CUDA code.
+  [[ -d /usr/local/cuda/bin ]] && export PATH=$PATH:/usr/local/cuda/bin
 fi
+GENERATOR=(-G Ninja)
+command -v ninja >/dev/null || GENERATOR=()
 
 stage "machine"
 uname -m; nproc; (command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv) || true
@@ -51,7 +56,7 @@ cmake --version | head -1; g++ --version | head -1; (command -v nvcc >/dev/null 
 
 stage "configure and build the trainer-only build in $BUILD_DIR"
 t0=$SECONDS
-cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=Release -DPAIRCAST_WITH_RENDER=OFF \
+cmake -S . -B "$BUILD_DIR" "${GENERATOR[@]}" -DCMAKE_BUILD_TYPE=Release -DPAIRCAST_WITH_RENDER=OFF \
   -DCMAKE_PREFIX_PATH="${TORCH_PREFIX:+$TORCH_PREFIX;}$G/prefix" \
   -DPAIRCAST_GTEST_SOURCE_DIR="$G/googletest" -DPAIRCAST_NCCL_INCLUDE_DIR="$NCCL_INC" \
   -DCMAKE_DISABLE_FIND_PACKAGE_embree=ON -DCMAKE_DISABLE_FIND_PACKAGE_assimp=ON \

@@ -5,12 +5,12 @@
 # the header-only libraries, libjpeg-turbo (headers and static library) and GoogleTest's sources.
 # Run it on the machine with the full build (Debian 12 with scripts/setup.sh's packages):
 #
-#   scripts/gpu_prepare.sh --croco-dir ~/src/croco [--pairs-per-scene 100] [--build build]
+#   scripts/gpu_prepare.sh --croco-dir ~/src/croco [--pairs-per-scene 200] [--build build]
 #
 # Then carry .gpu along and run scripts/gpu_check.sh there. Everything fits in about 30 MiB.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-CROCO_DIR="" PAIRS=100 BUILD=build
+CROCO_DIR="" PAIRS=200 BUILD=build
 while (($#)); do
   case "$1" in
     --croco-dir) CROCO_DIR=$2; shift 2 ;;
@@ -36,4 +36,4 @@ cp /usr/include/jpeglib.h /usr/include/jerror.h /usr/include/jmorecfg.h \
 # Static: nothing to find at run time, whatever the GPU machine's distribution.
 cp /usr/lib/x86_64-linux-gnu/libjpeg.a .gpu/prefix/lib/
 cp -r /usr/src/googletest .gpu/googletest
-du -sh .gpu .gpu/* | sed 's/^/gpu_prepare: /'
+du -sh .gpu/* .gpu | sed 's/^/gpu_prepare: /'

@@ -1,16 +1,16 @@
 // util/image_io.h for the trainer-only build (PAIRCAST_WITH_RENDER=OFF), without OpenImageIO:
 // JPEG through libjpeg-turbo (decode and encode), PNG written with stored (uncompressed)
 // deflate blocks, which needs no zlib. EXR and PNG decoding need the full build and say so.
-#include <jpeglib.h>
-
 #include <algorithm>
 #include <csetjmp>
 #include <cstdint>
-#include <cstdio>
+#include <cstdio>  // before jpeglib.h, which uses FILE
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <string>
+
+#include <jpeglib.h>
 
 #include "util/atomic_file.h"
 #include "util/error.h"
