@@ -42,6 +42,9 @@ else
   # pip's torch links NCCL from the nvidia-nccl package, whose header it does not ship.
   NCCL_INC=$("$PYTHON" -c 'import nvidia.nccl, os; print(os.path.join(list(nvidia.nccl.__path__)[0], "include"))' 2>/dev/null || true)
   EXTRA=(-DCMAKE_CUDA_ARCHITECTURES=90)
+  # Recent LibTorch headers (2.10 and later) are written for C++20.
+  "$PYTHON" -c 'import torch, sys; v = tuple(int(x) for x in torch.__version__.split("+")[0].split(".")[:2]); sys.exit(v < (2, 10))' &&
+    EXTRA+=(-DCMAKE_CXX_STANDARD=20)
   export TORCH_CUDA_ARCH_LIST=${TORCH_CUDA_ARCH_LIST:-9.0}
   # Torch's CMake config looks for the CUDA toolkit (nvcc) even though nothing here is CUDA code.
   [[ -d /usr/local/cuda/bin ]] && export PATH=$PATH:/usr/local/cuda/bin
