@@ -1,19 +1,32 @@
-// bench_generate: accepted pairs/s of generate_pairs at 256x256 per scene, with the time split,
-// and the co-visibility cost per pair on one core against CroCo's kd-tree method
+// bench_generate: for each scene, side by side in one run on the same threads:
+//   - the render limit: 1 / (two RGB+depth renders at the output resolution), with --jobs workers
+//     rendering views of that scene on one core each, as generate_pairs' workers do;
+//   - generate_pairs' accepted pairs/s with screening (the default) and without, the efficiency
+//     (pairs/s / limit), the time split, and the scene's load and build figures;
+//   - the false-rejection rate of screening (an audited run: screened-out candidates are also
+//     rendered at full resolution, and those that would have been kept are counted);
+//   - depth-only against RGB+depth render time.
+// Then the co-visibility cost per pair on one core against CroCo's kd-tree method
 // (../shared/tools/ref_covis.py), on the same depth maps, with their agreement.
 #include <unistd.h>
 
+#include <omp.h>
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <sstream>
+
+#include <atomic>
 #include <thread>
 
 #include "covis/covisibility.h"
 #include "dataset/generate_job.h"
+#include "dataset/pair_generator.h"
 #include "dataset/shard.h"
+#include "dataset/viewpoint_sampler.h"
+#include "render/ray_caster.h"
 #include "util/atomic_file.h"
 #include "util/image_io.h"
 
@@ -63,6 +76,79 @@ nlohmann::json runRefCovis(const std::string& stem) {
   return out;
 }
 
+// Seconds per render of `views` random views, `threads` workers each rendering its own views on
+// one core (omp off), as generate_pairs' workers do. Best of 3 rounds.
+double secondsPerRender(const RayCaster& caster, const std::vector<Camera>& views, unsigned threads,
+                        bool rgb) {
+  double best = 1e30;
+  for (int round = 0; round < 3; ++round) {
+    std::atomic<size_t> next{0};
+    const auto t0 = Clock::now();
+    std::vector<std::thread> pool;
+    for (unsigned t = 0; t < threads; ++t)
+      pool.emplace_back([&] {
+        omp_set_num_threads(1);
+        Frame frame;
+        ImageF depth;
+        RenderOptions ro;
+        for (size_t i; (i = next++) < views.size();) {
+          if (rgb)
+            caster.render(views[i], ro, frame);
+          else
+            caster.renderDepth(views[i], depth);
+        }
+      });
+    for (auto& t : pool) t.join();
+    best = std::min(best, std::chrono::duration<double>(Clock::now() - t0).count() / views.size());
+  }
+  return best;
+}
+
+struct RenderLimit {
+  double rgbDepthSeconds = 0, depthSeconds = 0, screenDepthSeconds = 0;
+  double pairsPerSecond() const { return 1.0 / (2.0 * rgbDepthSeconds); }
+};
+
+// Renders of views as the sampler places them (reference views), at 256x256, hfov 60.
+RenderLimit measureRenderLimit(const SceneArg& arg, unsigned threads, int resolution) {
+  LoadOptions lo;
+  lo.up = arg.up;
+  Scene scene = loadScene(arg.path, lo);
+  const RayCaster caster(scene.mesh);
+  const ViewpointSampler sampler(scene, caster, {});
+  Rng rng(7);
+  std::vector<Camera> views;
+  const Camera K = Camera::fromHfov(resolution, resolution, 60);
+  for (int i = 0; i < 64; ++i) views.push_back(sampler.sampleView(K, rng));
+  RenderLimit r;
+  r.rgbDepthSeconds = secondsPerRender(caster, views, threads, true);
+  r.depthSeconds = secondsPerRender(caster, views, threads, false);
+  for (Camera& c : views) {
+    Camera small = Camera::fromHfov(resolution / 4, resolution / 4, 60);
+    small.R_cam2world = c.R_cam2world;
+    small.t_cam2world = c.t_cam2world;
+    c = small;
+  }
+  r.screenDepthSeconds = secondsPerRender(caster, views, threads, false);
+  std::printf("    per render: RGB+depth %.3f ms, depth %.3f ms, depth at 1/4 size %.3f ms\n",
+              1e3 * r.rgbDepthSeconds, 1e3 * r.depthSeconds, 1e3 * r.screenDepthSeconds);
+  return r;
+}
+
+nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, unsigned threads,
+                        int screen, bool audit) {
+  GenerateConfig c;
+  c.scenes = {arg.path};
+  c.load.up = arg.up;
+  c.out = out;
+  c.pairsPerScene = pairs;
+  c.jobs = static_cast<int>(threads);
+  c.progress = false;
+  c.pair.screenResolution = screen;
+  c.pair.auditScreening = audit;
+  return runGenerate(c);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -71,11 +157,17 @@ int main(int argc, char** argv) {
   int pairs = 100, jobs = 0, refPairs = 5;
   CLI::App app{"Pair generation speed and co-visibility cost"};
   app.add_option("--scenes", sceneArgs, "Scenes (default: scenes/ and ../shared/scenes)");
-  app.add_option("--up", up, "Up axis of --scenes")->check(CLI::IsMember({"y", "z"}));
+  app.add_option("--up", up, "Up axis of --scenes: y, z or auto")
+      ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--pairs", pairs, "Accepted pairs per scene");
   app.add_option("--jobs", jobs, "Worker threads (default: all cores)");
   app.add_option("--ref-pairs", refPairs, "Pairs compared with ref_covis.py");
+  int screen = kAutoScreen, auditPairs = 0;
+  app.add_option("--screen-resolution", screen, "Screening resolution (default: automatic)");
+  app.add_option("--audit-pairs", auditPairs,
+                 "Pairs of the audited run for the false-rejection rate (default: --pairs)");
   CLI11_PARSE(app, argc, argv);
+  if (auditPairs <= 0) auditPairs = pairs;
   try {
     std::vector<SceneArg> scenes;
     if (sceneArgs.empty()) {
@@ -96,32 +188,64 @@ int main(int argc, char** argv) {
     nlohmann::json results = nlohmann::json::array();
     std::vector<std::string> depthStems;
     for (size_t s = 0; s < scenes.size(); ++s) {
-      GenerateConfig c;
-      c.scenes = {scenes[s].path};
-      c.load.up = scenes[s].up;
-      c.out = tmp + "/gen" + std::to_string(s);
-      c.pairsPerScene = pairs;
-      c.jobs = static_cast<int>(threads);
-      c.progress = false;
-      const nlohmann::json sum = runGenerate(c);
       const std::string name = fs::path(scenes[s].path).filename().string();
+      const std::string out = tmp + "/gen" + std::to_string(s);
+      const nlohmann::json sum = generate(scenes[s], out, pairs, threads, screen, false);
       if (!sum["skipped_scenes"].empty()) {
         std::printf("%-22s skipped: %s\n", name.c_str(),
                     sum["skipped_scenes"][0]["reason"].get<std::string>().c_str());
         continue;
       }
+      const nlohmann::json plain = generate(scenes[s], out + "-plain", pairs, threads, 0, false);
+      const nlohmann::json audit =
+          generate(scenes[s], out + "-audit", auditPairs, threads, screen, true);
+      const RenderLimit limit = measureRenderLimit(scenes[s], threads, 256);
+      const double rate = sum["pairs_per_second"].get<double>();
+      const double plainRate = plain["pairs_per_second"].get<double>();
+      const auto& screening = audit["screening"];
+      const double falseRate =
+          screening["screened"].get<double>() > 0
+              ? screening["false_rejections"].get<double>() / screening["screened"].get<double>()
+              : 0.0;
+      const auto& stats = sum["scene_stats"][0];
       const auto& split = sum["time_split"];
       std::printf(
-          "%-22s %7.1f accepted pairs/s  acceptance %4.1f%%  time: render %4.1f%%  covis "
-          "%4.1f%%  encode %4.1f%%  write %4.1f%%\n",
-          name.c_str(), sum["pairs_per_second"].get<double>(),
-          100 * sum["acceptance"].get<double>(), 100 * split["render"].get<double>(),
-          100 * split["covis"].get<double>(), 100 * split["encode"].get<double>(),
-          100 * split["write"].get<double>());
+          "%-22s %9zu tris  load %.2f s  build %.2f s  %.0f MB\n"
+          "    %7.1f pairs/s  limit %6.1f pairs/s  efficiency %.2f  unscreened %6.1f pairs/s "
+          "(x%.2f)  acceptance %4.1f%%\n"
+          "    screened %.0f%% of candidates, false rejections %.4f (%.0f of %.0f)  "
+          "RGB+depth / depth-only render %.2fx\n"
+          "    time: render %4.1f%%  screen %4.1f%%  sampling %4.1f%%  covis %4.1f%%  encode "
+          "%4.1f%%  write %4.1f%%\n",
+          name.c_str(), stats["triangles"].get<size_t>(), stats["load_seconds"].get<double>(),
+          stats["build_seconds"].get<double>(), stats["bytes"].get<double>() / 1e6, rate,
+          limit.pairsPerSecond(), rate / limit.pairsPerSecond(), plainRate, rate / plainRate,
+          100 * sum["acceptance"].get<double>(),
+          100 * screening["screened"].get<double>() /
+              std::max(1.0, screening["candidates_this_run"].get<double>()),
+          falseRate, screening["false_rejections"].get<double>(),
+          screening["screened"].get<double>(), limit.rgbDepthSeconds / limit.depthSeconds,
+          100 * split["render"].get<double>(), 100 * split["screen"].get<double>(),
+          100 * split["sampling"].get<double>(), 100 * split["covis"].get<double>(),
+          100 * split["encode"].get<double>(), 100 * split["write"].get<double>());
+      std::fflush(stdout);
       results.push_back({{"scene", name},
-                         {"pairs_per_second", sum["pairs_per_second"]},
+                         {"pairs_per_second", rate},
+                         {"limit_pairs_per_second", limit.pairsPerSecond()},
+                         {"efficiency", rate / limit.pairsPerSecond()},
+                         {"unscreened_pairs_per_second", plainRate},
+                         {"screening_speedup", rate / plainRate},
+                         {"false_rejection_rate", falseRate},
+                         {"rgb_depth_over_depth", limit.rgbDepthSeconds / limit.depthSeconds},
                          {"acceptance", sum["acceptance"]},
+                         {"scene_stats", stats},
                          {"time_split", split}});
+      GenerateConfig c;
+      c.scenes = {scenes[s].path};
+      c.load.up = scenes[s].up;
+      c.jobs = static_cast<int>(threads);
+      c.progress = false;
+      if (refPairs < 1) continue;
       // A few pairs with depth, for the co-visibility comparison.
       c.out = tmp + "/depth" + std::to_string(s);
       c.pairsPerScene = refPairs;

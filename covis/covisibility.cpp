@@ -34,7 +34,7 @@ constexpr int kChunk = 256;
 // coordinates of j.
 PAIRCAST_COVIS_CLONES VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI,
                                                       const ImageF& depthJ, float absTol,
-                                                      float relTol, int stride) {
+                                                      float relTol, int stride, uint8_t* mask) {
   const int Wi = depthI.width, Hi = depthI.height, Wj = depthJ.width;
   const float maxX = static_cast<float>(depthJ.width), maxY = static_cast<float>(depthJ.height);
   const float lastX = maxX - 1.0f, lastY = maxY - 1.0f;
@@ -76,6 +76,16 @@ PAIRCAST_COVIS_CLONES VisibleCount countVisibleKernel(const PixelDepthMap& m, co
         visible += ok[k] & validDepth(d) & (std::abs(qz[k] - d) <= absTol + relTol * d);
         nValid += valid[k];
       }
+      // The mask repeats the test per lane; kept out of the loop above so that stays a plain
+      // reduction.
+      if (mask) {
+        uint8_t* out = mask + static_cast<size_t>(v) * Wi + u0;
+        for (int k = 0; k < n; ++k) {
+          const float d = dj[index[k]];
+          const bool seen = ok[k] & validDepth(d) & (std::abs(qz[k] - d) <= absTol + relTol * d);
+          out[k * stride] = seen ? 255 : 0;
+        }
+      }
       count.visible += visible;
       count.valid += nValid;
       count.total += n;
@@ -89,18 +99,34 @@ double fraction(const VisibleCount& c, CovisOptions::Normalize normalize) {
   return den > 0 ? static_cast<double>(c.visible) / static_cast<double>(den) : 0.0;
 }
 
-}  // namespace
-
-VisibleCount countVisible(const Camera& ci, const ImageF& depthI, const Camera& cj,
-                          const ImageF& depthJ, const CovisOptions& o) {
+void checkInputs(const Camera& ci, const ImageF& depthI, const Camera& cj, const ImageF& depthJ,
+                 const CovisOptions& o) {
   checkDepthMatches(ci, depthI);
   checkDepthMatches(cj, depthJ);
   if (o.stride < 1) throw Error("covis stride must be >= 1, got " + std::to_string(o.stride));
   if (!(o.absTol >= 0.0f && o.relTol >= 0.0f))
     throw Error("covis tolerances must be >= 0 (absTol " + std::to_string(o.absTol) + ", relTol " +
                 std::to_string(o.relTol) + ")");
+}
+
+}  // namespace
+
+VisibleCount countVisible(const Camera& ci, const ImageF& depthI, const Camera& cj,
+                          const ImageF& depthJ, const CovisOptions& o) {
+  checkInputs(ci, depthI, cj, depthJ, o);
   return countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, depthJ, o.absTol, o.relTol,
-                            o.stride);
+                            o.stride, nullptr);
+}
+
+Image8 visibilityMask(const Camera& ci, const ImageF& depthI, const Camera& cj,
+                      const ImageF& depthJ, const CovisOptions& options) {
+  CovisOptions o = options;
+  o.stride = 1;
+  checkInputs(ci, depthI, cj, depthJ, o);
+  Image8 mask(depthI.width, depthI.height, 1, 0);
+  countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, depthJ, o.absTol, o.relTol, 1,
+                     mask.data.data());
+  return mask;
 }
 
 double visibleFraction(const Camera& ci, const ImageF& depthI, const Camera& cj,

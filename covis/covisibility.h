@@ -45,6 +45,12 @@ struct VisibleCount {
 VisibleCount countVisible(const Camera& ci, const ImageF& depthI, const Camera& cj,
                           const ImageF& depthJ, const CovisOptions& options = {});
 
+// The pixels behind countVisible's count, at full resolution (stride ignored): [Hi, Wi, 1], 255
+// where view i's pixel is seen by view j (inside its frame, in front of it, not occluded), 0
+// elsewhere. Over i's valid pixels, the share of 255 is v_ij exactly.
+Image8 visibilityMask(const Camera& ci, const ImageF& depthI, const Camera& cj,
+                      const ImageF& depthJ, const CovisOptions& options = {});
+
 // One direction: v_ij, normalised as options.normalize says (0 when the denominator is 0).
 double visibleFraction(const Camera& ci, const ImageF& depthI, const Camera& cj,
                        const ImageF& depthJ, const CovisOptions& options = {});

@@ -11,9 +11,9 @@
 #include <set>
 
 #include "dataset/shard.h"
-#include "dataset/svg.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/plot.h"
 
 namespace paircast {
 namespace fs = std::filesystem;
@@ -87,6 +87,7 @@ std::vector<PairRecord> readRecords(const std::string& dir, const std::string& k
           shard,
           [&](ShardSample&& s) {
             if (!keys.empty() && !keys.count(s.key)) return;
+            if (!s.record.contains("camera2")) return;  // a one-view sample is no pair
             PairRecord r;
             r.key = s.key;
             r.scene = s.record.value("scene", std::string("?"));
@@ -210,7 +211,7 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
   double covisSum = 0;
   for (const auto& p : pairs) counts[binOf(p.covis, 20)] += 1, covisSum += p.covis;
   writeFileAtomic((files / "covis_histogram.svg").string(),
-                  svg::histogram(edges, counts, {"Co-visibility", "covis", "pairs"}));
+                  plot::histogram(edges, counts, {"Co-visibility", "covis", "pairs"}));
 
   // Distance x angle.
   double maxDist = 0.5;
@@ -227,20 +228,20 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
     joint[cy][cx] += 1;
   }
   writeFileAtomic((files / "distance_angle.svg").string(),
-                  svg::heatmap(xe, ye, joint,
-                               {"Distribution of viewpoint pairs", "distance between views (m)",
-                                "angle between optical axes (deg)"}));
+                  plot::heatmap(xe, ye, joint,
+                                {"Distribution of viewpoint pairs", "distance between views (m)",
+                                 "angle between optical axes (deg)"}));
 
   // Relative positions on the floor plane.
-  std::vector<svg::Arrow> arrows;
+  std::vector<plot::Arrow> arrows;
   const size_t step = std::max<size_t>(1, pairs.size() / 2000);  // at most ~2000 marks
   for (size_t i = 0; i < pairs.size(); i += step) {
     const FloorRelative r = floorRelative(pairs[i]);
     arrows.push_back({r.x, r.y, r.headingX, r.headingY, pairs[i].covis});
   }
   writeFileAtomic((files / "relative_positions.svg").string(),
-                  svg::cameraPlot(arrows, {"Second view relative to the first (floor plane)",
-                                           "right (m)", "forward (m)", 460, 460}));
+                  plot::cameraPlot(arrows, {"Second view relative to the first (floor plane)",
+                                            "right (m)", "forward (m)", 460, 460}));
 
   // Per scene.
   std::map<std::string, std::pair<int64_t, double>> perScene;
@@ -248,7 +249,7 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
 
   // The page.
   std::string html =
-      "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>" + svg::escape(title) +
+      "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>" + plot::escape(title) +
       " - paircast dataset report</title>\n<style>body{font-family:sans-serif;margin:24px;"
       "max-width:1200px}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px "
       "8px;text-align:right}th{background:#f3f3f3}.grid td{text-align:center;vertical-align:top}"
@@ -256,10 +257,10 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
       "img{width:96px;height:auto;display:inline-block;margin:1px}figure{display:inline-block;"
       "margin:6px}"
       "</style></head><body>\n<h1>" +
-      svg::escape(title) + "</h1>\n<p>" + std::to_string(pairs.size()) + " pairs from " +
+      plot::escape(title) + "</h1>\n<p>" + std::to_string(pairs.size()) + " pairs from " +
       std::to_string(perScene.size()) + " scene(s); mean co-visibility " +
-      fmt(covisSum / pairs.size()) + ". Source: <code>" + svg::escape(o.dir) + "</code>" +
-      (o.keysFile.empty() ? "" : " (keys from <code>" + svg::escape(o.keysFile) + "</code>)") +
+      fmt(covisSum / pairs.size()) + ". Source: <code>" + plot::escape(o.dir) + "</code>" +
+      (o.keysFile.empty() ? "" : " (keys from <code>" + plot::escape(o.keysFile) + "</code>)") +
       ".</p>\n";
   html += "<figure><img src='report_files/covis_histogram.svg' alt='covis histogram'></figure>\n";
   html += "<figure><img src='report_files/distance_angle.svg' alt='distance and angle'></figure>\n";
@@ -271,7 +272,7 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
       "<h2>Pairs per scene</h2>\n<table><tr><th>scene</th><th>pairs</th><th>mean "
       "covis</th></tr>\n";
   for (const auto& [scene, v] : perScene)
-    html += "<tr><td style='text-align:left'>" + svg::escape(scene) + "</td><td>" +
+    html += "<tr><td style='text-align:left'>" + plot::escape(scene) + "</td><td>" +
             std::to_string(v.first) + "</td><td>" + fmt(v.second / v.first) + "</td></tr>\n";
   html += "</table>\n<h2>Sample pairs by co-visibility</h2>\n<table class='grid'>\n";
   int image = 0;
@@ -291,7 +292,7 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
       }
       ++image;
       html +=
-          "<br>covis " + fmt(rec.covis) + "<br><small>" + svg::escape(rec.key) + "</small></td>";
+          "<br>covis " + fmt(rec.covis) + "<br><small>" + plot::escape(rec.key) + "</small></td>";
     }
     html += "</tr>\n";
   }

@@ -1,5 +1,6 @@
 #include "dataset/floor_map.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -20,6 +21,92 @@ struct Candidate {
 int findRoot(std::vector<int>& parent, int i) {
   while (parent[i] != i) i = parent[i] = parent[parent[i]];
   return i;
+}
+
+// The up axis and two horizontal axes, (a, b, up) right-handed.
+struct Axes {
+  Eigen::Vector3f up, a, b;
+  // The d-th of n horizontal directions, evenly spaced.
+  Eigen::Vector3f horizontal(int d, int n) const {
+    const float angle = static_cast<float>(2.0 * M_PI * d / n);
+    return std::cos(angle) * a + std::sin(angle) * b;
+  }
+};
+
+// The candidates flat at the scale of a footprint: downward rays at kFootprintRays points on a
+// circle around each (from a little above it, so that noise and small steps are seen) are
+// fitted, with the candidate, by a plane h = c0 + c1 a + c2 b (least squares). A candidate is
+// flat when enough rays hit, the plane is no steeper than the slope limit, and no hit lies
+// further off it than the roughness limit. A wall's edge, a step's nosing, the rim of a table
+// and clutter fail; millimetres of noise on centimetre triangles do not.
+std::vector<Candidate> flatCandidates(const std::vector<Candidate>& candidates,
+                                      const RayCaster& caster, const FloorOptions& o,
+                                      const Axes& axes) {
+  constexpr int kFootprintRays = 8;
+  const float radius = static_cast<float>(o.footprintRadius);
+  const float tanSlope = static_cast<float>(std::tan(o.maxSlopeDegrees * M_PI / 180.0));
+  const float lift = std::max(0.3f, 2.0f * radius * tanSlope + static_cast<float>(o.maxRoughness));
+  std::vector<Eigen::Vector2f> offsets(kFootprintRays);  // [8] (a, b) of the footprint's rays
+  for (int d = 0; d < kFootprintRays; ++d)
+    offsets[d] = radius * Eigen::Vector2f(std::cos(2.0 * M_PI * d / kFootprintRays),
+                                          std::sin(2.0 * M_PI * d / kFootprintRays));
+  std::vector<Ray> rays(candidates.size() * kFootprintRays);
+  std::vector<Hit> hits(rays.size());
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    for (int d = 0; d < kFootprintRays; ++d) {
+      const Eigen::Vector3f from =
+          candidates[k].point + offsets[d].x() * axes.a + offsets[d].y() * axes.b + lift * axes.up;
+      rays[k * kFootprintRays + d] = Ray{from, -axes.up, 0.0f, 2.0f * lift};
+    }
+  }
+  caster.intersect(rays.data(), hits.data(), rays.size());
+  std::vector<Candidate> flat;
+  for (size_t k = 0; k < candidates.size(); ++k) {
+    // Points (a, b, h) relative to the candidate, which is the first; normal equations of the
+    // fit accumulated in double.
+    Eigen::Vector3d rows[kFootprintRays + 1];  // (1, a, b) per point
+    double heights[kFootprintRays + 1];
+    int n = 0;
+    rows[n] = Eigen::Vector3d(1, 0, 0), heights[n++] = 0.0;
+    for (int d = 0; d < kFootprintRays; ++d) {
+      const Hit& hit = hits[k * kFootprintRays + d];
+      if (hit.triangle < 0) continue;
+      rows[n] = Eigen::Vector3d(1, offsets[d].x(), offsets[d].y());
+      heights[n++] = lift - hit.t;
+    }
+    if (n - 1 < o.minFootprintHits) continue;
+    Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
+    Eigen::Vector3d Ath = Eigen::Vector3d::Zero();
+    for (int i = 0; i < n; ++i) AtA += rows[i] * rows[i].transpose(), Ath += heights[i] * rows[i];
+    const Eigen::Vector3d c = AtA.ldlt().solve(Ath);
+    if (c.tail<2>().norm() > tanSlope) continue;
+    double roughness = 0.0;
+    for (int i = 0; i < n; ++i)
+      roughness = std::max(roughness, std::abs(rows[i].dot(c) - heights[i]));
+    if (roughness > o.maxRoughness) continue;
+    flat.push_back(candidates[k]);
+  }
+  return flat;
+}
+
+// For each point, whether walls surround it: horizontal rays at 1 m, in 8 directions, hit
+// something in at least 6 (a scan's walls have holes, and rooms have doors).
+std::vector<bool> enclosedPoints(const std::vector<Candidate>& points, const RayCaster& caster,
+                                 const Axes& axes) {
+  constexpr int kDirs = 8, kMinHits = 6;
+  std::vector<Ray> rays(points.size() * kDirs);
+  std::vector<Hit> hits(rays.size());
+  for (size_t k = 0; k < points.size(); ++k)
+    for (int d = 0; d < kDirs; ++d)
+      rays[k * kDirs + d] = Ray{points[k].point + axes.up, axes.horizontal(d, kDirs), 0.0f, 1e30f};
+  caster.intersect(rays.data(), hits.data(), rays.size());
+  std::vector<bool> enclosed(points.size());
+  for (size_t k = 0; k < points.size(); ++k) {
+    int n = 0;
+    for (int d = 0; d < kDirs; ++d) n += hits[k * kDirs + d].triangle >= 0;
+    enclosed[k] = n >= kMinHits;
+  }
+  return enclosed;
 }
 
 }  // namespace
@@ -44,10 +131,10 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
   nA_ = std::max(1, static_cast<int>(std::ceil((aMax - aMin) / cell_)));
   nB_ = std::max(1, static_cast<int>(std::ceil((bMax - bMin) / cell_)));
   const size_t cells = static_cast<size_t>(nA_) * nB_;
-  const float cosSlope = static_cast<float>(std::cos(o.maxSlopeDegrees * M_PI / 180.0));
   const float top = static_cast<float>(hMax + 1.0);
+  const Axes axes{up_, axisA_, axisB_};
 
-  // 1. Peel each column from the top: every near-horizontal surface is a candidate.
+  // 1. Peel each column from the top: every surface hit is a candidate.
   std::vector<Candidate> candidates;
   {
     std::vector<Ray> rays(cells);
@@ -73,14 +160,14 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
       for (size_t k = 0; k < active.size(); ++k) {
         if (hits[k].triangle < 0) continue;
         const int c = active[k];
-        if (std::abs(hits[k].normal.dot(up_)) >= cosSlope)
-          candidates.push_back({c, origins[c] - hits[k].t * up_, 0.0f});
+        candidates.push_back({c, origins[c] - hits[k].t * up_, 0.0f});
         tStart[c] = hits[k].t + 1e-3f;
         next.push_back(c);
       }
       active.swap(next);
     }
   }
+  candidates = flatCandidates(candidates, caster, o, axes);
   if (candidates.empty()) return;
 
   // 2. Headroom and wall clearance, by rays from each candidate.
@@ -94,10 +181,9 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
     rays[k * perCand] = Ray{p, up_, 0.0f, 1e30f};
     for (int h = 0; h < 2; ++h) {
       for (int d = 0; d < kDirs; ++d) {
-        const float ang = static_cast<float>(2.0 * M_PI * d / kDirs);
-        const Eigen::Vector3f dir = std::cos(ang) * axisA_ + std::sin(ang) * axisB_;
-        rays[k * perCand + 1 + h * kDirs + d] = Ray{candidates[k].point + heights[h] * up_, dir,
-                                                    0.0f, static_cast<float>(o.wallClearance)};
+        rays[k * perCand + 1 + h * kDirs + d] =
+            Ray{candidates[k].point + heights[h] * up_, axes.horizontal(d, kDirs), 0.0f,
+                static_cast<float>(o.wallClearance)};
       }
     }
   }
@@ -115,14 +201,21 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
     covered += std::isfinite(headroom);
     open.push_back(candidates[k]);
   }
-  // A scene with ceilings over a good part (a fifth) of its open floor is an interior: then
-  // standing points with nothing above (roofs, the outside) are not inside it. A roof is about
-  // as large as the floors under it, so "most" would be the wrong test.
-  hasCeiling_ = !open.empty() && covered * 5 >= open.size();
+  // A scene with a ceiling over a room's worth of open floor (minRegionArea) is an interior: then
+  // a standing point with nothing above is inside only when walls surround it (a gap in a scan's
+  // ceiling), not on a roof or the ground outside. No share of the open floor would do: a roof
+  // is about as large as the floors under it, and the ground around a house can be far larger.
+  hasCeiling_ = covered * cell_ * cell_ >= o.minRegionArea;
   if (hasCeiling_) {
-    open.erase(std::remove_if(open.begin(), open.end(),
-                              [](const Candidate& c) { return !std::isfinite(c.headroom); }),
-               open.end());
+    std::vector<Candidate> uncovered;
+    for (const Candidate& c : open)
+      if (!std::isfinite(c.headroom)) uncovered.push_back(c);
+    const std::vector<bool> enclosed = enclosedPoints(uncovered, caster, axes);
+    std::vector<Candidate> inside;
+    for (size_t k = 0, u = 0; k < open.size(); ++k) {
+      if (std::isfinite(open[k].headroom) || enclosed[u++]) inside.push_back(open[k]);
+    }
+    open.swap(inside);
   }
   if (open.empty()) return;
 

@@ -1,8 +1,17 @@
 // The walkable floor of a scene, found from the mesh alone (no navmesh is given): a grid of
 // columns over the scene's horizontal extent, each holding the floor levels where a person
-// could stand. A level is an upward-facing, near-horizontal surface hit by a downward ray, with
-// enough headroom, clear of walls, inside the scene (under a ceiling when the scene has one),
-// and part of a connected region large enough to walk in (so table tops and beds are not).
+// could stand. A level is a surface hit by a downward ray that is flat at the scale of a
+// footprint, with enough headroom, clear of walls, inside the scene, and part of a connected
+// region large enough to walk in (so table tops and beds are not).
+//
+// Scans decide the shape of these tests. Their floors are centimetre triangles with millimetres
+// of noise, so the normal of one triangle says little (at 1.5 cm and 3 mm, many tilt past
+// 20 degrees): flatness is judged from the heights of downward rays over a footprint, fitted
+// with a plane. They have holes (a footprint may miss a few rays), clutter and stairs (a
+// footprint over an edge is not flat), and often part of a ceiling or none: a point without a
+// ceiling above is inside when walls surround it (horizontal rays hit something in most
+// directions), so the floor under a gap in the ceiling stays, and a roof or the ground outside a
+// building does not.
 #pragma once
 
 #include <Eigen/Core>
@@ -17,7 +26,10 @@ namespace paircast {
 
 struct FloorOptions {
   double cellSize = 0.1;          // grid spacing, metres
-  double maxSlopeDegrees = 20.0;  // steeper surfaces are not floor
+  double maxSlopeDegrees = 20.0;  // steeper surfaces are not floor (of the footprint's plane)
+  double footprintRadius = 0.2;   // metres; flatness is judged over this disc
+  double maxRoughness = 0.03;     // metres; largest height of a footprint ray off its plane
+  int minFootprintHits = 6;       // of 8 rays around the footprint (holes lose a few)
   double headroom = 2.0;          // free space above the floor, metres
   double wallClearance = 0.25;    // free radius around the standing point, metres
   double stepHeight = 0.25;       // neighbouring cells connect when their floors differ less

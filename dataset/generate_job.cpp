@@ -1,3 +1,6 @@
+// generate_pairs in stages: plan the work (scenes, what a killed run already finished), load each
+// scene when a worker first needs it, make samples on the workers, write them in order on the
+// calling thread (journal, shards, CroCo files), then summarise from the journal.
 #include "dataset/generate_job.h"
 
 #include <omp.h>
@@ -5,7 +8,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <chrono>
 #include <condition_variable>
 #include <cstdio>
 #include <exception>
@@ -18,9 +20,14 @@
 #include <set>
 #include <thread>
 
+#include "dataset/croco_layout.h"
+#include "dataset/habitat_frame.h"
+#include "dataset/journal.h"
 #include "dataset/shard.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/image_io.h"
+#include "util/progress_line.h"
 #include "util/timer.h"
 
 namespace paircast {
@@ -33,31 +40,31 @@ constexpr auto since = secondsSince;
 
 constexpr int kHistogramBins = 20;
 
-std::string fmtIndex(uint64_t i) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%08llu", static_cast<unsigned long long>(i));
-  return b;
-}
-
-std::string bytesView(const std::vector<unsigned char>& v) {
-  return std::string(reinterpret_cast<const char*>(v.data()), v.size());
-}
-
-// Habitat's quaternion (w, x, y, z) of a pose, as CroCo's metadata stores it: the rotation of
-// habitat's camera axes (x right, y up, z back), i.e. R_cam2world * diag(1, -1, -1).
-nlohmann::json habitatQuaternion(const Eigen::Matrix3d& R) {
-  const Eigen::Matrix3d H = R * Eigen::Vector3d(1, -1, -1).asDiagonal();
-  const Eigen::Quaterniond q(H);
-  return {q.w(), q.x(), q.y(), q.z()};
-}
+constexpr auto fmtIndex = crocoIndex;
 
 void histogramAdd(std::vector<uint64_t>& h, double covis) {
   int b = static_cast<int>(covis * kHistogramBins);
   h[std::clamp(b, 0, kHistogramBins - 1)]++;
 }
 
+// The journal's key of a record: its sample key, or "" for a line that is not a record.
+std::string recordKey(const nlohmann::json& r) {
+  const auto scene = r.find("scene"), index = r.find("index");
+  if (scene == r.end() || !scene->is_string() || index == r.end() || !index->is_number_unsigned())
+    return "";
+  return sampleKey(scene->get<std::string>(), index->get<uint64_t>());
+}
+
+// Resident memory of the process, bytes (0 when /proc is not there).
+uint64_t residentBytes() {
+  std::ifstream in("/proc/self/statm");
+  uint64_t pages = 0, resident = 0;
+  if (!(in >> pages >> resident)) return 0;
+  return resident * static_cast<uint64_t>(::sysconf(_SC_PAGESIZE));
+}
+
 // Per-scene state, created once by the first worker that needs it, and freed when the worker
-// that finishes its last pair is done with it: items are in scene order, so a run over
+// that finishes its last sample is done with it: items are in scene order, so a run over
 // thousands of scenes holds only the few its workers are on.
 struct SceneJob {
   std::string path, name;
@@ -68,6 +75,7 @@ struct SceneJob {
   std::unique_ptr<PairGenerator> generator;
   std::string error;               // why the scene is skipped; empty when usable
   std::atomic<size_t> pending{0};  // items of this run not yet finished
+  nlohmann::json stats;            // scene_stats entry, once loaded
 
   void release() {
     generator.reset();
@@ -77,10 +85,16 @@ struct SceneJob {
   }
 };
 
+struct Item {
+  size_t scene;
+  uint64_t index;
+  bool forShard, forCroco;
+};
+
 struct Result {
-  bool done = false;  // slot filled
-  bool skip = false;  // nothing to write (failed pair or skipped scene)
-  std::optional<EncodedPair> pair;
+  bool done = false;      // slot filled
+  nlohmann::json record;  // for the journal; null when nothing is recorded (skipped scene)
+  std::optional<EncodedPair> pair;  // for the shard
 };
 
 // Reads the keys of the shards that already exist, in order, stopping at the first gap.
@@ -108,29 +122,480 @@ void removeTemporaries(const std::string& dir) {
   }
 }
 
-class ProgressLine {
+// "[generate_pairs] 120/500 pairs  38.1 pairs/s  acceptance 6%  ETA 0m10s"
+std::string progressText(size_t done, size_t total, size_t accepted, size_t candidates,
+                         double seconds) {
+  const double rate = done / std::max(seconds, 1e-9);
+  const int eta = rate > 0 ? static_cast<int>((total - done) / rate) : 0;
+  char line[160];
+  std::snprintf(line, sizeof line,
+                "[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds",
+                done, total, accepted / std::max(seconds, 1e-9),
+                candidates ? 100.0 * accepted / candidates : 0.0, eta / 60, eta % 60);
+  return line;
+}
+
+void validateConfig(const GenerateConfig& cfg) {
+  if (cfg.out.empty()) throw Error("--out is required");
+  if (cfg.pairsPerScene < 1) throw Error("--pairs-per-scene must be at least 1");
+  if (cfg.numShards < 1 || cfg.shardIndex < 0 || cfg.shardIndex >= cfg.numShards)
+    throw Error("--shard-index must be in [0, --num-shards)");
+  if (!cfg.shards && !cfg.croco) throw Error("--format must be shards, croco or both");
+  if (cfg.shardSize < 1) throw Error("--shard-size must be at least 1");
+  validatePairOptions(cfg.pair);
+}
+
+// One run of the job. The constructor plans it; run() makes and writes what is missing;
+// summarise() assembles the outputs from the journal, so a resumed run reports everything.
+class GenerateRun {
  public:
-  ProgressLine(bool enabled, size_t total)
-      : enabled_(enabled), tty_(isatty(2)), total_(total), start_(Clock::now()) {}
-  // On a terminal the line is redrawn twice a second; in a log, one line every 10 s.
-  void update(size_t done, size_t accepted, size_t candidates, bool force = false) {
-    if (!enabled_ || (!force && since(last_) < (tty_ ? 0.5 : 10.0))) return;
-    last_ = Clock::now();
-    const double t = since(start_);
-    const double rate = done / std::max(t, 1e-9);
-    const double eta = rate > 0 ? (total_ - done) / rate : 0;
-    std::fprintf(
-        stderr, "%s[generate_pairs] %zu/%zu pairs  %.1f pairs/s  acceptance %.0f%%  ETA %dm%02ds%s",
-        tty_ ? "\r" : "", done, total_, accepted / std::max(t, 1e-9),
-        candidates ? 100.0 * accepted / candidates : 0.0, static_cast<int>(eta) / 60,
-        static_cast<int>(eta) % 60, tty_ && !force ? "   " : "\n");
-  }
+  explicit GenerateRun(const GenerateConfig& cfg);
+  void run();
+  nlohmann::json summarise();
 
  private:
-  bool enabled_, tty_;
-  size_t total_;
-  Clock::time_point start_, last_{};
+  // Planning.
+  void planScenes();
+  void planItems();
+  std::string crocoStem(const SceneJob& s, uint64_t k) const {
+    return (fs::path(cfg_.out) / s.name / fmtIndex(k)).string();
+  }
+  std::string outPath(const std::string& stem, const std::string& ext) const {
+    return (fs::path(cfg_.out) / (stem + part_ + ext)).string();
+  }
+  // Workers.
+  void prepareScene(SceneJob& job);
+  void loadScene(SceneJob& job);
+  void worker();
+  Result makeItem(const Item& item);
+  void fail();
+  // The writer, on the calling thread.
+  void writeInOrder();
+  void addToShard(const EncodedPair& pair);
+  void closeShard();
+  // Summary.
+  void summariseScene(const SceneJob& job, nlohmann::json& perScene, std::string& pairsTxt);
+  nlohmann::json summaryJson(double seconds) const;
+
+  const GenerateConfig& cfg_;
+  const Clock::time_point start_ = Clock::now();
+  std::string part_;  // "-<shard index>" with several machines, else ""
+  std::vector<std::unique_ptr<SceneJob>> scenes_;
+  std::unique_ptr<Journal> journal_;
+  std::vector<std::vector<std::string>> doneShards_;
+  std::vector<Item> items_;
+  int jobs_ = 1;
+
+  // Workers hand results to the writer through a window of slots.
+  std::vector<Result> results_;
+  std::mutex mu_;
+  std::condition_variable produced_, consumed_;
+  size_t nextToWrite_ = 0;
+  std::atomic<size_t> nextItem_{0};
+  std::atomic<bool> stop_{false};
+  std::exception_ptr failure_;
+  std::mutex loadMu_;  // scenes load one at a time, so that their memory can be measured
+
+  // Counters and timing.
+  std::atomic<size_t> accepted_{0}, failedPairs_{0}, candidates_{0}, screened_{0},
+      falseRejections_{0};
+  std::mutex timeMu_;
+  double tRender_ = 0, tScreen_ = 0, tSampling_ = 0, tCovis_ = 0, tEncode_ = 0, tWrite_ = 0;
+  std::mutex warnMu_;
+  std::vector<nlohmann::json> skipped_;
+  std::atomic<int> scenesLoaded_{0}, scenesPeak_{0};
+
+  // Shards being written.
+  std::unique_ptr<ShardWriter> shard_;
+  std::vector<nlohmann::json> shardList_;
+
+  // Summary tallies.
+  std::vector<uint64_t> histogram_ = std::vector<uint64_t>(kHistogramBins, 0);
+  std::vector<uint64_t> candidateHistogram_ = std::vector<uint64_t>(kHistogramBins, 0);
+  uint64_t pairs_ = 0, tried_ = 0;
 };
+
+GenerateRun::GenerateRun(const GenerateConfig& cfg) : cfg_(cfg) {
+  validateConfig(cfg);
+  part_ = cfg.numShards > 1 ? "-" + std::to_string(cfg.shardIndex) : "";
+  jobs_ =
+      cfg.jobs > 0 ? cfg.jobs : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  planScenes();
+  makeDirs(cfg.out);
+  removeStaleTemporaries(cfg.out);  // left by a killed run
+  removeTemporaries(cfg.out);
+  makeDirs((fs::path(cfg.out) / ".paircast").string());
+  journal_ = std::make_unique<Journal>(
+      (fs::path(cfg.out) / ".paircast" / ("journal" + part_ + ".jsonl")).string(), recordKey);
+  if (cfg.shards) doneShards_ = completedShards(cfg.out, "pairs" + part_);
+  for (const auto& keys : doneShards_) shardList_.push_back({{"pairs", keys.size()}});
+  planItems();
+}
+
+// Scenes: expand, name uniquely, keep this machine's part.
+void GenerateRun::planScenes() {
+  const std::vector<std::string> all = expandSceneList(cfg_.scenes);
+  if (all.empty()) throw Error("no scene files found in --scenes");
+  const std::vector<std::string> names = uniqueSceneNames(all);
+  for (size_t i = 0; i < all.size(); ++i) {
+    if (static_cast<int>(i % cfg_.numShards) != cfg_.shardIndex) continue;
+    auto job = std::make_unique<SceneJob>();
+    job->path = all[i];
+    job->name = names[i];
+    scenes_.push_back(std::move(job));
+  }
+}
+
+// What is left: samples in neither a completed shard nor the journal (with their files).
+void GenerateRun::planItems() {
+  std::set<std::string> inShards;
+  for (const auto& keys : doneShards_) inShards.insert(keys.begin(), keys.end());
+  const std::string lastView = "_" + std::to_string(cfg_.pair.views) + ".jpeg";
+  for (size_t s = 0; s < scenes_.size(); ++s) {
+    SceneJob& job = *scenes_[s];
+    if (cfg_.croco) removeStaleTemporaries((fs::path(cfg_.out) / job.name).string());
+    for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
+      const std::string key = sampleKey(job.name, k);
+      const nlohmann::json rec = journal_->contains(key) ? journal_->find(key) : nlohmann::json();
+      if (rec.is_object() && rec.value("failed", false)) continue;  // known to have no sample
+      const bool shardDone = !cfg_.shards || inShards.count(key);
+      const bool crocoDone =
+          !cfg_.croco || (rec.is_object() && fs::exists(crocoStem(job, k) + lastView));
+      if (shardDone && crocoDone) continue;
+      items_.push_back({s, k, !shardDone, !crocoDone});
+      job.pending++;
+    }
+  }
+}
+
+void GenerateRun::run() {
+  results_.resize(items_.size());
+  std::vector<std::thread> threads;
+  for (int t = 0; t < jobs_; ++t) threads.emplace_back([this] { worker(); });
+  try {
+    writeInOrder();
+  } catch (...) {
+    fail();
+  }
+  for (auto& t : threads) t.join();
+  journal_->sync();
+  if (failure_) std::rethrow_exception(failure_);
+}
+
+void GenerateRun::fail() {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!failure_) failure_ = std::current_exception();
+  stop_ = true;
+  produced_.notify_all();
+  consumed_.notify_all();
+}
+
+void GenerateRun::prepareScene(SceneJob& job) {
+  std::call_once(job.once, [&] {
+    try {
+      loadScene(job);
+      // A scene whose first sample cannot be made has no usable views: skip it whole.
+      const nlohmann::json rec0 = journal_->find(sampleKey(job.name, 0));
+      if (rec0.is_object() ? rec0.value("failed", false) : !job.generator->generate(cfg_.seed, 0))
+        job.error = "no valid views (no sample found for index 0)";
+    } catch (const Error& e) {
+      job.error = e.what();
+    }
+    if (job.error.empty()) return;
+    std::lock_guard<std::mutex> lock(warnMu_);
+    std::fprintf(stderr, "%sgenerate_pairs: warning: skipping scene %s: %s\n",
+                 cfg_.progress ? "\n" : "", job.path.c_str(), job.error.c_str());
+    skipped_.push_back({{"scene", job.path}, {"reason", job.error}});
+  });
+}
+
+// Loads the mesh, builds the BVH and the floor map, and measures them (scene_stats).
+void GenerateRun::loadScene(SceneJob& job) {
+  std::lock_guard<std::mutex> lock(loadMu_);
+  const uint64_t before = residentBytes();
+  auto t0 = Clock::now();
+  job.scene = std::make_unique<Scene>(paircast::loadScene(job.path, cfg_.load));
+  const int now = ++scenesLoaded_;
+  for (int peak = scenesPeak_; now > peak && !scenesPeak_.compare_exchange_weak(peak, now);) {
+  }
+  job.scene->name = job.name;
+  const double loadSeconds = since(t0);
+  for (const auto& w : job.scene->warnings) {
+    std::lock_guard<std::mutex> warn(warnMu_);
+    std::fprintf(stderr, "%sgenerate_pairs: warning: %s: %s\n", cfg_.progress ? "\n" : "",
+                 job.path.c_str(), w.c_str());
+  }
+  t0 = Clock::now();
+  job.caster = std::make_unique<RayCaster>(job.scene->mesh);
+  job.sampler = std::make_unique<ViewpointSampler>(*job.scene, *job.caster, cfg_.pair.sampler);
+  job.stats = {{"scene", job.name},
+               {"triangles", job.scene->mesh.numTriangles()},
+               {"load_seconds", loadSeconds},
+               {"build_seconds", since(t0)},
+               {"bytes", residentBytes() - std::min(before, residentBytes())},
+               {"warnings", job.scene->warnings}};
+  PairOptions po = cfg_.pair;
+  po.keepDepth = cfg_.saveDepth;
+  job.generator = std::make_unique<PairGenerator>(*job.scene, *job.caster, *job.sampler, po);
+}
+
+void GenerateRun::worker() {
+  // OpenMP's thread count is per thread: each worker renders on one core.
+  omp_set_num_threads(1);
+  try {
+    const size_t window = static_cast<size_t>(4 * jobs_ + 4);
+    while (!stop_) {
+      const size_t i = nextItem_++;
+      if (i >= items_.size()) return;
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        consumed_.wait(lock, [&] { return stop_ || i < nextToWrite_ + window; });
+        if (stop_) return;
+      }
+      Result r = makeItem(items_[i]);
+      SceneJob& job = *scenes_[items_[i].scene];
+      if (--job.pending == 0) {  // no other worker holds an item of it
+        if (job.scene) --scenesLoaded_;
+        job.release();
+      }
+      std::lock_guard<std::mutex> lock(mu_);
+      results_[i] = std::move(r);
+      produced_.notify_all();
+    }
+  } catch (...) {
+    fail();
+  }
+}
+
+// One sample: generated, encoded, its CroCo files written; the journal record and shard entry
+// go to the writer.
+Result GenerateRun::makeItem(const Item& item) {
+  SceneJob& job = *scenes_[item.scene];
+  prepareScene(job);
+  Result r;
+  r.done = true;
+  if (!job.error.empty()) return r;
+  std::vector<float> tried;
+  std::optional<PairSample> sample = job.generator->generate(cfg_.seed, item.index, &tried);
+  candidates_ += tried.size();
+  if (!sample) {
+    ++failedPairs_;
+    r.record = {
+        {"failed", true}, {"scene", job.name}, {"index", item.index}, {"candidate_covis", tried}};
+    return r;
+  }
+  screened_ += sample->screened;
+  falseRejections_ += sample->falseRejections;
+  auto t0 = Clock::now();
+  EncodedPair enc = encodePair(*sample, cfg_.saveDepth, cfg_.jpegQuality);
+  enc.record["candidate_covis"] = sample->candidateCovis;
+  enc.record["screened"] = sample->screened;
+  enc.record["up"] = job.scene->up == UpAxis::Z ? "z" : "y";  // resolved (--up auto)
+  const double encode = since(t0);
+  t0 = Clock::now();
+  if (item.forCroco) {
+    makeDirs((fs::path(cfg_.out) / job.name).string());
+    writeCrocoSample(crocoStem(job, item.index), enc, sample->camera);
+  }
+  {
+    std::lock_guard<std::mutex> lock(timeMu_);
+    tRender_ += sample->renderSeconds;
+    tScreen_ += sample->screenSeconds;
+    tSampling_ += std::max(0.0, sample->totalSeconds - sample->renderSeconds -
+                                    sample->screenSeconds - sample->covisSeconds);
+    tCovis_ += sample->covisSeconds;
+    tEncode_ += encode;
+    tWrite_ += since(t0);
+  }
+  ++accepted_;
+  r.record = enc.record;
+  if (item.forShard) r.pair = std::move(enc);
+  return r;
+}
+
+// Takes results in item order: journal first, then the shard, so that every sample of a
+// completed shard is in the journal.
+void GenerateRun::writeInOrder() {
+  ProgressLine progress(cfg_.progress);
+  const auto started = Clock::now();
+  auto show = [&](size_t done, bool last) {
+    if (last || progress.due())
+      progress.show(progressText(done, items_.size(), accepted_, candidates_, since(started)),
+                    last);
+  };
+  for (size_t i = 0; i < items_.size(); ++i) {
+    Result r;
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      produced_.wait(lock, [&] { return stop_ || results_[i].done; });
+      if (stop_ && !results_[i].done) return;
+      r = std::move(results_[i]);
+      results_[i] = Result{};
+      nextToWrite_ = i + 1;
+      consumed_.notify_all();
+    }
+    const auto t0 = Clock::now();
+    if (!r.record.is_null()) journal_->append(r.record);
+    if (r.pair) addToShard(*r.pair);
+    {
+      std::lock_guard<std::mutex> lock(timeMu_);
+      tWrite_ += since(t0);
+    }
+    show(i + 1, false);
+  }
+  if (shard_ && !stop_) closeShard();
+  show(items_.size(), true);
+}
+
+void GenerateRun::addToShard(const EncodedPair& pair) {
+  if (!shard_) {
+    char name[64];
+    std::snprintf(name, sizeof name, "pairs%s-%06zu.tar", part_.c_str(), shardList_.size());
+    shard_ = std::make_unique<ShardWriter>((fs::path(cfg_.out) / name).string());
+  }
+  shard_->add(pair);
+  if (static_cast<int>(shard_->samples()) >= cfg_.shardSize ||
+      shard_->bytes() >= cfg_.shardMaxBytes)
+    closeShard();
+}
+
+void GenerateRun::closeShard() {
+  journal_->sync();
+  shard_->close();
+  shardList_.push_back({{"pairs", shard_->samples()}});
+  shard_.reset();
+}
+
+nlohmann::json GenerateRun::summarise() {
+  journal_->reopen();
+  std::string pairsTxt;
+  nlohmann::json perScene = nlohmann::json::object();
+  std::set<std::string> skippedPaths;
+  for (const auto& s : skipped_) skippedPaths.insert(s["scene"].get<std::string>());
+  for (const auto& job : scenes_)
+    if (!skippedPaths.count(job->path)) summariseScene(*job, perScene, pairsTxt);
+  if (cfg_.croco) writeFileAtomic(outPath("pairs", ".txt"), pairsTxt);
+  if (cfg_.shards) {
+    for (size_t s = 0; s < shardList_.size(); ++s) {
+      char name[64];
+      std::snprintf(name, sizeof name, "pairs%s-%06zu.tar", part_.c_str(), s);
+      shardList_[s]["name"] = name;
+    }
+    const nlohmann::json index = {{"format", "paircast-shards"},
+                                  {"format_version", kShardVersion},
+                                  {"pairs", pairs_},
+                                  {"views", cfg_.pair.views},
+                                  {"shards", shardList_},
+                                  {"pairs_per_scene", perScene},
+                                  {"covis_histogram", histogram_},
+                                  {"depth", cfg_.saveDepth},
+                                  {"covis_masks", cfg_.pair.covisMasks},
+                                  {"resolution", cfg_.pair.resolution},
+                                  {"hfov", cfg_.pair.hfov},
+                                  {"seed", cfg_.seed}};
+    writeFileAtomic(outPath("index", ".json"), index.dump(1) + "\n");
+  }
+  const nlohmann::json summary = summaryJson(since(start_));
+  writeFileAtomic(outPath("summary", ".json"), summary.dump(1) + "\n");
+  return summary;
+}
+
+// CroCo's metadata entry of one sample, from its journal record.
+nlohmann::json multiviewEntry(const nlohmann::json& rec, const std::string& source) {
+  nlohmann::json positions = nlohmann::json::array();
+  for (const auto& c : rec.at("cameras")) {
+    const Camera cam = cameraFromJson(c, source);
+    positions.push_back({cam.t_cam2world.x(), cam.t_cam2world.y(), cam.t_cam2world.z()});
+  }
+  const nlohmann::json& orientations = rec.at("orientations");
+  return {{"positions", positions},
+          {"orientations", orientations},
+          {"covisibility_ratios", rec.at("covisibility_ratios")},
+          {"valid_fractions", rec.at("valid_fractions")},
+          {"pairwise_visibility_ratios", rec.at("pairwise_visibility_ratios")}};
+}
+
+// Tallies one scene's records, and writes its metadata.json and pairs.txt lines (CroCo layout).
+void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
+                                 std::string& pairsTxt) {
+  nlohmann::json multiviews = nlohmann::json::object();
+  uint64_t scenePairs = 0;
+  std::string up = cfg_.load.up == UpAxis::Z ? "z" : "y";
+  for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
+    const nlohmann::json rec = journal_->find(sampleKey(job.name, k));
+    if (!rec.is_object()) continue;
+    for (const auto& c : rec.value("candidate_covis", nlohmann::json::array())) {
+      histogramAdd(candidateHistogram_, c.get<double>());
+      ++tried_;
+    }
+    if (rec.value("failed", false)) continue;
+    ++pairs_;
+    ++scenePairs;
+    if (rec.contains("covis")) histogramAdd(histogram_, rec["covis"].get<double>());
+    up = rec.value("up", up);
+    if (!cfg_.croco) continue;
+    multiviews[fmtIndex(k)] = multiviewEntry(rec, journal_->path() + ": " + recordKey(rec));
+    pairsTxt += crocoPairLines(job.name, fmtIndex(k), cfg_.pair.views);
+  }
+  perScene[job.name] = scenePairs;
+  if (!cfg_.croco) return;
+  const nlohmann::json meta = {{"scene", job.path},
+                               {"views_count", cfg_.pair.views},
+                               {"size", cfg_.pairsPerScene},
+                               {"generate_depth", cfg_.saveDepth},
+                               {"resolution", cfg_.pair.resolution},
+                               {"hfov", cfg_.pair.hfov},
+                               {"minimum_covisibility", cfg_.pair.minCovis},
+                               {"maximum_covisibility", cfg_.pair.maxCovis},
+                               {"seed", cfg_.seed},
+                               {"generator", "paircast"},
+                               {"up", up},
+                               {"multiviews", multiviews}};
+  makeDirs((fs::path(cfg_.out) / job.name).string());
+  writeFileAtomic((fs::path(cfg_.out) / job.name / "metadata.json").string(), meta.dump() + "\n");
+}
+
+nlohmann::json GenerateRun::summaryJson(double seconds) const {
+  const double split =
+      std::max(tRender_ + tScreen_ + tSampling_ + tCovis_ + tEncode_ + tWrite_, 1e-12);
+  nlohmann::json sceneStats = nlohmann::json::array();
+  for (const auto& job : scenes_)
+    if (!job->stats.is_null()) sceneStats.push_back(job->stats);
+  return {{"pairs", pairs_},
+          {"views", cfg_.pair.views},
+          {"candidates", tried_},
+          {"acceptance", tried_ ? static_cast<double>(pairs_) / tried_ : 0.0},
+          {"seconds", seconds},
+          {"pairs_this_run", accepted_.load()},
+          {"pairs_per_second", accepted_ / std::max(seconds, 1e-9)},
+          {"failed_pairs", failedPairs_.load()},
+          {"screening",
+           {{"resolution", screenResolution(cfg_.pair)},
+            {"screened", screened_.load()},
+            {"candidates_this_run", candidates_.load()},
+            {"false_rejections", falseRejections_.load()},
+            {"audited", cfg_.pair.auditScreening}}},
+          {"covis_histogram", histogram_},
+          {"candidate_covis_histogram", candidateHistogram_},
+          {"time_split",
+           {{"render", tRender_ / split},
+            {"screen", tScreen_ / split},
+            {"sampling", tSampling_ / split},
+            {"covis", tCovis_ / split},
+            {"encode", tEncode_ / split},
+            {"write", tWrite_ / split}}},
+          {"time_seconds",
+           {{"render", tRender_},
+            {"screen", tScreen_},
+            {"sampling", tSampling_},
+            {"covis", tCovis_},
+            {"encode", tEncode_},
+            {"write", tWrite_}}},
+          {"skipped_scenes", skipped_},
+          {"scene_stats", sceneStats},
+          {"scenes_in_memory_max", scenesPeak_.load()},
+          {"jobs", jobs_}};
+}
 
 }  // namespace
 
@@ -171,10 +636,19 @@ std::vector<std::string> expandSceneList(const std::vector<std::string>& args) {
 }
 
 std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files) {
+  // Datasets that name every scene file alike (Replica's <scene>/mesh.ply, MP3D's
+  // <scene>/matterport_mesh/<hash>.obj) are told apart by their folder: a stem that several
+  // files share becomes "<folder>_<stem>".
+  std::map<std::string, int> stems;
+  for (const auto& f : files) stems[fs::path(f).stem().string()]++;
   std::vector<std::string> out;
   std::set<std::string> taken;
   for (const auto& f : files) {
-    const std::string stem = sanitizeName(fs::path(f).stem().string());
+    const fs::path p(f);
+    std::string stem = p.stem().string();
+    const std::string folder = p.parent_path().filename().string();
+    if (stems[stem] > 1 && !folder.empty()) stem = folder + "_" + stem;
+    stem = sanitizeName(stem);
     std::string name = stem;
     for (int k = 2; taken.count(name); ++k) name = stem + "_" + std::to_string(k);
     taken.insert(name);
@@ -183,376 +657,10 @@ std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files)
   return out;
 }
 
-nlohmann::json runGenerate(const GenerateConfig& cfg) {
-  const auto start = Clock::now();
-  if (cfg.out.empty()) throw Error("--out is required");
-  if (cfg.pairsPerScene < 1) throw Error("--pairs-per-scene must be at least 1");
-  if (cfg.numShards < 1 || cfg.shardIndex < 0 || cfg.shardIndex >= cfg.numShards)
-    throw Error("--shard-index must be in [0, --num-shards)");
-  if (!cfg.shards && !cfg.croco) throw Error("--format must be shards, croco or both");
-  if (cfg.shardSize < 1) throw Error("--shard-size must be at least 1");
-  if (!(cfg.pair.minCovis >= 0 && cfg.pair.minCovis <= cfg.pair.maxCovis && cfg.pair.maxCovis <= 1))
-    throw Error("the covis band must satisfy 0 <= --min-covis <= --max-covis <= 1");
-
-  // Scenes: expand, name uniquely, keep this machine's part.
-  const std::vector<std::string> all = expandSceneList(cfg.scenes);
-  if (all.empty()) throw Error("no scene files found in --scenes");
-  const std::vector<std::string> names = uniqueSceneNames(all);
-  std::vector<std::unique_ptr<SceneJob>> scenes;
-  for (size_t i = 0; i < all.size(); ++i) {
-    if (static_cast<int>(i % cfg.numShards) != cfg.shardIndex) continue;
-    auto job = std::make_unique<SceneJob>();
-    job->path = all[i];
-    job->name = names[i];
-    scenes.push_back(std::move(job));
-  }
-
-  makeDirs(cfg.out);
-  removeStaleTemporaries(cfg.out);  // left by a killed run
-  removeTemporaries(cfg.out);
-  const std::string part = cfg.numShards > 1 ? "-" + std::to_string(cfg.shardIndex) : "";
-  const std::string shardPrefix = "pairs" + part;
-  const fs::path recordsDir = fs::path(cfg.out) / ".paircast" / "records";
-
-  auto recordPath = [&](const SceneJob& s, uint64_t k) {
-    return (recordsDir / s.name / (fmtIndex(k) + ".json")).string();
-  };
-  auto crocoStem = [&](const SceneJob& s, uint64_t k) {
-    return (fs::path(cfg.out) / s.name / fmtIndex(k)).string();
-  };
-  auto readRecord = [&](const std::string& path) -> nlohmann::json {
-    std::error_code ec;
-    if (!fs::exists(path, ec)) return nullptr;
-    auto j = nlohmann::json::parse(readFile(path), nullptr, false);
-    return j.is_discarded() ? nlohmann::json(nullptr) : j;
-  };
-
-  // What is already done: pairs in completed shards, and pairs with a record (and files).
-  std::set<std::string> inShards;
-  std::vector<std::vector<std::string>> doneShards;
-  if (cfg.shards) {
-    doneShards = completedShards(cfg.out, shardPrefix);
-    for (const auto& keys : doneShards) inShards.insert(keys.begin(), keys.end());
-  }
-  struct Item {
-    size_t scene;
-    uint64_t index;
-    bool forShard, forCroco;
-  };
-  std::vector<Item> items;
-  size_t totalItems = 0;
-  for (size_t s = 0; s < scenes.size(); ++s) {
-    makeDirs((recordsDir / scenes[s]->name).string());
-    removeStaleTemporaries((recordsDir / scenes[s]->name).string());
-    removeStaleTemporaries((fs::path(cfg.out) / scenes[s]->name).string());
-    for (uint64_t k = 0; k < static_cast<uint64_t>(cfg.pairsPerScene); ++k) {
-      ++totalItems;
-      const nlohmann::json rec = readRecord(recordPath(*scenes[s], k));
-      if (rec.is_object() && rec.value("failed", false)) continue;  // known to have no pair
-      const bool shardDone = !cfg.shards || inShards.count(sampleKey(scenes[s]->name, k));
-      const bool crocoDone =
-          !cfg.croco || (rec.is_object() && fs::exists(crocoStem(*scenes[s], k) + "_2.jpeg"));
-      if (!shardDone || !crocoDone) {
-        items.push_back({s, k, !shardDone, !crocoDone});
-        scenes[s]->pending++;
-      }
-    }
-  }
-
-  // Workers generate and encode pairs in any order; the writer appends them to shards in order.
-  const int jobs = cfg.jobs > 0 ? cfg.jobs : std::max(1u, std::thread::hardware_concurrency());
-  const size_t window = static_cast<size_t>(4 * jobs + 4);
-  std::vector<Result> results(items.size());
-  std::mutex mu;
-  std::condition_variable produced, consumed;
-  size_t nextToWrite = 0;
-  std::atomic<size_t> nextItem{0};
-  std::atomic<bool> stop{false};
-  std::exception_ptr failure;
-  std::atomic<size_t> accepted{0}, failedPairs{0}, candidates{0};
-  std::mutex timeMu;
-  double tRender = 0, tCovis = 0, tEncode = 0, tWrite = 0;
-  std::mutex warnMu;
-  std::vector<nlohmann::json> skipped;
-  std::atomic<int> scenesLoaded{0}, scenesPeak{0};
-
-  auto prepareScene = [&](SceneJob& job) {
-    std::call_once(job.once, [&] {
-      try {
-        job.scene = std::make_unique<Scene>(loadScene(job.path, cfg.load));
-        const int now = ++scenesLoaded;
-        for (int peak = scenesPeak; now > peak && !scenesPeak.compare_exchange_weak(peak, now);) {
-        }
-        job.scene->name = job.name;
-        job.caster = std::make_unique<RayCaster>(job.scene->mesh);
-        job.sampler = std::make_unique<ViewpointSampler>(*job.scene, *job.caster, cfg.pair.sampler);
-        PairOptions po = cfg.pair;
-        po.keepDepth = cfg.saveDepth;
-        job.generator = std::make_unique<PairGenerator>(*job.scene, *job.caster, *job.sampler, po);
-        // A scene whose first pair cannot be made has no usable views: skip it whole.
-        const nlohmann::json rec0 = readRecord(recordPath(job, 0));
-        if (!rec0.is_object() && !job.generator->generate(cfg.seed, 0))
-          job.error = "no valid views (no pair found for index 0)";
-        if (rec0.is_object() && rec0.value("failed", false))
-          job.error = "no valid views (no pair found for index 0)";
-      } catch (const Error& e) {
-        job.error = e.what();
-      }
-      if (!job.error.empty()) {
-        std::lock_guard<std::mutex> lock(warnMu);
-        std::fprintf(stderr, "%sgenerate_pairs: warning: skipping scene %s: %s\n",
-                     cfg.progress ? "\n" : "", job.path.c_str(), job.error.c_str());
-        skipped.push_back({{"scene", job.path}, {"reason", job.error}});
-      }
-    });
-  };
-
-  auto worker = [&]() {
-    try {
-      while (!stop) {
-        const size_t i = nextItem++;
-        if (i >= items.size()) return;
-        {
-          std::unique_lock<std::mutex> lock(mu);
-          consumed.wait(lock, [&] { return stop || i < nextToWrite + window; });
-          if (stop) return;
-        }
-        const Item& item = items[i];
-        SceneJob& job = *scenes[item.scene];
-        prepareScene(job);
-        Result r;
-        r.done = true;
-        if (!job.error.empty()) {
-          r.skip = true;
-        } else {
-          std::vector<float> tried;
-          auto sample = job.generator->generate(cfg.seed, item.index, &tried);
-          candidates += tried.size();
-          if (!sample) {
-            ++failedPairs;
-            nlohmann::json rec = {{"failed", true},
-                                  {"scene", job.name},
-                                  {"index", item.index},
-                                  {"candidate_covis", tried}};
-            writeFileAtomic(recordPath(job, item.index), rec.dump() + "\n", Durability::NoSync);
-            r.skip = true;
-          } else {
-            auto t0 = Clock::now();
-            EncodedPair enc = encodePair(*sample, cfg.saveDepth, cfg.jpegQuality);
-            enc.record["candidate_covis"] = sample->candidateCovis;
-            const double encode = since(t0);
-            t0 = Clock::now();
-            if (item.forCroco) {
-              makeDirs((fs::path(cfg.out) / job.name).string());
-              const std::string stem = crocoStem(job, item.index);
-              for (int k = 0; k < 2; ++k) {
-                const std::string view = "_" + std::to_string(k + 1);
-                writeFileAtomic(stem + view + ".jpeg", bytesView(enc.jpeg[k]), Durability::NoSync);
-                if (cfg.saveDepth) {
-                  writeFileAtomic(stem + view + "_depth.exr", bytesView(enc.depthExr[k]),
-                                  Durability::NoSync);
-                  nlohmann::json cam = cameraToJson(sample->camera[k]);
-                  cam.erase("width");
-                  cam.erase("height");
-                  writeFileAtomic(stem + view + "_camera_params.json", cam.dump() + "\n",
-                                  Durability::NoSync);
-                }
-              }
-            }
-            writeFileAtomic(recordPath(job, item.index), enc.record.dump() + "\n",
-                            Durability::NoSync);
-            {
-              std::lock_guard<std::mutex> lock(timeMu);
-              tRender += sample->renderSeconds;
-              tCovis += sample->covisSeconds;
-              tEncode += encode;
-              tWrite += since(t0);
-            }
-            ++accepted;
-            if (item.forShard) r.pair = std::move(enc);
-          }
-        }
-        if (--job.pending == 0) {  // no other worker holds an item of it
-          if (job.scene) --scenesLoaded;
-          job.release();
-        }
-        std::lock_guard<std::mutex> lock(mu);
-        results[i] = std::move(r);
-        produced.notify_all();
-      }
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(mu);
-      if (!failure) failure = std::current_exception();
-      stop = true;
-      produced.notify_all();
-      consumed.notify_all();
-    }
-  };
-
-  // Nested parallelism off: each worker renders its own pairs on one core.
-  omp_set_max_active_levels(1);
-  const int ompThreadsBefore = omp_get_max_threads();
-  omp_set_num_threads(1);
-  std::vector<std::thread> threads;
-  for (int t = 0; t < jobs; ++t) threads.emplace_back(worker);
-
-  ProgressLine progress(cfg.progress, items.size());
-  std::unique_ptr<ShardWriter> shard;
-  int shardNumber = static_cast<int>(doneShards.size());
-  std::vector<nlohmann::json> shardList;
-  for (size_t s = 0; s < doneShards.size(); ++s)
-    shardList.push_back({{"pairs", doneShards[s].size()}});
-  auto shardPath = [&](int n) {
-    char name[64];
-    std::snprintf(name, sizeof name, "%s-%06d.tar", shardPrefix.c_str(), n);
-    return (fs::path(cfg.out) / name).string();
-  };
-  try {
-    for (size_t i = 0; i < items.size(); ++i) {
-      Result r;
-      {
-        std::unique_lock<std::mutex> lock(mu);
-        produced.wait(lock, [&] { return stop || results[i].done; });
-        if (stop && !results[i].done) break;
-        r = std::move(results[i]);
-        results[i] = Result{};
-        nextToWrite = i + 1;
-        consumed.notify_all();
-      }
-      if (r.pair && cfg.shards) {
-        auto t0 = Clock::now();
-        if (!shard) shard = std::make_unique<ShardWriter>(shardPath(shardNumber));
-        shard->add(*r.pair);
-        if (static_cast<int>(shard->samples()) >= cfg.shardSize ||
-            shard->bytes() >= cfg.shardMaxBytes) {
-          shard->close();
-          shardList.push_back({{"pairs", shard->samples()}});
-          shard.reset();
-          ++shardNumber;
-        }
-        std::lock_guard<std::mutex> lock(timeMu);
-        tWrite += since(t0);
-      }
-      progress.update(i + 1, accepted, candidates);
-    }
-    if (shard && !stop) {
-      shard->close();
-      shardList.push_back({{"pairs", shard->samples()}});
-      shard.reset();
-    }
-  } catch (...) {
-    std::lock_guard<std::mutex> lock(mu);
-    if (!failure) failure = std::current_exception();
-    stop = true;
-    consumed.notify_all();
-  }
-  for (auto& t : threads) t.join();
-  omp_set_num_threads(ompThreadsBefore);
-  if (failure) std::rethrow_exception(failure);
-  progress.update(items.size(), accepted, candidates, true);
-
-  // Outputs assembled from the per-pair records, so that a resumed run reports everything.
-  std::vector<uint64_t> histogram(kHistogramBins, 0), candidateHistogram(kHistogramBins, 0);
-  uint64_t pairs = 0, tried = 0;
-  std::string pairsTxt;
-  nlohmann::json perScene = nlohmann::json::object();
-  std::set<std::string> skippedNames;
-  for (const auto& s : skipped) skippedNames.insert(s["scene"].get<std::string>());
-  for (const auto& jobPtr : scenes) {
-    const SceneJob& job = *jobPtr;
-    if (skippedNames.count(job.path)) continue;
-    nlohmann::json multiviews = nlohmann::json::object();
-    uint64_t scenePairs = 0;
-    for (uint64_t k = 0; k < static_cast<uint64_t>(cfg.pairsPerScene); ++k) {
-      const nlohmann::json rec = readRecord(recordPath(job, k));
-      if (!rec.is_object()) continue;
-      for (const auto& c : rec.value("candidate_covis", nlohmann::json::array())) {
-        histogramAdd(candidateHistogram, c.get<double>());
-        ++tried;
-      }
-      if (rec.value("failed", false)) continue;
-      ++pairs;
-      ++scenePairs;
-      histogramAdd(histogram, rec["covis"].get<double>());
-      if (!cfg.croco) continue;
-      const Camera c1 = cameraFromJson(rec["camera1"], recordPath(job, k));
-      const Camera c2 = cameraFromJson(rec["camera2"], recordPath(job, k));
-      const double f1 = rec["valid_fraction1"], f2 = rec["valid_fraction2"];
-      multiviews[fmtIndex(k)] = {
-          {"positions",
-           {{c1.t_cam2world.x(), c1.t_cam2world.y(), c1.t_cam2world.z()},
-            {c2.t_cam2world.x(), c2.t_cam2world.y(), c2.t_cam2world.z()}}},
-          {"orientations", {habitatQuaternion(c1.R_cam2world), habitatQuaternion(c2.R_cam2world)}},
-          {"covisibility_ratios", {f1, rec["covis"]}},
-          {"valid_fractions", {f1, f2}},
-          {"pairwise_visibility_ratios", {{f1, rec["v_ij"]}, {rec["v_ji"], f2}}}};
-      pairsTxt +=
-          job.name + "/" + fmtIndex(k) + "_1.jpeg " + job.name + "/" + fmtIndex(k) + "_2.jpeg\n";
-    }
-    perScene[job.name] = scenePairs;
-    if (cfg.croco) {
-      nlohmann::json meta = {{"scene", job.path},
-                             {"views_count", 2},
-                             {"size", cfg.pairsPerScene},
-                             {"generate_depth", cfg.saveDepth},
-                             {"resolution", cfg.pair.resolution},
-                             {"hfov", cfg.pair.hfov},
-                             {"minimum_covisibility", cfg.pair.minCovis},
-                             {"maximum_covisibility", cfg.pair.maxCovis},
-                             {"seed", cfg.seed},
-                             {"generator", "paircast"},
-                             {"multiviews", multiviews}};
-      makeDirs((fs::path(cfg.out) / job.name).string());
-      writeFileAtomic((fs::path(cfg.out) / job.name / "metadata.json").string(),
-                      meta.dump() + "\n");
-    }
-  }
-  if (cfg.croco)
-    writeFileAtomic((fs::path(cfg.out) / ("pairs" + part + ".txt")).string(), pairsTxt);
-  if (cfg.shards) {
-    for (size_t s = 0; s < shardList.size(); ++s) {
-      char name[64];
-      std::snprintf(name, sizeof name, "%s-%06zu.tar", shardPrefix.c_str(), s);
-      shardList[s]["name"] = name;
-    }
-    nlohmann::json index = {{"format", "paircast-shards"},
-                            {"format_version", kShardVersion},
-                            {"pairs", pairs},
-                            {"shards", shardList},
-                            {"pairs_per_scene", perScene},
-                            {"covis_histogram", histogram},
-                            {"depth", cfg.saveDepth},
-                            {"resolution", cfg.pair.resolution},
-                            {"hfov", cfg.pair.hfov},
-                            {"seed", cfg.seed}};
-    writeFileAtomic((fs::path(cfg.out) / ("index" + part + ".json")).string(),
-                    index.dump(1) + "\n");
-  }
-  const double seconds = since(start);
-  const double split = std::max(tRender + tCovis + tEncode + tWrite, 1e-12);
-  nlohmann::json summary = {
-      {"pairs", pairs},
-      {"candidates", tried},
-      {"acceptance", tried ? static_cast<double>(pairs) / tried : 0.0},
-      {"seconds", seconds},
-      {"pairs_this_run", accepted.load()},
-      {"pairs_per_second", accepted / std::max(seconds, 1e-9)},
-      {"failed_pairs", failedPairs.load()},
-      {"covis_histogram", histogram},
-      {"candidate_covis_histogram", candidateHistogram},
-      {"time_split",
-       {{"render", tRender / split},
-        {"covis", tCovis / split},
-        {"encode", tEncode / split},
-        {"write", tWrite / split}}},
-      {"time_seconds",
-       {{"render", tRender}, {"covis", tCovis}, {"encode", tEncode}, {"write", tWrite}}},
-      {"skipped_scenes", skipped},
-      {"scenes_in_memory_max", scenesPeak.load()},
-      {"jobs", jobs}};
-  writeFileAtomic((fs::path(cfg.out) / ("summary" + part + ".json")).string(),
-                  summary.dump(1) + "\n");
-  return summary;
+nlohmann::json runGenerate(const GenerateConfig& config) {
+  GenerateRun run(config);
+  run.run();
+  return run.summarise();
 }
 
 }  // namespace paircast

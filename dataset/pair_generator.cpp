@@ -1,6 +1,7 @@
 #include "dataset/pair_generator.h"
 
 #include <chrono>
+#include <string>
 
 #include "util/error.h"
 #include "util/random.h"
@@ -35,6 +36,37 @@ Eigen::Vector3d meanWorldPoint(const Camera& camera, const ImageF& depth) {
   return camera.R_cam2world * (sum / static_cast<double>(n)) + camera.t_cam2world;
 }
 
+int screenResolution(const PairOptions& o) {
+  if (o.screenResolution != kAutoScreen) return o.screenResolution;
+  return o.resolution >= 64 ? o.resolution / kAutoScreenDivisor : 0;
+}
+
+void validatePairOptions(const PairOptions& o) {
+  if (!(o.minCovis >= 0 && o.maxCovis <= 1 && o.minCovis <= o.maxCovis))
+    throw Error("the covis band must satisfy 0 <= --min-covis <= --max-covis <= 1");
+  if (o.maxAttempts < 1 || o.maxReferences < 1) throw Error("attempt limits must be at least 1");
+  if (o.views < 1 || o.views > kMaxViews)
+    throw Error("--views must be in [1, " + std::to_string(kMaxViews) + "], got " +
+                std::to_string(o.views));
+  if (o.screenResolution < 0 && o.screenResolution != kAutoScreen)
+    throw Error("--screen-resolution must be >= 0 (0 turns screening off), got " +
+                std::to_string(o.screenResolution));
+  if (o.screenResolution > o.resolution)
+    throw Error("--screen-resolution (" + std::to_string(o.screenResolution) +
+                ") must not exceed --resolution (" + std::to_string(o.resolution) + ")");
+  if (!(o.screenCovisMargin >= 0 && o.screenValidMargin >= 0))
+    throw Error("screening margins must be >= 0");
+}
+
+// One view while a sample is being made.
+struct PairGenerator::View {
+  Viewpoint at;
+  ImageF depth;        // [H, W, 1] full resolution
+  ImageF screenDepth;  // [S, S, 1] screening resolution (empty without screening)
+  Image8 rgb;          // [H, W, 3], empty until rendered
+  CovisResult covis;   // against view 0, full resolution
+};
+
 PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
                              const ViewpointSampler& sampler, const PairOptions& options)
     : scene_(scene),
@@ -42,63 +74,181 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
       sampler_(sampler),
       options_(options),
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
-  if (!(options.minCovis >= 0 && options.maxCovis <= 1 && options.minCovis <= options.maxCovis))
-    throw Error("the covis band must satisfy 0 <= min <= max <= 1");
-  if (options.maxAttempts < 1 || options.maxReferences < 1)
-    throw Error("attempt limits must be at least 1");
+  validatePairOptions(options);
+  options_.screenResolution = screenResolution(options);
+  if (options_.screenResolution > 0)
+    screenIntrinsics_ =
+        Camera::fromHfov(options_.screenResolution, options_.screenResolution, options.hfov);
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
                                                   std::vector<float>* candidates) const {
+  const auto start = Clock::now();
   Rng rng(mixSeed(seed, scene_.name, index));
   PairSample s;
   s.scene = scene_.name;
   s.index = index;
   s.seed = seed;
-  ImageF depth[2];
+  std::vector<View> views;
+  views.reserve(options_.views);
   for (int ref = 0; ref < options_.maxReferences; ++ref) {
-    auto t0 = Clock::now();
-    const Viewpoint first = sampler_.sampleReference(intrinsics_, rng);
-    caster_.renderDepth(first.camera, depth[0]);
-    s.renderSeconds += since(t0);
-    const double valid0 = validFraction(depth[0]);
-    if (valid0 < options_.minValidFraction) continue;
-    const Eigen::Vector3d target = meanWorldPoint(first.camera, depth[0]);
-    for (int attempt = 0; attempt < options_.maxAttempts; ++attempt) {
-      t0 = Clock::now();
-      const Viewpoint second = sampler_.sampleOther(intrinsics_, first, target, rng);
-      caster_.renderDepth(second.camera, depth[1]);
-      s.renderSeconds += since(t0);
-      if (validFraction(depth[1]) < options_.minValidFraction) continue;
-      t0 = Clock::now();
-      const CovisResult c =
-          computeCovisibility(first.camera, depth[0], second.camera, depth[1], options_.covis);
-      s.covisSeconds += since(t0);
-      s.candidateCovis.push_back(static_cast<float>(c.covis));
-      if (options_.accept ? !options_.accept(c.covis)
-                          : c.covis < options_.minCovis || c.covis > options_.maxCovis)
-        continue;
-      // Accepted: render the colour images (the geometry is the same as the depth pass).
-      t0 = Clock::now();
-      s.camera[0] = first.camera;
-      s.camera[1] = second.camera;
-      s.covis = c;
-      Frame frame;
-      for (int k = 0; k < 2; ++k) {
-        RenderOptions ro = options_.render;
-        ro.normals = false;
-        ro.ids = false;
-        caster_.render(s.camera[k], ro, frame);
-        s.rgb[k] = std::move(frame.rgb);
-        if (options_.keepDepth) s.depth[k] = std::move(depth[k]);
-      }
-      s.renderSeconds += since(t0);
-      if (candidates) *candidates = s.candidateCovis;
-      return s;
+    views.clear();
+    std::optional<View> first = referenceView(rng, s);
+    if (!first) continue;
+    const Eigen::Vector3d target = meanWorldPoint(first->at.camera, first->depth);
+    views.push_back(std::move(*first));
+    while (static_cast<int>(views.size()) < options_.views) {
+      std::optional<View> other = otherView(views[0], target, rng, s);
+      if (!other) break;
+      views.push_back(std::move(*other));
     }
+    if (static_cast<int>(views.size()) < options_.views) continue;
+    finish(views, s);
+    if (candidates) *candidates = s.candidateCovis;
+    s.totalSeconds = since(start);
+    return s;
   }
   if (candidates) *candidates = s.candidateCovis;
   return std::nullopt;
+}
+
+std::optional<PairGenerator::View> PairGenerator::referenceView(Rng& rng, PairSample& s) const {
+  View v;
+  v.at = sampler_.sampleReference(intrinsics_, rng);
+  if (screenedOut(nullptr, v, s)) return std::nullopt;
+  renderFull(v, options_.screenResolution > 0, s);
+  if (validFraction(v.depth) < options_.minValidFraction) return std::nullopt;
+  return v;
+}
+
+std::optional<PairGenerator::View> PairGenerator::otherView(const View& ref,
+                                                            const Eigen::Vector3d& target, Rng& rng,
+                                                            PairSample& s) const {
+  for (int attempt = 0; attempt < options_.maxAttempts; ++attempt) {
+    View v;
+    v.at = sampler_.sampleOther(intrinsics_, ref.at, target, rng);
+    if (screenedOut(&ref, v, s)) continue;
+    // A view that passed screening is likely kept: its colour comes in the same pass.
+    renderFull(v, options_.screenResolution > 0, s);
+    if (validFraction(v.depth) < options_.minValidFraction) continue;
+    const auto t0 = Clock::now();
+    v.covis = computeCovisibility(ref.at.camera, ref.depth, v.at.camera, v.depth, options_.covis);
+    s.covisSeconds += since(t0);
+    s.candidateCovis.push_back(static_cast<float>(v.covis.covis));
+    if (inBand(v.covis.covis)) return v;
+  }
+  return std::nullopt;
+}
+
+bool PairGenerator::inBand(double covis) const {
+  return options_.accept ? options_.accept(covis)
+                         : covis >= options_.minCovis && covis <= options_.maxCovis;
+}
+
+// Renders v's low-resolution depth and says whether it cannot pass: too few valid pixels, or (with
+// a reference) a covis estimate outside the band by more than the margin.
+bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
+  if (options_.screenResolution == 0) return false;
+  Camera cam = screenIntrinsics_;
+  cam.R_cam2world = v.at.camera.R_cam2world;
+  cam.t_cam2world = v.at.camera.t_cam2world;
+  auto t0 = Clock::now();
+  caster_.renderDepth(cam, v.screenDepth);
+  s.screenSeconds += since(t0);
+  bool out = validFraction(v.screenDepth) < options_.minValidFraction - options_.screenValidMargin;
+  if (!out && ref && !options_.accept) {
+    Camera refCam = screenIntrinsics_;
+    refCam.R_cam2world = ref->at.camera.R_cam2world;
+    refCam.t_cam2world = ref->at.camera.t_cam2world;
+    t0 = Clock::now();
+    const double estimate =
+        computeCovisibility(refCam, ref->screenDepth, cam, v.screenDepth, options_.covis).covis;
+    s.screenSeconds += since(t0);
+    out = estimate < options_.minCovis - options_.screenCovisMargin ||
+          estimate > options_.maxCovis + options_.screenCovisMargin;
+    if (out) s.candidateCovis.push_back(static_cast<float>(estimate));
+  }
+  if (!out) return false;
+  ++s.screened;
+  if (options_.auditScreening) {
+    View full = v;
+    renderFull(full, false, s);
+    bool kept = validFraction(full.depth) >= options_.minValidFraction;
+    if (kept && ref)
+      kept = inBand(computeCovisibility(ref->at.camera, ref->depth, full.at.camera, full.depth,
+                                        options_.covis)
+                        .covis);
+    s.falseRejections += kept;
+  }
+  return true;
+}
+
+void PairGenerator::renderFull(View& v, bool rgb, PairSample& s) const {
+  const auto t0 = Clock::now();
+  if (rgb) {
+    RenderOptions ro = options_.render;
+    ro.rgb = true;
+    ro.normals = false;
+    ro.ids = false;
+    Frame frame;
+    caster_.render(v.at.camera, ro, frame);
+    v.depth = std::move(frame.depth);
+    v.rgb = std::move(frame.rgb);
+  } else {
+    caster_.renderDepth(v.at.camera, v.depth);
+  }
+  s.renderSeconds += since(t0);
+}
+
+// Colour for views rendered depth-first, the visibility matrix, the masks, then the views move
+// into the sample.
+void PairGenerator::finish(std::vector<View>& views, PairSample& s) const {
+  const int V = static_cast<int>(views.size());
+  for (View& v : views) {
+    if (!v.rgb.data.empty()) continue;
+    const ImageF depth = std::move(v.depth);
+    renderFull(v, true, s);
+    v.depth = depth;
+  }
+  const auto t0 = Clock::now();
+  s.covis.assign(V, CovisResult{});
+  s.visibility.assign(V, std::vector<double>(V, 1.0));
+  for (int i = 0; i < V; ++i) s.visibility[i][i] = validFraction(views[i].depth);
+  s.covis[0] = {1.0, 1.0, 1.0, s.visibility[0][0], s.visibility[0][0]};
+  for (int k = 1; k < V; ++k) {
+    s.covis[k] = views[k].covis;
+    s.visibility[0][k] = views[k].covis.v_ij;
+    s.visibility[k][0] = views[k].covis.v_ji;
+  }
+  for (int i = 1; i < V; ++i) {
+    for (int j = i + 1; j < V; ++j) {
+      const CovisResult c = computeCovisibility(views[i].at.camera, views[i].depth,
+                                                views[j].at.camera, views[j].depth, options_.covis);
+      s.visibility[i][j] = c.v_ij;
+      s.visibility[j][i] = c.v_ji;
+    }
+  }
+  if (options_.covisMasks) makeMasks(views, s);
+  s.covisSeconds += since(t0);
+  for (View& v : views) {
+    s.camera.push_back(v.at.camera);
+    s.orientation.push_back(v.at.orientation);
+    s.rgb.push_back(std::move(v.rgb));
+    s.depth.push_back(options_.keepDepth ? std::move(v.depth) : ImageF());
+  }
+}
+
+void PairGenerator::makeMasks(const std::vector<View>& views, PairSample& s) const {
+  const View& first = views[0];
+  s.covisMask.assign(views.size(), Image8());
+  Image8 seenFromOthers(first.depth.width, first.depth.height, 1, 0);
+  for (size_t k = 1; k < views.size(); ++k) {
+    const Camera &c0 = first.at.camera, &ck = views[k].at.camera;
+    const Image8 m = visibilityMask(c0, first.depth, ck, views[k].depth, options_.covis);
+    for (size_t p = 0; p < m.data.size(); ++p) seenFromOthers.data[p] |= m.data[p];
+    s.covisMask[k] = visibilityMask(ck, views[k].depth, c0, first.depth, options_.covis);
+  }
+  s.covisMask[0] = std::move(seenFromOthers);
 }
 
 }  // namespace paircast

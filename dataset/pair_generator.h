@@ -17,33 +17,75 @@
 
 namespace paircast {
 
+// The most views a sample may have: names stay at two digits (<idx>_<k>.jpeg, <key>.<k>.jpg).
+constexpr int kMaxViews = 99;
+
+constexpr int kAutoScreen = -1;
+constexpr int kAutoScreenDivisor = 4;
+
 struct PairOptions {
   int resolution = 256;   // square images, pixels
   double hfov = 60.0;     // degrees
-  double minCovis = 0.5;  // keep a pair when covis lies in [minCovis, maxCovis]
+  double minCovis = 0.5;  // keep a view when its covis with view 1 lies in [minCovis, maxCovis]
   double maxCovis = 1.0;
   // When set, decides instead of [minCovis, maxCovis] (covis_sweep's buckets). Must be pure.
+  // Screening then checks valid depth only.
   std::function<bool(double covis)> accept;
+  int views = 2;                  // CroCo's views_count: view 1 (the reference) and views - 1 more
   double minValidFraction = 0.7;  // of each view's pixels with depth > 0
-  int maxAttempts = 100;          // second views tried per reference view
-  int maxReferences = 20;         // reference views tried per pair before it is given up
+  int maxAttempts = 100;          // candidates tried per view before the reference is given up
+  int maxReferences = 20;         // reference views tried per sample before it is given up
   bool keepDepth = true;          // keep the depth maps in the sample
+  bool covisMasks = false;        // fill PairSample::covisMask
+  // Screening: each view is first rendered as a screenResolution^2 depth map, and only views whose
+  // valid fraction and covis there come within the margins of passing go on to full resolution.
+  // 0 turns it off; kAutoScreen picks resolution / kAutoScreenDivisor, and off below 64 pixels.
+  // docs/dataset.md has the measurements behind the defaults.
+  int screenResolution = kAutoScreen;
+  double screenCovisMargin = 0.1;
+  double screenValidMargin = 0.05;
+  // Benchmarks: also render every screened-out view at full resolution, to count the ones that
+  // would have passed (PairSample::falseRejections). It changes no output.
+  bool auditScreening = false;
   CovisOptions covis;
   SamplerOptions sampler;
   RenderOptions render;
 };
 
+// Checks the options a user sets; throws paircast::Error with the option's name.
+void validatePairOptions(const PairOptions& options);
+// The screening resolution in use (kAutoScreen resolved), 0 when off.
+int screenResolution(const PairOptions& options);
+
+// Views are numbered from 0 here (view 0 is CroCo's view 1, the reference).
 struct PairSample {
   std::string scene;  // scene name (unique within a run)
   uint64_t index = 0;
   uint64_t seed = 0;
-  Camera camera[2];
-  Image8 rgb[2];    // [H, W, 3] sRGB
-  ImageF depth[2];  // [H, W, 1] z-depth, metres, 0 on a miss (empty unless keepDepth)
-  CovisResult covis;
-  std::vector<float> candidateCovis;  // covis of every second view tried, accepted one last
-  double renderSeconds = 0;
+  std::vector<Camera> camera;  // [V]
+  // [V] the habitat quaternions the rotations were made from (metadata.json's "orientations");
+  // may be empty (then computed from the rotations)
+  std::vector<HabitatQuaternion> orientation;
+  std::vector<Image8> rgb;    // [V] [H, W, 3] sRGB
+  std::vector<ImageF> depth;  // [V] [H, W, 1] z-depth, metres, 0 on a miss (empty unless keepDepth)
+  // [V] covis[k]: view 0 (i) against view k (j). covis[0] is view 0 against itself: all ratios 1,
+  // valid fractions its own.
+  std::vector<CovisResult> covis;
+  // [V][V] visibility[i][j] = v_ij (share of view i seen by view j); the diagonal holds each
+  // view's valid fraction (CroCo's pairwise_visibility_ratios).
+  std::vector<std::vector<double>> visibility;
+  // [V] [H, W, 1] when PairOptions::covisMasks: view k > 0: its pixels seen by view 0; view 0: its
+  // pixels seen by at least one other view (with V = 2, the pixels of each seen by the other).
+  std::vector<Image8> covisMask;
+  std::vector<float> candidateCovis;  // covis of every candidate tried (screened ones: estimate)
+  size_t screened = 0;                // candidates and references turned down by screening
+  size_t falseRejections = 0;         // of those, the ones full resolution would have kept (audit)
+  double renderSeconds = 0;           // full resolution
+  double screenSeconds = 0;           // screening: low-resolution renders and covis estimates
   double covisSeconds = 0;
+  double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
+
+  int views() const { return static_cast<int>(camera.size()); }
 };
 
 class PairGenerator {
@@ -52,7 +94,7 @@ class PairGenerator {
   PairGenerator(const Scene& scene, const RayCaster& caster, const ViewpointSampler& sampler,
                 const PairOptions& options);
 
-  // The pair of `index`, or nullopt when no pair was found within the attempt limits
+  // The sample of `index`, or nullopt when none was found within the attempt limits
   // (`candidates`, when given, still receives the covis of every candidate tried).
   std::optional<PairSample> generate(uint64_t seed, uint64_t index,
                                      std::vector<float>* candidates = nullptr) const;
@@ -60,11 +102,21 @@ class PairGenerator {
   const PairOptions& options() const { return options_; }
 
  private:
+  struct View;
+  std::optional<View> referenceView(Rng& rng, PairSample& s) const;
+  std::optional<View> otherView(const View& ref, const Eigen::Vector3d& target, Rng& rng,
+                                PairSample& s) const;
+  bool screenedOut(const View* ref, View& v, PairSample& s) const;
+  void renderFull(View& v, bool rgb, PairSample& s) const;
+  bool inBand(double covis) const;
+  void finish(std::vector<View>& views, PairSample& s) const;
+  void makeMasks(const std::vector<View>& views, PairSample& s) const;
+
   const Scene& scene_;
   const RayCaster& caster_;
   const ViewpointSampler& sampler_;
   PairOptions options_;
-  Camera intrinsics_;
+  Camera intrinsics_, screenIntrinsics_;
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

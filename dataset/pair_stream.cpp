@@ -1,5 +1,7 @@
 #include "dataset/pair_stream.h"
 
+#include <omp.h>
+
 #include <cstdio>
 
 #include "dataset/generate_job.h"
@@ -47,6 +49,7 @@ void PairStream::stop() {
 }
 
 void PairStream::work() {
+  omp_set_num_threads(1);  // per thread: each worker renders on one core
   while (!stopped_) {
     // The counter interleaves this part's pairs over all scenes.
     const uint64_t n = counter_++;

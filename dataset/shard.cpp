@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <map>
 
+#include "dataset/habitat_frame.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
@@ -30,18 +31,34 @@ std::string sampleKey(const std::string& scene, uint64_t index) {
 }
 
 nlohmann::json sampleRecord(const PairSample& s) {
+  const int V = s.views();
   nlohmann::json j;
   j["paircast_shard_version"] = kShardVersion;
   j["scene"] = s.scene;
   j["index"] = s.index;
   j["seed"] = s.seed;
-  j["camera1"] = cameraToJson(s.camera[0]);
-  j["camera2"] = cameraToJson(s.camera[1]);
-  j["covis"] = s.covis.covis;
-  j["v_ij"] = s.covis.v_ij;
-  j["v_ji"] = s.covis.v_ji;
-  j["valid_fraction1"] = s.covis.valid_i;
-  j["valid_fraction2"] = s.covis.valid_j;
+  j["views"] = V;
+  j["cameras"] = nlohmann::json::array();
+  for (const Camera& c : s.camera) j["cameras"].push_back(cameraToJson(c));
+  j["orientations"] = nlohmann::json::array();  // habitat quaternions (w, x, y, z)
+  for (int k = 0; k < V; ++k)
+    j["orientations"].push_back(k < static_cast<int>(s.orientation.size())
+                                    ? s.orientation[k]
+                                    : habitatQuaternion(s.camera[k].R_cam2world));
+  j["camera1"] = j["cameras"][0];
+  if (V >= 2) {
+    j["camera2"] = j["cameras"][1];
+    j["covis"] = s.covis[1].covis;
+    j["v_ij"] = s.covis[1].v_ij;
+    j["v_ji"] = s.covis[1].v_ji;
+  }
+  // CroCo's: view 1's valid fraction, then each view's covis with view 1.
+  std::vector<double> ratios{s.visibility[0][0]}, valid;
+  for (int k = 1; k < V; ++k) ratios.push_back(s.covis[k].covis);
+  for (int k = 0; k < V; ++k) valid.push_back(s.visibility[k][k]);
+  j["covisibility_ratios"] = ratios;
+  j["valid_fractions"] = valid;
+  j["pairwise_visibility_ratios"] = s.visibility;
   j["candidates"] = s.candidateCovis.size();
   return j;
 }
@@ -74,27 +91,48 @@ SampleRecord parseSampleRecord(const nlohmann::json& record, const std::string& 
   if (!record.contains("index") || !record.at("index").is_number_unsigned())
     throw Error(source, "record has no non-negative integer 'index'");
   r.index = record.at("index").get<uint64_t>();
+  if (record.contains("views")) {
+    const auto& v = record.at("views");
+    if (!v.is_number_integer() || v.get<int64_t>() < 1 || v.get<int64_t>() > kMaxViews)
+      throw Error(source, "'views' is not an integer in [1, " + std::to_string(kMaxViews) + "]");
+    r.views = v.get<int>();
+  }
   const char* cameraKeys[2] = {"camera1", "camera2"};
-  for (int k = 0; k < 2; ++k) {
+  for (int k = 0; k < std::min(r.views, 2); ++k) {
     if (!record.contains(cameraKeys[k]))
       throw Error(source, std::string("record has no '") + cameraKeys[k] + "'");
-    r.camera[k] = cameraFromJson(record.at(cameraKeys[k]), source + " " + cameraKeys[k]);
+    r.camera.push_back(cameraFromJson(record.at(cameraKeys[k]), source + " " + cameraKeys[k]));
   }
-  r.covis = ratioField(record, "covis", source);
-  r.v_ij = ratioField(record, "v_ij", source);
-  r.v_ji = ratioField(record, "v_ji", source);
+  if (record.contains("cameras")) {
+    const auto& cams = record.at("cameras");
+    if (!cams.is_array() || cams.size() != static_cast<size_t>(r.views))
+      throw Error(source, "'cameras' is not a list of " + std::to_string(r.views) + " cameras");
+    for (int k = 0; k < std::min(r.views, 2); ++k)
+      if (cams[k] != record.at(cameraKeys[k]))
+        throw Error(source, std::string("'cameras' disagrees with '") + cameraKeys[k] + "'");
+    for (int k = 2; k < r.views; ++k)
+      r.camera.push_back(cameraFromJson(cams[k], source + " cameras[" + std::to_string(k) + "]"));
+  } else if (r.views > 2) {
+    throw Error(source, "record of " + std::to_string(r.views) + " views has no 'cameras'");
+  }
+  if (r.views >= 2) {
+    r.covis = ratioField(record, "covis", source);
+    r.v_ij = ratioField(record, "v_ij", source);
+    r.v_ji = ratioField(record, "v_ji", source);
+  }
   return r;
 }
 
 EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality) {
   EncodedPair e;
   e.key = sampleKey(s.scene, s.index);
-  for (int k = 0; k < 2; ++k) {
-    e.jpeg[k] = encodeImage(s.rgb[k], "jpg", jpegQuality);
+  for (int k = 0; k < s.views(); ++k) {
+    e.jpeg.push_back(encodeImage(s.rgb[k], "jpg", jpegQuality));
     if (withDepth) {
       PAIRCAST_CHECK_MSG(!s.depth[k].data.empty(), "depth requested but not kept");
-      e.depthExr[k] = encodeExr(s.depth[k]);
+      e.depthExr.push_back(encodeExr(s.depth[k]));
     }
+    if (!s.covisMask.empty()) e.covisPng.push_back(encodeImage(s.covisMask[k], "png", 0));
   }
   e.record = sampleRecord(s);
   return e;
@@ -144,11 +182,13 @@ void ShardWriter::addFile(const std::string& name, const void* data, size_t size
 
 void ShardWriter::add(const EncodedPair& p) {
   PAIRCAST_CHECK(archive_ != nullptr);
-  addFile(p.key + ".1.jpg", p.jpeg[0].data(), p.jpeg[0].size());
-  addFile(p.key + ".2.jpg", p.jpeg[1].data(), p.jpeg[1].size());
-  if (!p.depthExr[0].empty()) {
-    addFile(p.key + ".1.depth.exr", p.depthExr[0].data(), p.depthExr[0].size());
-    addFile(p.key + ".2.depth.exr", p.depthExr[1].data(), p.depthExr[1].size());
+  for (size_t k = 0; k < p.jpeg.size(); ++k) {
+    const std::string view = p.key + "." + std::to_string(k + 1);
+    addFile(view + ".jpg", p.jpeg[k].data(), p.jpeg[k].size());
+    if (k < p.depthExr.size())
+      addFile(view + ".depth.exr", p.depthExr[k].data(), p.depthExr[k].size());
+    if (k < p.covisPng.size())
+      addFile(view + ".covis.png", p.covisPng[k].data(), p.covisPng[k].size());
   }
   const std::string json = p.record.dump();
   addFile(p.key + ".json", json.data(), json.size());
@@ -202,6 +242,36 @@ std::string printableName(const std::string& name) {
   return name.size() > 200 ? out + "..." : out;
 }
 
+// "<k>.jpg", "<k>.depth.exr" or "<k>.covis.png" with k in [1, kMaxViews]: stored in view k - 1.
+// Other members are ignored.
+void storeViewMember(ShardSample& s, const std::string& member, Bytes&& data) {
+  const size_t dot = member.find('.');
+  if (dot == 0 || dot == std::string::npos || dot > 2) return;
+  int k = 0;
+  for (size_t i = 0; i < dot; ++i) {
+    if (!std::isdigit(static_cast<unsigned char>(member[i]))) return;
+    k = 10 * k + (member[i] - '0');
+  }
+  const std::string kind = member.substr(dot + 1);
+  std::vector<Bytes>* slot = kind == "jpg"         ? &s.jpeg
+                             : kind == "depth.exr" ? &s.depthExr
+                             : kind == "covis.png" ? &s.covisPng
+                                                   : nullptr;
+  if (!slot || k < 1 || k > kMaxViews || std::to_string(k).size() != dot) return;
+  if (slot->size() < static_cast<size_t>(k)) slot->resize(k);
+  (*slot)[k - 1] = std::move(data);
+}
+
+// Every view has its image, and depth and masks are there for all views or none.
+bool wholeSample(ShardSample& s, int views) {
+  auto whole = [&](std::vector<Bytes>& files, bool optional) {
+    if (optional && files.empty()) return true;
+    if (files.size() != static_cast<size_t>(views)) return false;
+    return std::none_of(files.begin(), files.end(), [](const Bytes& b) { return b.empty(); });
+  };
+  return whole(s.jpeg, false) && whole(s.depthExr, true) && whole(s.covisPng, true);
+}
+
 struct ArchiveReader {
   archive* a;
   explicit ArchiveReader(const std::string& path) : a(archive_read_new()) {
@@ -235,14 +305,17 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
     if (current.key.empty()) return;
     ShardSample s = std::move(current);
     current = ShardSample{};
-    if (s.jpeg[0].empty() || s.jpeg[1].empty() || s.record.is_null()) {
-      report("sample '" + printableName(s.key) + "' is incomplete, skipped");
-      return;
+    SampleRecord r;
+    if (!s.record.is_null()) {
+      try {
+        r = parseSampleRecord(s.record, "sample '" + printableName(s.key) + "'");
+      } catch (const Error& e) {
+        report(std::string(e.what()) + ", skipped");
+        return;
+      }
     }
-    try {
-      parseSampleRecord(s.record, "sample '" + printableName(s.key) + "'");
-    } catch (const Error& e) {
-      report(std::string(e.what()) + ", skipped");
+    if (s.record.is_null() || !wholeSample(s, r.views)) {
+      report("sample '" + printableName(s.key) + "' is incomplete, skipped");
       return;
     }
     onSample(std::move(s));
@@ -295,17 +368,11 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
       flush();
       throw Error(path, "shard is truncated or corrupt in entry '" + printableName(name) + "'");
     }
-    if (member == "1.jpg")
-      current.jpeg[0] = std::move(data);
-    else if (member == "2.jpg")
-      current.jpeg[1] = std::move(data);
-    else if (member == "1.depth.exr")
-      current.depthExr[0] = std::move(data);
-    else if (member == "2.depth.exr")
-      current.depthExr[1] = std::move(data);
-    else if (member == "json") {
+    if (member == "json") {
       current.record = nlohmann::json::parse(data.begin(), data.end(), nullptr, false);
       if (current.record.is_discarded()) current.record = nullptr;
+    } else {
+      storeViewMember(current, member, std::move(data));
     }
   }
   flush();

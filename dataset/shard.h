@@ -1,7 +1,9 @@
-// WebDataset-style tar shards. A sample with key K is the consecutive entries K.1.jpg, K.2.jpg,
-// optional K.1.depth.exr and K.2.depth.exr, and K.json (both cameras, covis, v_ij, v_ji, scene,
-// seed, index, and "paircast_shard_version"). Entries are plain ustar files with fixed owner,
-// mode and time, so a shard's bytes depend only on its samples.
+// WebDataset-style tar shards. A sample with key K of N views is the consecutive entries K.1.jpg
+// ... K.N.jpg, optional K.k.depth.exr and K.k.covis.png for each view, and K.json: scene, seed,
+// index, "views", "cameras" (N), camera1 and camera2, covis, v_ij and v_ji of views 1 and 2,
+// CroCo's covisibility_ratios and pairwise_visibility_ratios, and "paircast_shard_version". Entries
+// are plain ustar files with fixed owner, mode and time, so a shard's bytes depend only on its
+// samples.
 #pragma once
 
 #include <cstdint>
@@ -31,18 +33,22 @@ nlohmann::json sampleRecord(const PairSample& s);
 struct SampleRecord {
   std::string scene;
   uint64_t index = 0;
-  Camera camera[2];
-  double covis = 0, v_ij = 0, v_ji = 0;  // in [0, 1]
+  int views = 2;
+  std::vector<Camera> camera;            // [views]
+  double covis = 0, v_ij = 0, v_ji = 0;  // views 1 and 2, in [0, 1] (0 with one view)
 };
 // Throws paircast::Error naming `source` when the version differs (the message says how to
 // regenerate the shard) or a field is missing, of the wrong type or out of range.
 SampleRecord parseSampleRecord(const nlohmann::json& record, const std::string& source);
 
-// Encoded files of one pair, shared by the shard and CroCo writers.
+using Bytes = std::vector<unsigned char>;
+
+// Encoded files of one sample, shared by the shard and CroCo writers.
 struct EncodedPair {
   std::string key;
-  std::vector<unsigned char> jpeg[2];
-  std::vector<unsigned char> depthExr[2];  // empty without depth
+  std::vector<Bytes> jpeg;      // [views]
+  std::vector<Bytes> depthExr;  // [views], or empty without depth
+  std::vector<Bytes> covisPng;  // [views], or empty without masks
   nlohmann::json record;
 };
 EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality);
@@ -73,8 +79,9 @@ class ShardWriter {
 // One sample read back from a shard.
 struct ShardSample {
   std::string key;
-  std::vector<unsigned char> jpeg[2];
-  std::vector<unsigned char> depthExr[2];
+  std::vector<Bytes> jpeg;      // [views]
+  std::vector<Bytes> depthExr;  // [views] when the shard has depth, else empty
+  std::vector<Bytes> covisPng;  // [views] when the shard has masks, else empty
   nlohmann::json record;
 };
 

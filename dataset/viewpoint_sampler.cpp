@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "dataset/habitat_frame.h"
 #include "util/error.h"
 
 namespace paircast {
@@ -29,8 +30,9 @@ ViewpointSampler::ViewpointSampler(const Scene& scene, const RayCaster& caster,
                     std::to_string(options.floor.headroom) + " m of headroom)");
 }
 
-Eigen::Matrix3d ViewpointSampler::orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
-                                         Rng& rng, double noiseScale) const {
+HabitatQuaternion ViewpointSampler::orient(const Eigen::Vector3d& eye,
+                                           const Eigen::Vector3d& target, Rng& rng,
+                                           double noiseScale) const {
   Eigen::Vector3d forward = target - eye;
   // Looking straight up or down: fall back to a horizontal direction.
   if ((forward - forward.dot(up_) * up_).norm() < 1e-6) forward = up_.unitOrthogonal();
@@ -38,7 +40,8 @@ Eigen::Matrix3d ViewpointSampler::orient(const Eigen::Vector3d& eye, const Eigen
   const double pan = rng.uniform(-options_.panDegrees, options_.panDegrees);
   const double tilt = rng.uniform(-options_.tiltDegrees, options_.tiltDegrees);
   const double roll = rng.uniform(-options_.rollDegrees, options_.rollDegrees);
-  return R * orientationNoise(noiseScale * pan, noiseScale * tilt, noiseScale * roll);
+  return habitatQuaternion(
+      R * orientationNoise(noiseScale * pan, noiseScale * tilt, noiseScale * roll));
 }
 
 Viewpoint ViewpointSampler::sampleReference(const Camera& intrinsics, Rng& rng) const {
@@ -50,7 +53,8 @@ Viewpoint ViewpointSampler::sampleReference(const Camera& intrinsics, Rng& rng) 
   const Eigen::Vector3d a = up_.unitOrthogonal(), b = up_.cross(a);
   const Eigen::Vector3d forward = std::cos(yaw) * a + std::sin(yaw) * b;
   v.camera = intrinsics;
-  v.camera.R_cam2world = orient(eye, eye + forward, rng);
+  v.orientation = orient(eye, eye + forward, rng);
+  v.camera.R_cam2world = cameraRotationFromHabitat(v.orientation);
   v.camera.t_cam2world = eye;
   return v;
 }
@@ -79,7 +83,8 @@ Viewpoint ViewpointSampler::sampleOther(const Camera& intrinsics, const Viewpoin
   }
   const Eigen::Vector3d eye = v.floorPoint.cast<double>() + height * up_;
   v.camera = intrinsics;
-  v.camera.R_cam2world = orient(eye, target, rng, closeness);
+  v.orientation = orient(eye, target, rng, closeness);
+  v.camera.R_cam2world = cameraRotationFromHabitat(v.orientation);
   v.camera.t_cam2world = eye;
   return v;
 }

@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 
 #include "dataset/floor_map.h"
+#include "dataset/habitat_frame.h"
 #include "render/camera.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
@@ -33,6 +34,9 @@ struct SamplerOptions {
 struct Viewpoint {
   Camera camera;
   Eigen::Vector3f floorPoint;
+  // camera.R_cam2world is made from this (cameraRotationFromHabitat), so that metadata.json,
+  // which stores it, replays the pose bit for bit.
+  HabitatQuaternion orientation{1, 0, 0, 0};
 };
 
 class ViewpointSampler {
@@ -56,8 +60,8 @@ class ViewpointSampler {
 
  private:
   // worldFromCamera rotation looking along `forward` (levelled on up), then the noise.
-  Eigen::Matrix3d orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, Rng& rng,
-                         double noiseScale = 1.0) const;
+  HabitatQuaternion orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, Rng& rng,
+                           double noiseScale = 1.0) const;
   SamplerOptions options_;
   Eigen::Vector3d up_;
   FloorMap floor_;

@@ -69,8 +69,32 @@ def ply_binary(endian):
     return header.encode() + body
 
 
+def ply_scan(replica):
+    """Binary little-endian, as ScanNet (x y z, uchar RGBA, triangles) and Replica (x y z,
+    nx ny nz, uchar RGB, quads) write them: the files loadScene's own PLY reader takes."""
+    props = "property float x\nproperty float y\nproperty float z\n"
+    if replica:
+        props += "property float nx\nproperty float ny\nproperty float nz\n"
+    props += "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+    if not replica:
+        props += "property uchar alpha\n"
+    faces = [(0, 1, 2, 3)] if replica else [(0, 1, 2), (0, 2, 3)]
+    header = ("ply\nformat binary_little_endian 1.0\nelement vertex 4\n" + props +
+              "element face %d\nproperty list uchar int vertex_indices\nend_header\n" % len(faces))
+    body = b""
+    for x, y in [(0, 0), (1, 0), (1, 1), (0, 1)]:
+        body += struct.pack("<3f", x, y, 0)
+        body += struct.pack("<3f", 0, 0, 1) if replica else b""
+        body += bytes([200, 100, 50]) + (b"" if replica else b"\xff")
+    for face in faces:
+        body += struct.pack("<B%di" % len(face), len(face), *face)
+    return header.encode() + body
+
+
 def ply_seeds():
     write("fuzz_scene_ply", "triangle_ascii.ply", PLY_TRI_ASCII)
+    write("fuzz_scene_ply", "scannet_rgba_binary_le.ply", ply_scan(False))
+    write("fuzz_scene_ply", "replica_quads_binary_le.ply", ply_scan(True))
     write("fuzz_scene_ply", "quad_binary_le.ply", ply_binary("<"))
     write("fuzz_scene_ply", "quad_binary_be.ply", ply_binary(">"))
     write("fuzz_scene_ply", "quad_ascii_polygon.ply",
@@ -114,6 +138,27 @@ def glb_seeds():
                        "min": [0, 0, 0], "max": [1, 1, 0]},
                       {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}],
     }, positions + indices))
+
+    # The same triangle with a Basis Universal texture, as HM3D's .basis.glb files hold
+    # (GOOGLE_texture_basis: a texture without a plain source, an image/basis image).
+    basis = b"sB" + bytes(range(30))
+    write("fuzz_scene_glb", "basis_texture.glb", glb({
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.2, 0.2, 1],
+                                                "baseColorTexture": {"index": 0}}}],
+        "textures": [{"extensions": {"GOOGLE_texture_basis": {"source": 0}}}],
+        "images": [{"bufferView": 2, "mimeType": "image/basis"}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36},
+                        {"buffer": 0, "byteOffset": 36, "byteLength": 6},
+                        {"buffer": 0, "byteOffset": 44, "byteLength": len(basis)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [0, 0, 0], "max": [1, 1, 0]},
+                      {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"}],
+        "extensionsUsed": ["GOOGLE_texture_basis"],
+        "extensionsRequired": ["GOOGLE_texture_basis"],
+    }, positions + indices + basis))
 
     # A quad with colours and UVs, instanced by two nodes under a rotated parent, and a texture
     # held in the file (a 1x1 PNG).

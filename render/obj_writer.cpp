@@ -19,17 +19,17 @@ void appendf(std::string& out, const char* fmt, double a, double b, double c) {
   out += buf;
 }
 
-std::string textureName(const Mesh& mesh, int t) {
+std::string textureName(const Mesh& mesh, int t, const std::string& format) {
   std::string name =
       mesh.textures[t].name.empty() ? "texture" + std::to_string(t) : mesh.textures[t].name;
   for (auto& c : name)
     if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_' && c != '-') c = '_';
-  return name + ".png";
+  return name + "." + format;
 }
 
 }  // namespace
 
-void writeObj(const std::string& path, const Mesh& mesh) {
+void writeObj(const std::string& path, const Mesh& mesh, const std::string& textureFormat) {
   mesh.validate(path);
   const fs::path p(path);
   const std::string stem = p.stem().string();
@@ -41,7 +41,8 @@ void writeObj(const std::string& path, const Mesh& mesh) {
     Image8 img(tex.width, tex.height, 3);
     for (size_t i = 0; i < static_cast<size_t>(tex.width) * tex.height; ++i)
       for (int c = 0; c < 3; ++c) img.data[3 * i + c] = tex.texels[i * tex.channels + c];
-    writeImage((dir / "textures" / textureName(mesh, static_cast<int>(t))).string(), img);
+    writeImage((dir / "textures" / textureName(mesh, static_cast<int>(t), textureFormat)).string(),
+               img);
   }
 
   std::string mtl = "# written by paircast\n";
@@ -49,7 +50,8 @@ void writeObj(const std::string& path, const Mesh& mesh) {
     const Material& mat = mesh.materials[m];
     mtl += "newmtl m" + std::to_string(m) + "\n";
     appendf(mtl, "Kd %.6f %.6f %.6f\n", mat.baseColor.x(), mat.baseColor.y(), mat.baseColor.z());
-    if (mat.texture >= 0) mtl += "map_Kd textures/" + textureName(mesh, mat.texture) + "\n";
+    if (mat.texture >= 0)
+      mtl += "map_Kd textures/" + textureName(mesh, mat.texture, textureFormat) + "\n";
   }
   writeFileAtomic((dir / (stem + ".mtl")).string(), mtl);
 

@@ -9,7 +9,8 @@
 
 namespace paircast {
 
-// Writes <path> (the .obj), <stem>.mtl and textures/<name>.png. Atomic per file.
-void writeObj(const std::string& path, const Mesh& mesh);
+// Writes <path> (the .obj), <stem>.mtl and textures/<name>.<textureFormat> ("png", or "jpg" as
+// Matterport's meshes ship). Atomic per file.
+void writeObj(const std::string& path, const Mesh& mesh, const std::string& textureFormat = "png");
 
 }  // namespace paircast

@@ -16,6 +16,8 @@ namespace {
 constexpr int kPacket = 8;  // rays per rtcIntersect8 call: one row of a tile
 constexpr int kTileW = 8;   // tile width in pixels (one packet)
 constexpr int kTileH = 8;   // tile height in pixels (packets per tile)
+// Meshes this large get a medium-quality BVH, smaller ones a high-quality one (see RayCaster).
+constexpr size_t kMediumQualityTriangles = 500'000;
 
 void embreeError(void* /*user*/, RTCError code, const char* message) {
   spdlog::error("embree error {}: {}", static_cast<int>(code), message ? message : "");
@@ -98,11 +100,17 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
   const auto start = std::chrono::steady_clock::now();
   RTCDevice device = sharedDevice();
   impl_->scene = rtcNewScene(device);
-  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
+  // High quality (spatial splits) pays on small scenes, which render for long. On a 1.3M-triangle
+  // scan it took 1.0 s against medium's 0.5 s, and the same 418 candidate views then rendered
+  // as fast (10.0-10.3 s with either).
+  const RTCBuildQuality quality = mesh.numTriangles() >= kMediumQualityTriangles
+                                      ? RTC_BUILD_QUALITY_MEDIUM
+                                      : RTC_BUILD_QUALITY_HIGH;
+  rtcSetSceneBuildQuality(impl_->scene, quality);
   rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_NONE);
 
   RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  rtcSetGeometryBuildQuality(geom, RTC_BUILD_QUALITY_HIGH);
+  rtcSetGeometryBuildQuality(geom, quality);
   // rtcSetNewGeometryBuffer pads the buffer as Embree's SIMD loads require.
   auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(
       geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), mesh.numVertices()));

@@ -3,6 +3,7 @@
 #include <assimp/DefaultIOSystem.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
+#include <Eigen/Geometry>
 #include <assimp/DefaultLogger.hpp>
 #include <assimp/Importer.hpp>
 #include <nlohmann/json.hpp>
@@ -10,6 +11,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -26,11 +28,30 @@ namespace fs = std::filesystem;
 UpAxis parseUpAxis(const std::string& text) {
   if (text == "y" || text == "Y") return UpAxis::Y;
   if (text == "z" || text == "Z") return UpAxis::Z;
-  throw Error("invalid up axis '" + text + "' (use y or z)");
+  if (text == "auto") return UpAxis::Auto;
+  throw Error("invalid up axis '" + text + "' (use y, z or auto)");
 }
 
 Eigen::Vector3f upVector(UpAxis up) {
+  PAIRCAST_CHECK_MSG(up != UpAxis::Auto, "the up axis is resolved when the scene is loaded");
   return up == UpAxis::Y ? Eigen::Vector3f::UnitY() : Eigen::Vector3f::UnitZ();
+}
+
+UpAxis guessUpAxis(const Mesh& mesh, const std::string& path) {
+  const float cos30 = std::cos(static_cast<float>(M_PI) / 6.0f);
+  double across[2] = {0.0, 0.0};  // area of surfaces across y, across z
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    const Eigen::Vector3f& a = mesh.positions[t[0]];
+    const Eigen::Vector3f n = (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a);
+    const float area = 0.5f * n.norm();
+    if (!(area > 0.0f)) continue;
+    if (std::abs(n.y()) >= cos30 * 2.0f * area) across[0] += area;
+    if (std::abs(n.z()) >= cos30 * 2.0f * area) across[1] += area;
+  }
+  if (across[1] > 1.25 * across[0]) return UpAxis::Z;
+  if (across[0] > 1.25 * across[1]) return UpAxis::Y;
+  throw Error(path, "cannot tell the up axis (" + std::to_string(across[0]) + " m^2 across y, " +
+                        std::to_string(across[1]) + " m^2 across z): pass --up y or --up z");
 }
 
 bool isSupportedSceneFile(const std::string& path) {
@@ -87,13 +108,20 @@ uint64_t plyValueBytes(const std::string& type, bool ascii) {
   return ascii ? 2 : it->second;
 }
 
+struct PlyProperty {
+  std::string name;
+  std::string type;       // of the value, or of a list's items
+  std::string countType;  // of a list's length; empty for a scalar property
+};
 struct PlyElement {
   std::string name;
   uint64_t count = 0;
   uint64_t minBytes = 0;  // per instance
+  std::vector<PlyProperty> properties;
 };
 struct PlyHeader {
   uint64_t bytes = 0;  // up to and including the end_header line
+  std::string format;  // ascii, binary_little_endian or binary_big_endian
   std::vector<PlyElement> elements;
 };
 
@@ -142,6 +170,7 @@ PlyHeader readPlyHeader(const std::string& path) {
       if (w[1] != "ascii" && w[1] != "binary_little_endian" && w[1] != "binary_big_endian")
         throw bad("unknown format '" + w[1] + "'");
       ascii = w[1] == "ascii";
+      h.format = w[1];
       hasFormat = true;
     } else if (word == "element") {
       if (!hasFormat) throw bad("element before the format line");
@@ -166,6 +195,7 @@ PlyHeader readPlyHeader(const std::string& path) {
       const uint64_t bytes = plyValueBytes(type, ascii);  // a list may be empty: only its count
       if (bytes == 0) throw bad("unknown type '" + type + "'");
       h.elements.back().minBytes += bytes;
+      h.elements.back().properties.push_back({w.back(), w[list ? 3 : 1], list ? type : ""});
     } else {
       throw bad("unknown keyword '" + word + "'");
     }
@@ -180,8 +210,8 @@ PlyHeader readPlyHeader(const std::string& path) {
 // that many vertices before reading one: a 200-byte file claiming 3e8 vertices made it touch
 // 9 GB for 195 s. Counts the rest of the file cannot hold, and counts over the limits, are
 // refused here.
-void checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptions& options) {
-  const PlyHeader h = readPlyHeader(path);
+PlyHeader checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptions& options) {
+  PlyHeader h = readPlyHeader(path);
   const uint64_t body = fileBytes > h.bytes ? fileBytes - h.bytes : 0;
   for (const PlyElement& e : h.elements) {
     const uint64_t atMost = body / std::max<uint64_t>(e.minBytes, 1);
@@ -199,18 +229,280 @@ void checkPlyHeader(const std::string& path, uint64_t fileBytes, const LoadOptio
                             " faces, more than the limit of " +
                             std::to_string(options.maxTriangles));
   }
+  return h;
+}
+
+// The binary little-endian PLY files that scans ship (ScanNet's *_vh_clean_2.ply, Replica's
+// mesh.ply) are read here directly: assimp's PLY importer keeps every property of every vertex
+// in generic containers and took most of the load time and memory of a million-triangle scan.
+enum class PlyType { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
+
+PlyType plyType(const std::string& type) {
+  static const std::map<std::string, PlyType> types = {
+      {"char", PlyType::Int8},      {"int8", PlyType::Int8},       {"uchar", PlyType::UInt8},
+      {"uint8", PlyType::UInt8},    {"short", PlyType::Int16},     {"int16", PlyType::Int16},
+      {"ushort", PlyType::UInt16},  {"uint16", PlyType::UInt16},   {"int", PlyType::Int32},
+      {"int32", PlyType::Int32},    {"uint", PlyType::UInt32},     {"uint32", PlyType::UInt32},
+      {"float", PlyType::Float32},  {"float32", PlyType::Float32}, {"double", PlyType::Float64},
+      {"float64", PlyType::Float64}};
+  return types.at(type);  // readPlyHeader accepted only these
+}
+
+size_t plySize(PlyType t) {
+  static constexpr size_t sizes[] = {1, 1, 2, 2, 4, 4, 4, 8};
+  return sizes[static_cast<int>(t)];
+}
+
+double plyRead(PlyType t, const char* p) {
+  switch (t) {
+    case PlyType::Int8:
+      return static_cast<int8_t>(*p);
+    case PlyType::UInt8:
+      return static_cast<uint8_t>(*p);
+    case PlyType::Int16: {
+      int16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case PlyType::UInt16: {
+      uint16_t v;
+      std::memcpy(&v, p, 2);
+      return v;
+    }
+    case PlyType::Int32: {
+      int32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::UInt32: {
+      uint32_t v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::Float32: {
+      float v;
+      std::memcpy(&v, p, 4);
+      return v;
+    }
+    case PlyType::Float64: {
+      double v;
+      std::memcpy(&v, p, 8);
+      return v;
+    }
+  }
+  return 0;
+}
+
+bool isIntegerType(PlyType t) {
+  return t != PlyType::Float32 && t != PlyType::Float64;
+}
+
+// Whether the fast reader handles the file: binary little-endian, one vertex element with x y z,
+// one face element whose only list is the vertex indices, and no other lists.
+bool plyFastPathApplies(const PlyHeader& h) {
+  if (h.format != "binary_little_endian") return false;
+  int vertexElements = 0, faceElements = 0;
+  for (const PlyElement& e : h.elements) {
+    int lists = 0, xyz = 0;
+    for (const PlyProperty& p : e.properties) {
+      if (!p.countType.empty()) {
+        if (e.name != "face" || (p.name != "vertex_indices" && p.name != "vertex_index") ||
+            !isIntegerType(plyType(p.type)) || !isIntegerType(plyType(p.countType)))
+          return false;
+        ++lists;
+      }
+      xyz += p.name == "x" || p.name == "y" || p.name == "z";
+    }
+    if (e.name == "vertex") {
+      ++vertexElements;
+      if (xyz != 3) return false;
+    } else if (e.name == "face") {
+      ++faceElements;
+      if (lists != 1) return false;
+    } else if (lists != 0) {
+      return false;
+    }
+  }
+  return vertexElements == 1 && faceElements == 1;
+}
+
+// Reads the body of a PLY file plyFastPathApplies accepted into `mesh` (positions scaled, sRGB
+// 8-bit colours made linear, polygons fanned into triangles, one white material). Every count,
+// length and index is checked against the bytes there are and the vertices read.
+void readBinaryPly(const std::string& path, const PlyHeader& h, const LoadOptions& options,
+                   Mesh& mesh) {
+  const std::string data = readFile(path);  // within maxFileBytes, checked by the caller
+  const char* const end = data.data() + data.size();
+  const char* p = data.data() + std::min<uint64_t>(h.bytes, data.size());
+  auto truncated = [&](const PlyElement& e, uint64_t index) {
+    return Error(path, "cannot load scene: PLY file is truncated: it ends in '" + e.name +
+                           "' element " + std::to_string(index) + " of " + std::to_string(e.count));
+  };
+  const float scale = static_cast<float>(options.scale);
+  std::array<float, 256> linear;
+  for (int i = 0; i < 256; ++i) linear[i] = srgbToLinear(i / 255.0f);
+  mesh.addMaterial(Material{});
+  uint64_t vertexCount = 0;
+  bool verticesRead = false;
+  for (const PlyElement& e : h.elements) {
+    std::vector<PlyType> types;
+    std::vector<size_t> offsets;
+    size_t stride = 0;
+    for (const PlyProperty& prop : e.properties) {
+      types.push_back(plyType(prop.type));
+      offsets.push_back(stride);
+      stride += prop.countType.empty() ? plySize(types.back()) : 0;
+    }
+    if (e.name != "face") {  // fixed-size records
+      if (e.count > static_cast<uint64_t>(end - p) / std::max<size_t>(stride, 1))
+        throw truncated(e, static_cast<uint64_t>(end - p) / std::max<size_t>(stride, 1));
+      if (e.name == "vertex") {
+        int x = -1, y = -1, z = -1, r = -1, g = -1, b = -1;
+        for (size_t k = 0; k < e.properties.size(); ++k) {
+          const std::string& n = e.properties[k].name;
+          const int ik = static_cast<int>(k);
+          if (n == "x") x = ik;
+          if (n == "y") y = ik;
+          if (n == "z") z = ik;
+          if (n == "red" || n == "diffuse_red") r = ik;
+          if (n == "green" || n == "diffuse_green") g = ik;
+          if (n == "blue" || n == "diffuse_blue") b = ik;
+        }
+        const bool rgb8 = r >= 0 && g >= 0 && b >= 0 && types[r] == PlyType::UInt8 &&
+                          types[g] == PlyType::UInt8 && types[b] == PlyType::UInt8;
+        const bool rgbFloat = !rgb8 && r >= 0 && g >= 0 && b >= 0;
+        mesh.positions.resize(e.count);
+        mesh.uvs.assign(e.count, Eigen::Vector2f::Zero());
+        mesh.colors.resize(e.count);
+        auto channel = [&](const char* rec, int k) {
+          return srgbToLinear(std::clamp(static_cast<float>(plyRead(types[k], rec + offsets[k])) /
+                                             (isIntegerType(types[k]) ? 255.0f : 1.0f),
+                                         0.0f, 1.0f));
+        };
+        for (uint64_t i = 0; i < e.count; ++i, p += stride) {
+          mesh.positions[i] = scale * Eigen::Vector3f(plyRead(types[x], p + offsets[x]),
+                                                      plyRead(types[y], p + offsets[y]),
+                                                      plyRead(types[z], p + offsets[z]));
+          if (rgb8)
+            mesh.colors[i] = {linear[static_cast<uint8_t>(p[offsets[r]])],
+                              linear[static_cast<uint8_t>(p[offsets[g]])],
+                              linear[static_cast<uint8_t>(p[offsets[b]])]};
+          else if (rgbFloat)
+            mesh.colors[i] = {channel(p, r), channel(p, g), channel(p, b)};
+          else
+            mesh.colors[i].setOnes();
+        }
+        vertexCount = e.count;
+        verticesRead = true;
+      } else {
+        p += e.count * stride;
+      }
+      continue;
+    }
+    if (!verticesRead)
+      throw Error(path, "cannot load scene: PLY faces come before the vertices they index");
+    mesh.triangles.reserve(std::min<uint64_t>(e.count, options.maxTriangles));
+    for (uint64_t f = 0; f < e.count; ++f) {
+      for (size_t k = 0; k < types.size(); ++k) {
+        if (e.properties[k].countType.empty()) {
+          if (static_cast<size_t>(end - p) < plySize(types[k])) throw truncated(e, f);
+          p += plySize(types[k]);
+          continue;
+        }
+        const PlyType countType = plyType(e.properties[k].countType);
+        if (static_cast<size_t>(end - p) < plySize(countType)) throw truncated(e, f);
+        const double n = plyRead(countType, p);
+        p += plySize(countType);
+        if (n < 0 || n > static_cast<double>(end - p) / plySize(types[k])) throw truncated(e, f);
+        const size_t corners = static_cast<size_t>(n), itemSize = plySize(types[k]);
+        auto index = [&](size_t c) {
+          const double v = plyRead(types[k], p + c * itemSize);
+          if (v < 0 || v >= static_cast<double>(vertexCount))
+            throw Error(path, "cannot load scene: PLY face " + std::to_string(f) +
+                                  " has vertex index " + std::to_string(static_cast<int64_t>(v)) +
+                                  ", but the file has " + std::to_string(vertexCount) +
+                                  " vertices");
+          return static_cast<int>(v);
+        };
+        // Points and lines are dropped, as assimp's SortByPType does; polygons become fans.
+        for (size_t c = 2; c < corners; ++c) {
+          if (mesh.triangles.size() >= options.maxTriangles)
+            throw Error(path, "scene has more than " + std::to_string(options.maxTriangles) +
+                                  " triangles (the limit)");
+          mesh.triangles.emplace_back(index(0), index(c - 1), index(c));
+        }
+        p += corners * itemSize;
+      }
+    }
+  }
+  mesh.triangleMaterial.assign(mesh.triangles.size(), 0);
 }
 
 // assimp 5.2.5 takes strchr(mimeType, '/') + 1 for an embedded image without checking it, so a
 // media type without '/' makes it read address 1 (fuzz_scene_glb found it). The glTF JSON is
 // parsed here first: it must be valid JSON (UTF-8 included), and every image's media type
 // (mimeType, or that of a data: URI) must be "type/subtype".
-void checkGltfJson(const std::string& path, const std::string& text) {
+//
+// It also looks at the extensions the habitat datasets use that assimp 5.2.5 does not decode:
+// EXT_meshopt_compression buffers are refused (assimp would read the uncompressed fallback,
+// often empty or garbage, and render garbled geometry silently); Basis Universal textures
+// (GOOGLE_texture_basis, KHR_texture_basisu) are reported, so that the scene renders with its
+// base colours and one warning. KHR_draco_mesh_compression is decoded by Debian's assimp.
+// Debian's assimp 5.2.5 decodes KHR_draco_mesh_compression, but drops the decoded indices when
+// they are 32-bit (SetDecodedIndexBuffer_Draco returns before attaching them when their size
+// matches Draco's own), and then fails with "Invalid accessor without data". Such files are
+// refused here with the reason; 8- and 16-bit indices decode.
+void checkDracoIndices(const std::string& path, const nlohmann::json& j) {
+  const auto meshes = j.find("meshes");
+  const auto accessors = j.find("accessors");
+  if (meshes == j.end() || !meshes->is_array() || accessors == j.end() || !accessors->is_array())
+    return;
+  for (const auto& mesh : *meshes) {
+    if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array())
+      continue;
+    for (const auto& prim : mesh["primitives"]) {
+      if (!prim.is_object() || !prim.contains("indices") || !prim["indices"].is_number_unsigned() ||
+          !prim.contains("extensions") || !prim["extensions"].is_object() ||
+          !prim["extensions"].contains("KHR_draco_mesh_compression"))
+        continue;
+      const uint64_t index = prim["indices"].get<uint64_t>();
+      if (index >= accessors->size() || !(*accessors)[index].is_object()) continue;
+      const auto& type = (*accessors)[index].value("componentType", nlohmann::json());
+      if (type.is_number() && type == 5125)
+        throw Error(path,
+                    "cannot load scene: a KHR_draco_mesh_compression primitive has 32-bit "
+                    "indices, which assimp 5.2.5 drops when it decodes them; re-encode it "
+                    "with 16-bit indices or without Draco");
+    }
+  }
+}
+
+struct GltfCheck {
+  std::string basisExtension;  // the Basis Universal extension the textures use, or ""
+};
+
+GltfCheck checkGltfJson(const std::string& path, const std::string& text) {
   const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
   if (j.is_discarded() || !j.is_object())
     throw Error(path, "cannot load scene: the glTF JSON is not a valid JSON object");
+  GltfCheck check;
+  for (const char* key : {"extensionsUsed", "extensionsRequired"}) {
+    const auto list = j.find(key);
+    if (list == j.end() || !list->is_array()) continue;
+    for (const auto& name : *list) {
+      if (!name.is_string()) continue;
+      const std::string ext = name.get<std::string>();
+      if (ext == "EXT_meshopt_compression" || ext == "KHR_meshopt_compression")
+        throw Error(path, "cannot load scene: it uses " + ext +
+                              " (meshoptimizer-compressed buffers), which paircast does not "
+                              "decode; export the scene without it (as the habitat datasets' "
+                              "plain .glb files are)");
+      if (ext == "GOOGLE_texture_basis" || ext == "KHR_texture_basisu") check.basisExtension = ext;
+    }
+  }
+  checkDracoIndices(path, j);
   const auto images = j.find("images");
-  if (images == j.end()) return;
+  if (images == j.end()) return check;
   if (!images->is_array()) throw Error(path, "cannot load scene: glTF 'images' is not an array");
   for (size_t i = 0; i < images->size(); ++i) {
     const nlohmann::json& image = (*images)[i];
@@ -230,6 +522,7 @@ void checkGltfJson(const std::string& path, const std::string& text) {
       throw Error(path, "cannot load scene: glTF image " + std::to_string(i) + " has media type '" +
                             type.substr(0, 64) + "', not type/subtype");
   }
+  return check;
 }
 
 uint32_t le32(const unsigned char* p) {
@@ -240,10 +533,12 @@ uint32_t le32(const unsigned char* p) {
 // it: a 1 KB file claiming a 4 GB JSON chunk made it ask for 4 GB (fuzz_scene_glb found it).
 // Lengths the file cannot hold are refused here; files without the glTF magic are left to
 // assimp.
-void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
+GltfCheck checkGlbHeader(const std::string& path, uint64_t fileBytes) {
   std::ifstream in(path, std::ios::binary);
   unsigned char header[20];
-  if (!in.read(reinterpret_cast<char*>(header), 12) || std::memcmp(header, "glTF", 4) != 0) return;
+  GltfCheck check;
+  if (!in.read(reinterpret_cast<char*>(header), 12) || std::memcmp(header, "glTF", 4) != 0)
+    return check;
   const uint32_t version = le32(header + 4), length = le32(header + 8);
   if (length > fileBytes)
     throw Error(path, "cannot load scene: GLB header claims " + std::to_string(length) +
@@ -253,11 +548,11 @@ void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
       throw Error(path, "cannot load scene: GLB header claims a " +
                             std::to_string(le32(header + 12)) +
                             "-byte scene, more than the file holds");
-    return;
+    return check;
   }
   for (uint64_t offset = 12; offset + 8 <= fileBytes;) {  // chunks: length, type, data
     in.seekg(static_cast<std::streamoff>(offset));
-    if (!in.read(reinterpret_cast<char*>(header), 8)) return;
+    if (!in.read(reinterpret_cast<char*>(header), 8)) return check;
     const uint64_t chunk = le32(header);
     if (chunk > fileBytes - offset - 8)
       throw Error(path, "cannot load scene: GLB chunk at byte " + std::to_string(offset) +
@@ -267,21 +562,34 @@ void checkGlbHeader(const std::string& path, uint64_t fileBytes) {
       std::string json(chunk, '\0');
       if (!in.read(json.data(), static_cast<std::streamsize>(chunk)))
         throw Error(path, "cannot load scene: cannot read the GLB's JSON chunk");
-      checkGltfJson(path, json);
+      check = checkGltfJson(path, json);
     }
     offset += 8 + chunk;
   }
+  return check;
+}
+
+// assimp's validation messages name its own structures: say what they mean for the file too.
+std::string explainAssimpError(const std::string& message) {
+  if (message.find("contains no faces") != std::string::npos ||
+      message.find("No meshes remaining") != std::string::npos)
+    return "scene has no triangles (assimp: " + message + ")";
+  if (message.find("mIndices") != std::string::npos &&
+      message.find("out of range") != std::string::npos)
+    return "a face has a vertex index out of range (assimp: " + message + ")";
+  return message;
 }
 
 // Converts one assimp material and its texture to ours, loading each texture file once.
 class MaterialBuilder {
  public:
-  MaterialBuilder(const aiScene* scene, const std::string& path, uint64_t maxFileBytes, Mesh& mesh,
-                  std::vector<std::string>& warnings)
+  MaterialBuilder(const aiScene* scene, const std::string& path, uint64_t maxFileBytes,
+                  bool noTextures, Mesh& mesh, std::vector<std::string>& warnings)
       : scene_(scene),
         path_(path),
         dir_(fs::path(path).parent_path()),
         maxFileBytes_(maxFileBytes),
+        noTextures_(noTextures),
         mesh_(mesh),
         warnings_(warnings) {}
 
@@ -295,6 +603,7 @@ class MaterialBuilder {
       m.baseColor = Eigen::Vector3f(color.r, color.g, color.b).cwiseMax(0.0f).cwiseMin(1.0f);
     }
     aiString texPath;
+    if (noTextures_) return mesh_.addMaterial(m);
     if (in->GetTexture(aiTextureType_BASE_COLOR, 0, &texPath) == AI_SUCCESS ||
         in->GetTexture(aiTextureType_DIFFUSE, 0, &texPath) == AI_SUCCESS) {
       m.texture = texture(texPath.C_Str());
@@ -352,6 +661,7 @@ class MaterialBuilder {
   std::string path_;
   fs::path dir_;
   uint64_t maxFileBytes_;
+  bool noTextures_;  // the textures are Basis Universal: base colours only, warned about once
   Mesh& mesh_;
   std::vector<std::string>& warnings_;
   std::map<std::string, int> cache_;
@@ -452,10 +762,34 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
     throw Error(path, "unsupported scene format '" + fs::path(path).extension().string() +
                           "' (glb, gltf, obj, ply, fbx, dae, ifc, ... are supported)");
 
+  Scene out;
+  out.path = path;
+  out.name = fs::path(path).stem().string();
+  out.up = options.up;
+  // The checks every loader ends with: no triangles, bad indices, non-finite vertices.
+  auto checked = [&](Scene& scene) {
+    if (scene.mesh.numTriangles() == 0) throw Error(path, "scene has no triangles");
+    scene.mesh.validate(path);
+    if (scene.up == UpAxis::Auto) scene.up = guessUpAxis(scene.mesh, path);
+    return std::move(scene);
+  };
+
   const std::string ext = lower(fs::path(path).extension().string());
-  if (ext == ".ply") checkPlyHeader(path, bytes, options);
-  if (ext == ".glb") checkGlbHeader(path, bytes);
-  if (ext == ".gltf") checkGltfJson(path, readFile(path));  // within maxFileBytes, checked above
+  if (ext == ".ply") {
+    const PlyHeader header = checkPlyHeader(path, bytes, options);
+    if (options.plyFastPath && plyFastPathApplies(header)) {
+      readBinaryPly(path, header, options, out.mesh);
+      return checked(out);
+    }
+  }
+  GltfCheck gltf;
+  if (ext == ".glb") gltf = checkGlbHeader(path, bytes);
+  if (ext == ".gltf") gltf = checkGltfJson(path, readFile(path));  // within maxFileBytes
+  if (!gltf.basisExtension.empty())
+    out.warnings.push_back(path + ": textures use " + gltf.basisExtension +
+                           " (Basis Universal), which paircast cannot decode: rendering with base "
+                           "colours; for textures use the plain .glb with JPEG textures (HM3D "
+                           "ships both)");
 
   Assimp::Importer importer;
   importer.SetIOHandler(new LimitedIOSystem(options.maxFileBytes));  // the importer owns it
@@ -473,9 +807,10 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   } catch (const Error&) {
     throw;
   } catch (const std::exception& e) {
-    throw Error(path, std::string("cannot load scene: ") + e.what());
+    throw Error(path, "cannot load scene: " + explainAssimpError(e.what()));
   }
-  if (!scene) throw Error(path, std::string("cannot load scene: ") + importer.GetErrorString());
+  if (!scene)
+    throw Error(path, "cannot load scene: " + explainAssimpError(importer.GetErrorString()));
   if (!scene->mRootNode || (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE))
     throw Error(path, "scene is incomplete or has no geometry");
 
@@ -492,14 +827,11 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
                           " vertices, more than the limit of " +
                           std::to_string(options.maxVertices));
 
-  Scene out;
-  out.path = path;
-  out.name = fs::path(path).stem().string();
-  out.up = options.up;
   out.mesh.positions.reserve(vertices);
   out.mesh.triangles.reserve(triangles);
 
-  MaterialBuilder materials(scene, path, options.maxFileBytes, out.mesh, out.warnings);
+  MaterialBuilder materials(scene, path, options.maxFileBytes, !gltf.basisExtension.empty(),
+                            out.mesh, out.warnings);
   std::vector<int> materialMap;
   for (unsigned i = 0; i < scene->mNumMaterials; ++i)
     materialMap.push_back(materials.build(scene->mMaterials[i]));
@@ -508,9 +840,7 @@ Scene loadScene(const std::string& path, const LoadOptions& options) {
   const bool linearVertexColors = ext == ".glb" || ext == ".gltf";
   appendNode(AppendContext{scene, path, options, materialMap, linearVertexColors}, scene->mRootNode,
              aiMatrix4x4(), out.mesh);
-  if (out.mesh.numTriangles() == 0) throw Error(path, "scene has no triangles");
-  out.mesh.validate(path);
-  return out;
+  return checked(out);
 }
 
 }  // namespace paircast

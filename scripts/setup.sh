@@ -9,6 +9,8 @@ PACKAGES=(
   libembree-dev libassimp-dev libeigen3-dev libopenimageio-dev openimageio-tools
   libgtest-dev libtorch-dev libopenblas0-pthread libgloo-dev
   nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev
+  # The Python package (python/): pybind11, numpy, and its tests and pip install.
+  python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-setuptools
 )
 # Optional references for tests and benchmarks (Python side): torch, open3d, sklearn.
 if [[ "${PAIRCAST_WITH_REFERENCES:-1}" == 1 ]]; then

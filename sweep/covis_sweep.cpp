@@ -16,7 +16,6 @@
 #include "dataset/generate_job.h"
 #include "dataset/pair_generator.h"
 #include "dataset/shard.h"
-#include "dataset/svg.h"
 #include "dataset/viewpoint_sampler.h"
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
@@ -29,6 +28,7 @@
 #include "trainer/trainer.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/plot.h"
 #include "util/random.h"
 #include "util/timer.h"
 
@@ -178,12 +178,12 @@ Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
     nlohmann::json added = nlohmann::json::array();
     for (int i = 0; i < m; ++i) {
       if (!got[i]) continue;
-      const int b = covisBucket(got[i]->covis.covis);
+      const int b = covisBucket(got[i]->covis[1].covis);
       if (left[b] <= 0) continue;
       --left[b];
       const EncodedPair enc = encodePair(*got[i], false, 90);
       writer.add(enc);
-      added.push_back({{"key", enc.key}, {"covis", got[i]->covis.covis}});
+      added.push_back({{"key", enc.key}, {"covis", got[i]->covis[1].covis}});
     }
     if (!added.empty()) writer.close();  // an empty round leaves no shard
     nextIndex += m;
@@ -293,10 +293,10 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
                  {"probe_absrel", "depth probe AbsRel, lower is better"},
                  {"probe_rmse", "depth probe RMSE (m), lower is better"}};
   for (const auto& m : metrics) {
-    std::vector<svg::Series> series;
+    std::vector<plot::Series> series;
     int k = 0;
     for (const auto& mode : c.modes) {
-      svg::Series s;
+      plot::Series s;
       s.label = mode;
       s.color = colors[k++ % 4];
       for (const auto& r : rows)
@@ -315,7 +315,7 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
       std::snprintf(note, sizeof note, "; random encoder %.3f", baseline);
       title += note;
     } else {
-      svg::Series base;
+      plot::Series base;
       base.label = "random encoder";
       base.color = "#7f7f7f";
       base.dashed = true;
@@ -326,7 +326,7 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
     }
     writeFileAtomic(
         (out / (std::string("plot_") + m.key + ".svg")).string(),
-        svg::lines(series, {title, "covis centre of the training set", m.key, 620, 340}));
+        plot::lines(series, {title, "covis centre of the training set", m.key, 620, 340}));
   }
 }
 
@@ -659,7 +659,7 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
       "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:"
       "right}th{background:#f3f3f3}</style></head><body>\n<h1>Co-visibility sweep</h1>\n<p>" +
       std::to_string(sets.size()) + " training sets of " + std::to_string(c.pairsPerSet) +
-      " pairs (" + svg::escape(c.preset) + " model, " + std::to_string(c.steps) + " steps of " +
+      " pairs (" + plot::escape(c.preset) + " model, " + std::to_string(c.steps) + " steps of " +
       std::to_string(c.batchSize) + " at " + std::to_string(c.imgSize) +
       " px), evaluated on held-out scenes. Data: <a href='results.csv'>results.csv</a>, <a "
       "href='results.json'>results.json</a>.</p>\n";

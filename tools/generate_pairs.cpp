@@ -4,17 +4,40 @@
 
 #include "dataset/dataset_report.h"
 #include "dataset/generate_job.h"
+#include "dataset/replay.h"
 #include "tool_main.h"
 
 using namespace paircast;
+
+// 0: done. 1 (with an error line): no pair could be made. 4: done, but scenes were skipped (they
+// are listed in summary.json), unless --allow-skipped-scenes.
+int exitStatus(const nlohmann::json& summary, const std::string& out, bool allowSkipped) {
+  const size_t skipped = summary["skipped_scenes"].size();
+  if (summary["pairs"].get<uint64_t>() == 0)
+    throw Error(out + "/summary.json", "no pair could be made (" + std::to_string(skipped) +
+                                           " scene(s) skipped; reasons listed there)");
+  if (skipped == 0 || allowSkipped) return 0;
+  std::fprintf(stderr,
+               "generate_pairs: %zu scene(s) skipped (listed in %s/summary.json); exit status 4 "
+               "(--allow-skipped-scenes makes it 0)\n",
+               skipped, out.c_str());
+  return 4;
+}
 
 int main(int argc, char** argv) {
   GenerateConfig cfg;
   std::string up = "y", format = "shards", normalize = "valid";
   CLI::App app{"Render CroCo pre-training pairs (co-visibility in a band) from mesh scenes"};
-  app.add_option("--scenes", cfg.scenes,
-                 "Scene files, folders (searched recursively) or .txt lists")
-      ->required();
+  auto* scenesOpt = app.add_option("--scenes", cfg.scenes,
+                                   "Scene files, folders (searched recursively) or .txt lists");
+  ReplayConfig replay;
+  auto* replayOpt =
+      app.add_option("--from-metadata", replay.metadata,
+                     "Render the poses of these metadata.json files (CroCo's or ours; folders "
+                     "are searched) instead of sampling")
+          ->excludes(scenesOpt);
+  app.add_option("--scene-root", replay.sceneRoot,
+                 "With --from-metadata: folder under which the metadata's scene paths are found");
   app.add_option("--out", cfg.out, "Output folder")->required();
   app.add_option("--pairs-per-scene", cfg.pairsPerScene, "Pairs to make in each scene")
       ->check(CLI::Range(1, 100000000));
@@ -30,7 +53,11 @@ int main(int argc, char** argv) {
          "--covis-normalize", normalize,
          "valid: divide by valid pixels (the paper); all: by all pixels (CroCo's generator)")
       ->check(CLI::IsMember({"valid", "all"}));
-  app.add_option("--up", up, "Up axis of the scenes: y or z")->check(CLI::IsMember({"y", "z"}));
+  auto* upOpt =
+      app.add_option("--up", up,
+                     "Up axis of the scenes: y, z, or auto (the axis with the larger floor and "
+                     "ceiling area)")
+          ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--scale", cfg.load.scale, "Multiply scene positions by this (to metres)");
   app.add_flag("--save-depth", cfg.saveDepth,
                "Also write z-depth EXR (and camera JSON in croco layout)");
@@ -53,12 +80,38 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100000));
   app.add_option("--min-valid", cfg.pair.minValidFraction, "Minimum fraction of pixels with depth")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--views", cfg.pair.views,
+                 "Views per sample (CroCo's views_count): view 1 and views-1 others, each with "
+                 "covis in the band with view 1");
+  app.add_option("--screen-resolution", cfg.pair.screenResolution,
+                 "Screen candidates on depth at this resolution first (0: off; default: a "
+                 "quarter of --resolution, off below 64)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
+               "Also write 8-bit co-visibility masks (255: seen by the other view)");
+  bool allowSkipped = false;
+  app.add_flag("--allow-skipped-scenes", allowSkipped,
+               "Exit 0 when some scenes were skipped (default: exit 4)");
   bool quiet = false;
   app.add_flag("--quiet", quiet, "No progress line");
   bool report = false;
   app.add_flag("--report", report, "Write OUT/report.html (dataset_report) at the end");
   return runTool("generate_pairs", app, argc, argv, [&] {
     cfg.load.up = parseUpAxis(up);
+    if (replayOpt->count()) {
+      replay.out = cfg.out;
+      replay.load = cfg.load;
+      replay.upGiven = upOpt->count() > 0;
+      replay.jpegQuality = cfg.jpegQuality;
+      replay.render = cfg.pair.render;
+      replay.progress = !quiet;
+      const nlohmann::json summary = runReplay(replay);
+      std::printf("%s\n", summary.dump().c_str());
+      if (summary["samples"].get<size_t>() == 0)
+        throw Error(cfg.out + "/summary.json", "no sample could be replayed");
+      return summary["skipped"].empty() || allowSkipped ? 0 : 4;
+    }
+    if (cfg.scenes.empty()) throw Error("--scenes (or --from-metadata) is required");
     cfg.shards = format != "croco";
     cfg.croco = format != "shards";
     cfg.pair.covis.normalize =
@@ -73,6 +126,6 @@ int main(int argc, char** argv) {
       summary["report"] = writeDatasetReport(ro)["report"];
     }
     std::printf("%s\n", summary.dump().c_str());
-    return 0;
+    return exitStatus(summary, cfg.out, allowSkipped);
   });
 }

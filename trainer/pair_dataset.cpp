@@ -4,6 +4,7 @@
 #include <glob.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -64,6 +65,22 @@ std::vector<unsigned char> readRange(const std::string& file, uint64_t offset, u
   return data;
 }
 
+// The view number of a shard member name after its key ("3.jpg" -> 3), or 0 when the member
+// is not a view (K.json, K.1.depth.exr, K.01.jpg).
+int viewNumber(const std::string& member) {
+  constexpr size_t kMaxDigits = 6;
+  const size_t dot = member.find('.');
+  if (dot == 0 || dot > kMaxDigits || member.compare(dot, std::string::npos, ".jpg") != 0 ||
+      member[0] == '0')
+    return 0;
+  int k = 0;
+  for (size_t i = 0; i < dot; ++i) {
+    if (member[i] < '0' || member[i] > '9') return 0;
+    k = k * 10 + (member[i] - '0');
+  }
+  return k;
+}
+
 }  // namespace
 
 PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
@@ -72,7 +89,7 @@ PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
     const uint64_t fileSize = fs::file_size(file);
     std::ifstream in(file, std::ios::binary);
     if (!in) throw Error(file, "cannot open shard");
-    std::map<std::string, std::pair<Member, Member>> open;  // key -> (.1.jpg, .2.jpg)
+    std::map<std::string, std::map<int, Member>> views;  // key -> view number -> member
     std::vector<std::string> order;
     uint64_t pos = 0;
     char h[512];
@@ -91,10 +108,11 @@ PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
       const size_t dot = name.find('.');
       if ((type == '0' || type == '\0') && dot != std::string::npos &&
           name.find('/') == std::string::npos) {
-        const std::string key = name.substr(0, dot), member = name.substr(dot + 1);
-        if (member == "1.jpg" || member == "2.jpg") {
-          if (!open.count(key)) order.push_back(key);
-          (member == "1.jpg" ? open[key].first : open[key].second) = Member{file, pos + 512, size};
+        const std::string key = name.substr(0, dot);
+        const int k = viewNumber(name.substr(dot + 1));
+        if (k > 0 && size > 0) {  // an empty member counts as missing
+          if (!views.count(key)) order.push_back(key);
+          views[key][k] = Member{file, pos + 512, size, name};
         }
       }
       pos += 512 + (size + 511) / 512 * 512;
@@ -102,13 +120,26 @@ PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
     if (truncated)
       std::fprintf(stderr, "pretrain: warning: %s is truncated; its whole samples are used\n",
                    file.c_str());
+    size_t incomplete = 0;
     for (const auto& key : order) {
-      const auto& [a, b] = open[key];
-      if (a.length == 0 || b.length == 0) continue;  // incomplete sample
-      ds.pairs_.push_back({a, b, key});
+      const auto& members = views[key];
+      if (!members.count(1) || members.size() < 2) {
+        ++incomplete;
+        continue;
+      }
+      Sample sample{key, members.at(1), {}};
+      for (const auto& [k, m] : members)
+        if (k != 1) sample.others.push_back(m);
+      ds.samples_.push_back(std::move(sample));
     }
+    // A truncated shard's last sample is cut by the truncation, reported above.
+    if (incomplete > (truncated ? 1u : 0u))
+      std::fprintf(stderr,
+                   "pretrain: warning: %s: %zu samples lack view 1 (KEY.1.jpg) or any other "
+                   "view; skipped\n",
+                   file.c_str(), incomplete);
   }
-  if (ds.pairs_.empty())
+  if (ds.samples_.empty())
     throw Error(patterns.empty() ? "--data" : patterns[0], "no complete pair in the shards");
   return ds;
 }
@@ -118,12 +149,21 @@ PairDataset PairDataset::fromCrocoDir(const std::string& dir) {
   std::ifstream in(list);
   if (!in) throw Error(list, "cannot read pairs.txt (is this a CroCo pairs folder?)");
   PairDataset ds;
+  std::map<std::string, size_t> byFirst;  // im1 -> its sample
   std::string a, b;
   while (in >> a >> b) {
-    const std::string pa = (fs::path(dir) / a).string(), pb = (fs::path(dir) / b).string();
-    ds.pairs_.push_back({Member{pa, 0, 0}, Member{pb, 0, 0}, a});
+    const Member other{(fs::path(dir) / b).string(), 0, 0, ""};
+    auto [it, added] = byFirst.emplace(a, ds.samples_.size());
+    if (added) {
+      ds.samples_.push_back({a, Member{(fs::path(dir) / a).string(), 0, 0, ""}, {other}});
+      continue;
+    }
+    auto& others = ds.samples_[it->second].others;
+    const bool listed = std::any_of(others.begin(), others.end(),
+                                    [&](const Member& m) { return m.file == other.file; });
+    if (!listed) others.push_back(other);  // a repeated line would weigh its view twice
   }
-  if (ds.pairs_.empty()) throw Error(list, "lists no pair");
+  if (ds.samples_.empty()) throw Error(list, "lists no pair");
   return ds;
 }
 
@@ -137,8 +177,8 @@ void PairDataset::restrictTo(const std::string& keysFile) {
     if (!line.empty()) wanted.emplace(line, false);
   }
   if (wanted.empty()) throw Error(keysFile, "lists no key");
-  std::vector<Pair> kept;
-  for (auto& p : pairs_) {
+  std::vector<Sample> kept;
+  for (auto& p : samples_) {
     auto it = wanted.find(p.key);
     if (it == wanted.end() || it->second) continue;  // not listed, or a duplicate
     it->second = true;
@@ -146,21 +186,21 @@ void PairDataset::restrictTo(const std::string& keysFile) {
   }
   for (const auto& [key, found] : wanted)
     if (!found) throw Error(keysFile, "lists key '" + key + "', which is not in the data");
-  pairs_ = std::move(kept);
+  samples_ = std::move(kept);
 }
 
-std::pair<Image8, Image8> PairDataset::load(size_t i) const {
-  const Pair& p = pairs_.at(i);
-  auto one = [&](const Member& m, const char* which) {
+std::pair<Image8, Image8> PairDataset::load(size_t i, uint64_t draw) const {
+  const Sample& s = samples_.at(i);
+  auto one = [&](const Member& m) {
     if (m.length == 0) return readImage8(m.file);
     const auto bytes = readRange(m.file, m.offset, m.length);
-    return decodeImage8(bytes.data(), bytes.size(), m.file + ":" + p.key + which);
+    return decodeImage8(bytes.data(), bytes.size(), m.file + ":" + m.name);
   };
-  return {one(p.a, ".1.jpg"), one(p.b, ".2.jpg")};
+  return {one(s.first), one(s.others[draw % s.others.size()])};
 }
 
 std::string PairDataset::describe(size_t i) const {
-  return pairs_.at(i).a.file + ":" + pairs_.at(i).key;
+  return samples_.at(i).first.file + ":" + samples_.at(i).key;
 }
 
 }  // namespace paircast

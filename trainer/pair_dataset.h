@@ -1,5 +1,7 @@
-// Pairs on disk, by index, for training: members of tar shards (located once by scanning the
-// ustar headers, then read with pread) or CroCo's folder layout (pairs.txt).
+// Training samples on disk, by index: members of tar shards (located once by scanning the
+// ustar headers, then read with pread) or CroCo's folder layout (pairs.txt). A sample is view 1
+// and one or more other views (N - 1 of them when it was rendered with CroCo's views_count N);
+// load() pairs view 1 with one of the others, drawn by the caller.
 #pragma once
 
 #include <cstdint>
@@ -13,31 +15,41 @@ namespace paircast {
 
 class PairDataset {
  public:
-  // Shards: files or glob patterns. Truncated shards keep their whole samples (with a warning).
+  // Shards: files or glob patterns. Sample K's views are its members K.1.jpg ... K.N.jpg; a
+  // sample without K.1.jpg or without any other view is skipped (with a warning). Truncated
+  // shards keep their whole samples (with a warning).
   static PairDataset fromShards(const std::vector<std::string>& patterns);
-  // CroCo layout: DIR/pairs.txt with "im1 im2" lines relative to DIR.
+  // CroCo layout: DIR/pairs.txt with "im1 im2" lines relative to DIR. The lines that share
+  // im1 make one sample: im1 is view 1, their im2s the other views, in the order listed.
   static PairDataset fromCrocoDir(const std::string& dir);
 
-  // Keeps only the pairs whose key is listed (one key per line in `keysFile`), in their order
+  // Keeps only the samples whose key is listed (one key per line in `keysFile`), in their order
   // in the shards. Throws paircast::Error naming the file when a listed key is missing.
   void restrictTo(const std::string& keysFile);
 
-  size_t size() const { return pairs_.size(); }
-  const std::string& key(size_t i) const { return pairs_.at(i).key; }
-  // Decodes pair i. Throws paircast::Error naming the file and member on corruption.
-  std::pair<Image8, Image8> load(size_t i) const;
+  size_t size() const { return samples_.size(); }
+  const std::string& key(size_t i) const { return samples_.at(i).key; }
+  // Views of sample i, view 1 included (2 for a pair).
+  size_t views(size_t i) const { return 1 + samples_.at(i).others.size(); }
+  // Decodes view 1 of sample i and the other view `draw` picks (draw modulo the number of other
+  // views, so draw 0 is view 2 and a pair ignores it): a caller that passes a draw from its
+  // seeded stream stays reproducible. Throws paircast::Error naming the file and member on
+  // corruption.
+  std::pair<Image8, Image8> load(size_t i, uint64_t draw = 0) const;
   std::string describe(size_t i) const;
 
  private:
   struct Member {
     std::string file;
     uint64_t offset = 0, length = 0;  // length 0: the whole file
+    std::string name;                 // the shard member, for messages ("" in CroCo folders)
   };
-  struct Pair {
-    Member a, b;
+  struct Sample {
     std::string key;
+    Member first;
+    std::vector<Member> others;  // at least one
   };
-  std::vector<Pair> pairs_;
+  std::vector<Sample> samples_;
 };
 
 }  // namespace paircast

@@ -31,6 +31,8 @@
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
+#include "util/plot.h"
+#include "util/progress_line.h"
 #include "util/timer.h"
 
 namespace paircast {
@@ -215,14 +217,15 @@ class BatchLoader {
     return perms_[epoch] = std::move(p);
   }
 
-  // Loads, augments and masks pair k of `ds`; a corrupt pair is reported and replaced by the
-  // next one, deterministically.
+  // Loads, augments and masks pair k of `ds` (view 1 and another view drawn from a stream
+  // keyed like the augmentation); a corrupt pair is reported and replaced by the next one,
+  // deterministically.
   void loadPair(const PairDataset& ds, int64_t i, const std::string& augStream,
                 const std::string& maskStream, Slots& s, int slot) {
     for (int attempt = 0;; ++attempt) {
       const size_t k = static_cast<size_t>(i + attempt) % ds.size();
       try {
-        auto [x, y] = ds.load(k);
+        auto [x, y] = ds.load(k, mixSeed(c_.seed, "view" + augStream, k));
         Rng rng(mixSeed(c_.seed, augStream, k));
         AugmentOptions ao;
         ao.size = c_.model.img_size;
@@ -352,32 +355,14 @@ void restoreOptimizer(torch::optim::AdamW& opt, const std::vector<torch::Tensor>
   }
 }
 
-void writeLossSvg(const std::string& path, const std::vector<std::pair<int64_t, double>>& points) {
+void writeLossCurve(const std::string& path,
+                    const std::vector<std::pair<int64_t, double>>& points) {
   if (points.size() < 2) return;
-  double lo = 1e30, hi = -1e30;
-  for (const auto& [s, l] : points) lo = std::min(lo, l), hi = std::max(hi, l);
-  if (hi <= lo) hi = lo + 1e-9;
-  const double W = 640, H = 360, m = 40;
-  const double s0 = points.front().first, s1 = std::max<double>(points.back().first, s0 + 1);
-  std::string svg =
-      "<svg xmlns='http://www.w3.org/2000/svg' width='640' height='360'>"
-      "<rect width='640' height='360' fill='white'/><polyline fill='none' stroke='#1f77b4' "
-      "stroke-width='1.5' points='";
-  char buf[64];
-  for (const auto& [s, l] : points) {
-    std::snprintf(buf, sizeof buf, "%.1f,%.1f ", m + (W - 2 * m) * (s - s0) / (s1 - s0),
-                  H - m - (H - 2 * m) * (l - lo) / (hi - lo));
-    svg += buf;
-  }
-  std::snprintf(buf, sizeof buf, "%.4f", hi);
-  svg += "'/><text x='4' y='30' font-size='12'>" + std::string(buf) + "</text>";
-  std::snprintf(buf, sizeof buf, "%.4f", lo);
-  svg += "<text x='4' y='" + std::to_string(static_cast<int>(H - m)) + "' font-size='12'>" + buf +
-         "</text>";
-  svg += "<text x='" + std::to_string(static_cast<int>(W / 2 - 40)) + "' y='" +
-         std::to_string(static_cast<int>(H - 8)) +
-         "' font-size='12'>training loss by step</text></svg>\n";
-  writeFileAtomic(path, svg);
+  plot::Series loss;
+  loss.label = "loss";
+  loss.markers = false;
+  for (const auto& [step, value] : points) loss.x.push_back(step), loss.y.push_back(value);
+  writeFileAtomic(path, plot::lines({loss}, {"training loss by step", "step", "loss", 640, 360}));
 }
 
 }  // namespace
@@ -404,7 +389,28 @@ nlohmann::json runPretrain(const TrainConfig& c) {
   return runPretrain(c, dist.get());
 }
 
-nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
+namespace {
+
+// SIGINT and SIGTERM, while training: the loop saves a checkpoint at the next step and stops.
+class StopSignals {
+ public:
+  StopSignals() {
+    gSignal = 0;
+    oldInt_ = signal(SIGINT, onSignal);
+    oldTerm_ = signal(SIGTERM, onSignal);
+  }
+  ~StopSignals() {
+    signal(SIGINT, oldInt_);
+    signal(SIGTERM, oldTerm_);
+  }
+  bool raised() const { return gSignal != 0; }
+
+ private:
+  using Handler = void (*)(int);
+  Handler oldInt_, oldTerm_;
+};
+
+void validate(const TrainConfig& c) {
   if (c.shards.empty() && c.crocoDir.empty() && c.live.empty())
     throw Error("give a data source: --data, --croco-dir or --live (or several, with weights)");
   if (c.amp != "bf16" && c.amp != "fp16" && c.amp != "none")
@@ -414,288 +420,394 @@ nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
     throw Error("batch size, accum-iter and epochs must be >= 1");
   c.model.validate();
   if (c.device != "cpu" && c.device != "cuda") throw Error("--device must be cpu or cuda");
-  const int rank = dist ? dist->rank() : 0, world = dist ? dist->worldSize() : 1;
-  const bool lead = rank == 0;  // writes checkpoints, logs and images
-  torch::Device device(torch::kCPU);
-  if (c.device == "cuda") {
-    if (!torch::cuda::is_available())
-      throw Error("--device cuda, but this LibTorch has no CUDA device");
-    device =
-        torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
-    allowTf32();
+}
+
+// One run of runPretrain. Its stages, in order: the constructor (device and output folder),
+// openDataSources, buildModelAndOptimizer, resumeOrStartLog, startLoaders, trainSteps and
+// summary. Members are declared in the order they are made, so that they are destroyed in
+// reverse: the loader's threads stop before the datasets they read go away.
+class Pretraining {
+ public:
+  Pretraining(const TrainConfig& c, Distributed* dist)
+      : c_(c),
+        dist_(dist),
+        rank_(dist ? dist->rank() : 0),
+        world_(dist ? dist->worldSize() : 1),
+        lead_(rank_ == 0),
+        progress_(c.progress && lead_) {
+    if (c.device == "cuda") {
+      if (!torch::cuda::is_available())
+        throw Error("--device cuda, but this LibTorch has no CUDA device");
+      device_ =
+          torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
+      allowTf32();
+    }
+    makeDirs(c.out);
+    if (lead_) removeStaleTemporaries(c.out);  // left by a killed run
+    ckptPath_ = (fs::path(c.out) / "checkpoint-last.pth").string();
+    logPath_ = (fs::path(c.out) / "log.jsonl").string();
   }
-  makeDirs(c.out);
-  if (lead) removeStaleTemporaries(c.out);  // left by a killed run
-  const std::string ckptPath = (fs::path(c.out) / "checkpoint-last.pth").string();
-  const std::string logPath = (fs::path(c.out) / "log.jsonl").string();
 
-  // Data.
-  std::unique_ptr<PairDataset> shardSet, crocoSet;
-  std::vector<Source> sources;
-  if (!c.shards.empty()) {
-    shardSet = std::make_unique<PairDataset>(PairDataset::fromShards(c.shards));
-    if (!c.keysFile.empty()) shardSet->restrictTo(c.keysFile);
-    sources.push_back({shardSet.get(), c.shardsWeight, "--data"});
+  void openDataSources() {
+    if (!c_.shards.empty()) {
+      shardSet_ = std::make_unique<PairDataset>(PairDataset::fromShards(c_.shards));
+      if (!c_.keysFile.empty()) shardSet_->restrictTo(c_.keysFile);
+      sources_.push_back({shardSet_.get(), c_.shardsWeight, "--data"});
+    }
+    if (!c_.crocoDir.empty()) {
+      crocoSet_ = std::make_unique<PairDataset>(PairDataset::fromCrocoDir(c_.crocoDir));
+      sources_.push_back({crocoSet_.get(), c_.crocoWeight, "--croco-dir " + c_.crocoDir});
+    }
+    if (!c_.live.empty()) sources_.push_back({nullptr, c_.liveWeight, "--live"});
+    reconData_ = shardSet_ ? shardSet_.get() : crocoSet_.get();
   }
-  if (!c.crocoDir.empty()) {
-    crocoSet = std::make_unique<PairDataset>(PairDataset::fromCrocoDir(c.crocoDir));
-    sources.push_back({crocoSet.get(), c.crocoWeight, "--croco-dir " + c.crocoDir});
+
+  // AdamW with no weight decay on biases and 1-D parameters (norms), and CroCo's lr scaling.
+  void buildModelAndOptimizer() {
+    torch::manual_seed(c_.seed);
+    model_ = CroCoNet(c_.model);
+    std::vector<std::pair<std::string, torch::Tensor>> named;
+    for (const auto& p : model_->named_parameters()) named.emplace_back(p.key(), p.value());
+    const DecayGroups names = weightDecayGroups(named);
+    std::vector<torch::Tensor> decay, noDecay;
+    for (const auto& [name, t] : named) {
+      ordered_.push_back(t);
+      const bool isDecay =
+          std::find(names.decay.begin(), names.decay.end(), name) != names.decay.end();
+      (isDecay ? decay : noDecay).push_back(t);
+    }
+    const int effBatch = c_.batchSize * c_.accumIter * world_;
+    lr_ = c_.blr * effBatch / 256.0;
+    const auto adamw = torch::optim::AdamWOptions(lr_).betas({0.9, 0.95});
+    std::vector<torch::optim::OptimizerParamGroup> groups;
+    groups.emplace_back(decay, std::make_unique<torch::optim::AdamWOptions>(
+                                   torch::optim::AdamWOptions(adamw).weight_decay(c_.weightDecay)));
+    groups.emplace_back(noDecay, std::make_unique<torch::optim::AdamWOptions>(
+                                     torch::optim::AdamWOptions(adamw).weight_decay(0.0)));
+    opt_ = std::make_unique<torch::optim::AdamW>(groups, adamw);
+    // fp16 needs a loss scale; bf16 has float32's range and does not.
+    scaler_ =
+        std::make_unique<GradScaler>((device_.is_cuda() && c_.amp == "fp16") || c_.forceLossScaling,
+                                     c_.initScale, c_.scaleGrowthInterval);
   }
-  if (!c.live.empty()) sources.push_back({nullptr, c.liveWeight, "--live"});
-  const PairDataset* dataset = shardSet ? shardSet.get() : crocoSet.get();  // for the recon grid
 
-  // Model and optimizer: no weight decay on biases and 1-D parameters (norms).
-  torch::manual_seed(c.seed);
-  CroCoNet model(c.model);
-  std::vector<std::pair<std::string, torch::Tensor>> named;
-  for (const auto& p : model->named_parameters()) named.emplace_back(p.key(), p.value());
-  const DecayGroups names = weightDecayGroups(named);
-  std::vector<torch::Tensor> decay, noDecay, ordered;
-  for (const auto& [name, t] : named) {
-    ordered.push_back(t);
-    const bool isDecay =
-        std::find(names.decay.begin(), names.decay.end(), name) != names.decay.end();
-    (isDecay ? decay : noDecay).push_back(t);
+  // From OUT/checkpoint-last.pth with --resume (the log cut back to its step), else a new log.
+  // The model goes to its device first, so that restored optimizer state lands there too; then
+  // rank 0's weights go to every rank.
+  void resumeOrStartLog() {
+    model_->to(device_);
+    if (c_.resume && fs::exists(ckptPath_)) {
+      restoreCheckpoint();
+      cutLogToCheckpoint();
+      std::fprintf(stderr, "pretrain: resumed from %s at step %lld\n", ckptPath_.c_str(),
+                   static_cast<long long>(iter_));
+    } else if (!c_.resume && lead_) {
+      writeFileAtomic(logPath_, "");
+    }
+    if (dist_) dist_->broadcast(ordered_);
   }
-  const int effBatch = c.batchSize * c.accumIter * world;
-  const double lr = c.blr * effBatch / 256.0;
-  std::vector<torch::optim::OptimizerParamGroup> groups;
-  groups.emplace_back(
-      decay, std::make_unique<torch::optim::AdamWOptions>(
-                 torch::optim::AdamWOptions(lr).betas({0.9, 0.95}).weight_decay(c.weightDecay)));
-  groups.emplace_back(noDecay,
-                      std::make_unique<torch::optim::AdamWOptions>(
-                          torch::optim::AdamWOptions(lr).betas({0.9, 0.95}).weight_decay(0.0)));
-  torch::optim::AdamW opt(groups, torch::optim::AdamWOptions(lr).betas({0.9, 0.95}));
 
-  // fp16 needs a loss scale; bf16 has float32's range and does not.
-  GradScaler scaler((device.is_cuda() && c.amp == "fp16") || c.forceLossScaling, c.initScale,
-                    c.scaleGrowthInterval);
+  void startLoaders() {
+    if (!c_.live.empty()) live_ = std::make_unique<LiveLoader>(c_, livePosition_, rank_, world_);
+    loader_ = std::make_unique<BatchLoader>(sources_, c_, iter_, rank_, world_, live_.get());
+    perEpoch_ = loader_->perEpoch();
+    const int64_t total = static_cast<int64_t>(c_.epochs) * perEpoch_;
+    stopAt_ = c_.maxSteps >= 0 ? std::min(total, c_.maxSteps) : total;
+    saveEvery_ = std::max<int64_t>(c_.accumIter,
+                                   (c_.saveEvery + c_.accumIter - 1) / c_.accumIter * c_.accumIter);
+  }
 
-  // On the device before the optimizer state is restored, so that the state lands there too.
-  model->to(device);
+  // Steps until stopAt, --max-steps or a signal; checkpoints, log lines, progress and
+  // reconstruction grids on the way.
+  void trainSteps() {
+    const StopSignals signals;
+    if (lead_) log_.open(logPath_, std::ios::app);
+    start_ = Clock::now();
+    firstIter_ = iter_;
+    model_->train();
+    while (iter_ < stopAt_) {
+      const auto t0 = Clock::now();
+      const Batch batch = loader_->get(iter_);
+      const double wait = since(t0);
+      epoch_ = static_cast<double>(iter_) / perEpoch_;
+      if (iter_ % c_.accumIter == 0) setLearningRate();
+      stepLoss_ = step(batch);
+      ++iter_;
+      const double stepTime = since(t0);
+      waitTotal_ += wait;
+      stepTotal_ += stepTime;
+      if (lead_ && std::isfinite(stepLoss_) && ((iter_ - 1) % c_.logEvery == 0 || iter_ == stopAt_))
+        logStep(wait, stepTime);
+      if (progress_.due()) progress_.show(progressText());
+      const bool boundary = iter_ % c_.accumIter == 0;
+      const bool stopNow = stopRequested(signals, boundary);
+      if (boundary &&
+          (iter_ % saveEvery_ == 0 || iter_ % perEpoch_ == 0 || iter_ == stopAt_ || stopNow)) {
+        if (lead_) saveCheckpoints();
+        if (stopNow) {
+          interrupted_ = true;
+          progress_.breakLine();
+          if (lead_)
+            std::fprintf(stderr, "pretrain: signal: checkpoint saved at step %lld, exiting\n",
+                         static_cast<long long>(iter_));
+          break;
+        }
+      }
+      if (lead_ && c_.reconEvery > 0 && iter_ % c_.reconEvery == 0 && reconData_)
+        writeReconstruction();
+    }
+    if (iter_ > firstIter_) progress_.show(progressText(), /*last=*/true);
+  }
 
-  // Resume.
-  int64_t iter = 0;
-  uint64_t livePosition = 0;
-  std::vector<std::pair<int64_t, double>> curve;
-  if (c.resume && fs::exists(ckptPath)) {
-    const Checkpoint ck = loadCheckpoint(ckptPath);
-    if (ck.hasArgs && configFromJson(ck.args, ckptPath).enc_embed_dim != c.model.enc_embed_dim)
-      throw Error(ckptPath, "checkpoint was trained with other hyper-parameters than --preset");
-    loadStateDictStrict(model, ck.model, ckptPath);
-    restoreOptimizer(opt, ordered, ck.extraTensors, ckptPath);
-    iter = ck.extra.value("step", int64_t{0});
-    livePosition = ck.extra.value("live_position", uint64_t{0});
-    if (ck.extra.contains("scaler")) scaler.restore(ck.extra["scaler"]);
+  nlohmann::json summary() {
+    const double seconds = since(start_);
+    nlohmann::json s = {
+        {"steps", iter_},
+        {"steps_this_run", iter_ - firstIter_},
+        {"loss", lastLoss_},
+        {"seconds", seconds},
+        {"pairs_per_s", (iter_ - firstIter_) * c_.batchSize / std::max(seconds, 1e-9)},
+        {"data_wait", waitTotal_ / std::max(stepTotal_, 1e-9)},
+        {"skipped_steps", skipped_},
+        {"interrupted", interrupted_},
+        {"checkpoint", ckptPath_}};
+    s["world_size"] = world_;
+    s["fused_adamw"] = c_.fusedAdamW && device_.is_cuda() && fusedAdamWCompiled();
+    s["pairs_by_source"] = loader_->counts();
+    if (scaler_->enabled()) s["loss_scale"] = scaler_->scale();
+    if (lead_) writeFileAtomic((fs::path(c_.out) / "summary.json").string(), s.dump(1) + "\n");
+    if (dist_) dist_->barrier();
+    return s;
+  }
+
+ private:
+  void restoreCheckpoint() {
+    const Checkpoint ck = loadCheckpoint(ckptPath_);
+    if (ck.hasArgs && configFromJson(ck.args, ckptPath_).enc_embed_dim != c_.model.enc_embed_dim)
+      throw Error(ckptPath_, "checkpoint was trained with other hyper-parameters than --preset");
+    loadStateDictStrict(model_, ck.model, ckptPath_);
+    restoreOptimizer(*opt_, ordered_, ck.extraTensors, ckptPath_);
+    iter_ = ck.extra.value("step", int64_t{0});
+    livePosition_ = ck.extra.value("live_position", uint64_t{0});
+    if (ck.extra.contains("scaler")) scaler_->restore(ck.extra["scaler"]);
     auto rng = ck.extraTensors.find("rng/torch");
     if (rng != ck.extraTensors.end()) {
       auto gen = at::detail::getDefaultCPUGenerator();
       std::lock_guard<std::mutex> lock(gen.mutex());
       gen.set_state(rng->second);
     }
-    // Keep the log up to the checkpoint: lines a killed run wrote after it are dropped.
-    std::ifstream in(logPath);
+  }
+
+  // Keeps the log up to the checkpoint: lines a killed run wrote after it are dropped. A
+  // resumed run that has no step left still reports the last logged loss.
+  void cutLogToCheckpoint() {
+    std::ifstream in(logPath_);
     std::string line, kept;
     while (std::getline(in, line)) {
       auto j = nlohmann::json::parse(line, nullptr, false);
-      if (j.is_object() && j.value("step", int64_t{-1}) < iter) {
+      if (j.is_object() && j.value("step", int64_t{-1}) < iter_) {
         kept += line + "\n";
-        curve.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
+        curve_.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
       }
     }
-    if (lead) writeFileAtomic(logPath, kept);
-    std::fprintf(stderr, "pretrain: resumed from %s at step %lld\n", ckptPath.c_str(),
-                 static_cast<long long>(iter));
-  } else if (!c.resume && lead) {
-    writeFileAtomic(logPath, "");
+    if (lead_) writeFileAtomic(logPath_, kept);
+    if (!curve_.empty()) lastLoss_ = curve_.back().second;
   }
-  if (dist) dist->broadcast(ordered);  // every rank starts from rank 0's weights
 
-  std::unique_ptr<LiveLoader> live;
-  if (!c.live.empty()) live = std::make_unique<LiveLoader>(c, livePosition, rank, world);
-  auto loader = std::make_unique<BatchLoader>(sources, c, iter, rank, world, live.get());
-  const int64_t perEpoch = loader->perEpoch();
-  const int64_t total = static_cast<int64_t>(c.epochs) * perEpoch;
-  const int64_t stopAt = c.maxSteps >= 0 ? std::min(total, c.maxSteps) : total;
-  const int64_t saveEvery =
-      std::max<int64_t>(c.accumIter, (c.saveEvery + c.accumIter - 1) / c.accumIter * c.accumIter);
+  void setLearningRate() {
+    const double l = learningRate(lr_, c_.minLr, c_.warmupEpochs, c_.epochs, epoch_);
+    for (auto& g : opt_->param_groups())
+      static_cast<torch::optim::AdamWOptions&>(g.options()).lr(l);
+  }
+  double currentLr() const {
+    return static_cast<torch::optim::AdamWOptions&>(opt_->param_groups()[0].options()).lr();
+  }
 
-  auto save = [&](const std::string& path, int64_t step) {
-    for (const auto& p : model->parameters())
+  // Forward and backward of iteration iter_, and the optimizer step when it ends an
+  // accumulation. Returns the loss averaged over the ranks; a non-finite one skips the step.
+  double step(const Batch& batch) {
+    torch::Tensor loss;
+    {
+      // On CUDA: bf16 or fp16 autocast; the loss itself in float32.
+      AutocastGuard autocast(device_.is_cuda() && c_.amp != "none",
+                             c_.amp == "fp16" ? at::kHalf : at::kBFloat16);
+      auto out =
+          model_->forward(batch.img1.to(device_), batch.img2.to(device_), batch.mask.to(device_));
+      loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
+    }
+    if (iter_ == c_.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
+    // The ranks agree on the loss (and so on skipping a non-finite one).
+    auto lossAll = loss.detach().to(torch::kCPU, torch::kFloat64).reshape({1});
+    if (dist_) dist_->allReduceMean({lossAll});
+    const double lossValue = lossAll.item<double>();
+    if (!std::isfinite(lossValue)) {
+      ++skipped_;
+      if (++nanRun_ > c_.maxNanSkips)
+        throw Error(c_.out, "loss is not finite for " + std::to_string(nanRun_) +
+                                " steps in a row (step " + std::to_string(iter_) +
+                                "); stopped, the last checkpoint is kept");
+      progress_.breakLine();
+      std::fprintf(stderr, "pretrain: warning: non-finite loss at step %lld, step skipped\n",
+                   static_cast<long long>(iter_));
+      opt_->zero_grad();
+      return lossValue;
+    }
+    nanRun_ = 0;
+    scaler_->scaleLoss(loss / c_.accumIter).backward();
+    if ((iter_ + 1) % c_.accumIter == 0) optimizerStep();
+    lastLoss_ = lossValue;
+    return lossValue;
+  }
+
+  void optimizerStep() {
+    if (dist_) {
+      std::vector<torch::Tensor> grads;
+      for (auto& p : ordered_)
+        if (p.grad().defined()) grads.push_back(p.grad());
+      dist_->allReduceMean(grads);
+    }
+    // With a loss scale, gradients that overflowed skip the step (on every rank alike: they
+    // were all-reduced) and the scale backs off.
+    const bool finite = scaler_->unscale(ordered_);
+    if (finite && !(c_.fusedAdamW && fusedAdamWStep(*opt_))) opt_->step();
+    scaler_->update(finite);
+    if (!finite && lead_) {
+      progress_.breakLine();
+      std::fprintf(stderr,
+                   "pretrain: warning: fp16 gradients overflowed at step %lld; step skipped, "
+                   "loss scale now %g\n",
+                   static_cast<long long>(iter_), scaler_->scale());
+    }
+    opt_->zero_grad();
+  }
+
+  // One line of log.jsonl for the step just taken (iter_ - 1).
+  void logStep(double wait, double stepTime) {
+    nlohmann::json j = {{"step", iter_ - 1},
+                        {"epoch", epoch_},
+                        {"loss", stepLoss_},
+                        {"lr", currentLr()},
+                        {"pairs_per_s", c_.batchSize / stepTime},
+                        {"data_wait", wait / stepTime}};
+    log_ << j.dump() << "\n";
+    log_.flush();
+    curve_.emplace_back(iter_ - 1, stepLoss_);
+  }
+
+  std::string progressText() const {
+    const double rate = (iter_ - firstIter_) / std::max(1e-9, since(start_));
+    char line[256];
+    std::snprintf(line, sizeof line,
+                  "[pretrain] step %lld/%lld  epoch %.2f  loss %.4f  lr %.2e  %.1f pairs/s  "
+                  "data-wait %.1f%%  ETA %.0fs",
+                  static_cast<long long>(iter_), static_cast<long long>(stopAt_), epoch_, stepLoss_,
+                  currentLr(), rate * c_.batchSize, 100 * waitTotal_ / std::max(1e-9, stepTotal_),
+                  (stopAt_ - iter_) / std::max(rate, 1e-9));
+    return line;
+  }
+
+  // A signal to any rank stops them all, at the same accumulation boundary.
+  bool stopRequested(const StopSignals& signals, bool boundary) {
+    bool stop = signals.raised();
+    if (dist_ && boundary) {
+      auto flag = torch::tensor({stop ? 1.0 : 0.0}, torch::kFloat64);
+      dist_->allReduceMean({flag});
+      stop = flag.item<double>() > 0;
+    }
+    return stop;
+  }
+
+  // checkpoint-last.pth and the loss curve; checkpoint-<epoch>.pth every --keep-every epochs.
+  void saveCheckpoints() {
+    save(ckptPath_, iter_);
+    writeLossCurve((fs::path(c_.out) / "loss.svg").string(), curve_);
+    if (c_.keepEvery > 0 && iter_ % perEpoch_ == 0 && (iter_ / perEpoch_) % c_.keepEvery == 0)
+      save((fs::path(c_.out) / ("checkpoint-" + std::to_string(iter_ / perEpoch_) + ".pth"))
+               .string(),
+           iter_);
+  }
+
+  void save(const std::string& path, int64_t step) {
+    for (const auto& p : model_->parameters())
       if (!torch::isfinite(p).all().item<bool>())
         throw Error(path, "weights are not finite at step " + std::to_string(step) +
                               ": checkpoint not written");
-    auto tensors = optimizerTensors(opt, ordered);
+    auto tensors = optimizerTensors(*opt_, ordered_);
     {
       auto gen = at::detail::getDefaultCPUGenerator();
       std::lock_guard<std::mutex> lock(gen.mutex());
       tensors["rng/torch"] = gen.get_state();
     }
     nlohmann::json extra = {{"step", step},
-                            {"live_position", live ? live->position() : 0},
-                            {"seed", c.seed},
-                            {"batch_size", c.batchSize},
-                            {"accum_iter", c.accumIter}};
-    if (scaler.enabled()) extra["scaler"] = scaler.state();
-    saveCheckpoint(path, model, step / perEpoch, extra, tensors);
-  };
-
-  gSignal = 0;
-  auto oldInt = signal(SIGINT, onSignal), oldTerm = signal(SIGTERM, onSignal);
-  std::ofstream log;
-  if (lead) log.open(logPath, std::ios::app);
-  const auto start = Clock::now();
-  // A resumed run that has no step left still reports the last logged loss.
-  double waitTotal = 0, stepTotal = 0, lastLoss = curve.empty() ? NAN : curve.back().second;
-  int nanRun = 0, skipped = 0;
-  int64_t firstIter = iter;
-  bool interrupted = false;
-  model->train();
-  auto lastPrint = Clock::now();
-  while (iter < stopAt) {
-    const auto t0 = Clock::now();
-    const Batch batch = loader->get(iter);
-    const double wait = since(t0);
-    const double epochF = static_cast<double>(iter) / perEpoch;
-    if (iter % c.accumIter == 0) {
-      const double l = learningRate(lr, c.minLr, c.warmupEpochs, c.epochs, epochF);
-      for (auto& g : opt.param_groups())
-        static_cast<torch::optim::AdamWOptions&>(g.options()).lr(l);
-    }
-    torch::Tensor loss;
-    {
-      // On CUDA: bf16 or fp16 autocast; the loss itself in float32.
-      AutocastGuard autocast(device.is_cuda() && c.amp != "none",
-                             c.amp == "fp16" ? at::kHalf : at::kBFloat16);
-      auto out =
-          model->forward(batch.img1.to(device), batch.img2.to(device), batch.mask.to(device));
-      loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
-    }
-    if (iter == c.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
-    // The ranks agree on the loss (and so on skipping a non-finite one).
-    auto lossAll = loss.detach().to(torch::kCPU, torch::kFloat64).reshape({1});
-    if (dist) dist->allReduceMean({lossAll});
-    const double lossValue = lossAll.item<double>();
-    if (!std::isfinite(lossValue)) {
-      ++skipped;
-      if (++nanRun > c.maxNanSkips)
-        throw Error(c.out, "loss is not finite for " + std::to_string(nanRun) +
-                               " steps in a row (step " + std::to_string(iter) +
-                               "); stopped, the last checkpoint is kept");
-      std::fprintf(stderr, "pretrain: warning: non-finite loss at step %lld, step skipped\n",
-                   static_cast<long long>(iter));
-      opt.zero_grad();
-    } else {
-      nanRun = 0;
-      scaler.scaleLoss(loss / c.accumIter).backward();
-      if ((iter + 1) % c.accumIter == 0) {
-        if (dist) {
-          std::vector<torch::Tensor> grads;
-          for (auto& p : ordered)
-            if (p.grad().defined()) grads.push_back(p.grad());
-          dist->allReduceMean(grads);
-        }
-        // With a loss scale, gradients that overflowed skip the step (on every rank alike:
-        // they were all-reduced) and the scale backs off.
-        const bool finite = scaler.unscale(ordered);
-        if (finite && !(c.fusedAdamW && fusedAdamWStep(opt))) opt.step();
-        scaler.update(finite);
-        if (!finite && lead)
-          std::fprintf(stderr,
-                       "pretrain: warning: fp16 gradients overflowed at step %lld; step skipped, "
-                       "loss scale now %g\n",
-                       static_cast<long long>(iter), scaler.scale());
-        opt.zero_grad();
-      }
-      lastLoss = lossValue;
-    }
-    ++iter;
-    const double stepTime = since(t0);
-    waitTotal += wait;
-    stepTotal += stepTime;
-    const double curLr =
-        static_cast<torch::optim::AdamWOptions&>(opt.param_groups()[0].options()).lr();
-    if (lead && std::isfinite(lossValue) && ((iter - 1) % c.logEvery == 0 || iter == stopAt)) {
-      nlohmann::json j = {{"step", iter - 1},
-                          {"epoch", epochF},
-                          {"loss", lossValue},
-                          {"lr", curLr},
-                          {"pairs_per_s", c.batchSize / stepTime},
-                          {"data_wait", wait / stepTime}};
-      log << j.dump() << "\n";
-      log.flush();
-      curve.emplace_back(iter - 1, lossValue);
-    }
-    if (lead && c.progress && (since(lastPrint) > 1.0 || iter == stopAt)) {
-      lastPrint = Clock::now();
-      const double rate = (iter - firstIter) / std::max(1e-9, since(start));
-      std::fprintf(stderr,
-                   "[pretrain] step %lld/%lld  epoch %.2f  loss %.4f  lr %.2e  %.1f pairs/s  "
-                   "data-wait %.1f%%  ETA %.0fs\n",
-                   static_cast<long long>(iter), static_cast<long long>(stopAt), epochF, lossValue,
-                   curLr, rate * c.batchSize, 100 * waitTotal / std::max(1e-9, stepTotal),
-                   (stopAt - iter) / std::max(rate, 1e-9));
-    }
-    const bool boundary = iter % c.accumIter == 0;
-    bool stopNow = gSignal != 0;
-    if (dist && boundary) {  // a signal to any rank stops them all at the same step
-      auto flag = torch::tensor({stopNow ? 1.0 : 0.0}, torch::kFloat64);
-      dist->allReduceMean({flag});
-      stopNow = flag.item<double>() > 0;
-    }
-    if (boundary && (iter % saveEvery == 0 || iter % perEpoch == 0 || iter == stopAt || stopNow)) {
-      if (lead) {
-        save(ckptPath, iter);
-        writeLossSvg((fs::path(c.out) / "loss.svg").string(), curve);
-        if (c.keepEvery > 0 && iter % perEpoch == 0 && (iter / perEpoch) % c.keepEvery == 0)
-          save((fs::path(c.out) / ("checkpoint-" + std::to_string(iter / perEpoch) + ".pth"))
-                   .string(),
-               iter);
-      }
-      if (stopNow) {
-        interrupted = true;
-        if (lead)
-          std::fprintf(stderr, "pretrain: signal: checkpoint saved at step %lld, exiting\n",
-                       static_cast<long long>(iter));
-        break;
-      }
-    }
-    if (lead && c.reconEvery > 0 && iter % c.reconEvery == 0 && dataset) {
-      torch::NoGradGuard ng;
-      model->eval();
-      auto [x, y] = dataset->load(0);
-      // A fixed mask from its own generator: training's random stream is left untouched.
-      auto gen = at::make_generator<at::CPUGeneratorImpl>(c.seed);
-      auto mask = torch::argsort(torch::rand({1, c.model.numPatches()}, gen), 1, false) <
-                  c.model.numMasked();
-      const Reconstruction r =
-          reconstructWith(model, imageTensor(x, c.model.img_size).to(device),
-                          imageTensor(y, c.model.img_size).to(device), mask.to(device));
-      writeImage((fs::path(c.out) / "recon-latest.png").string(), r.grid);
-      model->train();
-    }
+                            {"live_position", live_ ? live_->position() : 0},
+                            {"seed", c_.seed},
+                            {"batch_size", c_.batchSize},
+                            {"accum_iter", c_.accumIter}};
+    if (scaler_->enabled()) extra["scaler"] = scaler_->state();
+    saveCheckpoint(path, model_, step / perEpoch_, extra, tensors);
   }
-  signal(SIGINT, oldInt);
-  signal(SIGTERM, oldTerm);
-  const double seconds = since(start);
-  nlohmann::json summary = {
-      {"steps", iter},
-      {"steps_this_run", iter - firstIter},
-      {"loss", lastLoss},
-      {"seconds", seconds},
-      {"pairs_per_s", (iter - firstIter) * c.batchSize / std::max(seconds, 1e-9)},
-      {"data_wait", waitTotal / std::max(stepTotal, 1e-9)},
-      {"skipped_steps", skipped},
-      {"interrupted", interrupted},
-      {"checkpoint", ckptPath}};
-  summary["world_size"] = world;
-  summary["fused_adamw"] = c.fusedAdamW && device.is_cuda() && fusedAdamWCompiled();
-  summary["pairs_by_source"] = loader->counts();
-  if (scaler.enabled()) summary["loss_scale"] = scaler.scale();
-  if (lead) writeFileAtomic((fs::path(c.out) / "summary.json").string(), summary.dump(1) + "\n");
-  if (dist) dist->barrier();
-  return summary;
+
+  // recon-latest.png: the first pair of the disk data with a fixed mask.
+  void writeReconstruction() {
+    torch::NoGradGuard ng;
+    model_->eval();
+    auto [x, y] = reconData_->load(0);
+    // A fixed mask from its own generator: training's random stream is left untouched.
+    auto gen = at::make_generator<at::CPUGeneratorImpl>(c_.seed);
+    auto mask = torch::argsort(torch::rand({1, c_.model.numPatches()}, gen), 1, false) <
+                c_.model.numMasked();
+    const Reconstruction r =
+        reconstructWith(model_, imageTensor(x, c_.model.img_size).to(device_),
+                        imageTensor(y, c_.model.img_size).to(device_), mask.to(device_));
+    writeImage((fs::path(c_.out) / "recon-latest.png").string(), r.grid);
+    model_->train();
+  }
+
+  // Set-up.
+  const TrainConfig& c_;
+  Distributed* dist_;
+  const int rank_, world_;
+  const bool lead_;  // rank 0: writes checkpoints, logs and images
+  torch::Device device_{torch::kCPU};
+  std::string ckptPath_, logPath_;
+  ProgressLine progress_;
+  // Data.
+  std::unique_ptr<PairDataset> shardSet_, crocoSet_;
+  std::vector<Source> sources_;
+  const PairDataset* reconData_ = nullptr;  // the recon grid's pair
+  // Model and optimizer.
+  CroCoNet model_{nullptr};
+  std::vector<torch::Tensor> ordered_;  // parameters, in named_parameters() order
+  double lr_ = 0;                       // the peak lr
+  std::unique_ptr<torch::optim::AdamW> opt_;
+  std::unique_ptr<GradScaler> scaler_;
+  // Position.
+  int64_t iter_ = 0, firstIter_ = 0;
+  uint64_t livePosition_ = 0;
+  std::vector<std::pair<int64_t, double>> curve_;  // (step, loss) of the logged steps
+  std::unique_ptr<LiveLoader> live_;
+  std::unique_ptr<BatchLoader> loader_;
+  int64_t perEpoch_ = 0, stopAt_ = 0, saveEvery_ = 0;
+  // The step loop's state and tallies.
+  std::ofstream log_;
+  Clock::time_point start_ = Clock::now();
+  double epoch_ = 0, stepLoss_ = NAN, lastLoss_ = NAN;
+  double waitTotal_ = 0, stepTotal_ = 0;
+  int nanRun_ = 0, skipped_ = 0;
+  bool interrupted_ = false;
+};
+
+}  // namespace
+
+nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
+  validate(c);
+  Pretraining run(c, dist);
+  run.openDataSources();
+  run.buildModelAndOptimizer();
+  run.resumeOrStartLog();
+  run.startLoaders();
+  run.trainSteps();
+  return run.summary();
 }
 
 }  // namespace paircast

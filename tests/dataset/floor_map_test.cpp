@@ -2,10 +2,15 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
 #include "dataset/test_scenes.h"
 #include "dataset/viewpoint_sampler.h"
+#include "render/procedural_scene.h"
+#include "render/scan_scene.h"
 #include "test_paths.h"
 #include "util/error.h"
+#include "util/random.h"
 
 namespace paircast {
 namespace {
@@ -34,6 +39,168 @@ TEST(FloorMap, FindsTheRoomFloorAndNotTheFurniture) {
     // Not under the table: its top leaves only 0.7 m of headroom.
     ASSERT_FALSE(std::abs(p.x()) < 0.55f && std::abs(p.z()) < 0.35f);
   }
+}
+
+// Scenes built in memory: the floor map needs no file.
+Scene sceneOf(Mesh mesh, UpAxis up) {
+  Scene scene;
+  scene.path = scene.name = "test";
+  scene.up = up;
+  scene.mesh = std::move(mesh);
+  return scene;
+}
+
+Scene boxesScene(const std::vector<testing::BoxSpec>& boxes) {
+  Mesh mesh;
+  const int material = mesh.addMaterial(Material{});
+  for (const auto& b : boxes) addBox(mesh, b.lo, b.hi, material);
+  return sceneOf(std::move(mesh), UpAxis::Y);
+}
+
+// A scan as make_scenes --scan writes it, small (100k triangles, so 5.7 cm cells) but with the
+// noise scaled to match: 1.2 cm on 5.7 cm cells tilts the triangles as 3 mm does on 1.5 cm ones.
+Scene noisyScan() {
+  ScanSpec spec;
+  spec.triangles = 100'000;
+  spec.noise = 0.012f;
+  spec.seed = 3;
+  return sceneOf(buildScan(spec), UpAxis::Z);
+}
+
+TEST(FloorMap, NoisyDenselyTessellatedScanFloorIsWalkable) {
+  const Scene scene = noisyScan();
+  // The trait under test: many floor triangles tilt past the 20 degree slope limit.
+  size_t floorTriangles = 0, tilted = 0;
+  for (const auto& t : scene.mesh.triangles) {
+    const Eigen::Vector3f a = scene.mesh.positions[t[0]], b = scene.mesh.positions[t[1]],
+                          c = scene.mesh.positions[t[2]];
+    if (std::max({a.z(), b.z(), c.z()}) > 0.05f) continue;
+    ++floorTriangles;
+    tilted += std::abs((b - a).cross(c - a).normalized().z()) < std::cos(20.0 * M_PI / 180);
+  }
+  ASSERT_GT(floorTriangles, 10000u);
+  EXPECT_GT(tilted, floorTriangles / 20) << "the scan is not noisy enough to test anything";
+
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  ASSERT_FALSE(floor.empty());
+  EXPECT_TRUE(floor.hasCeiling());
+  // The room is about 7 x 5.5 m; furniture, the partition and the clearance band take a part.
+  EXPECT_GT(floor.area(), 15.0);
+  for (const auto& p : floor.points()) ASSERT_LT(std::abs(p.z()), 0.05f) << p.transpose();
+}
+
+TEST(FloorMap, FloorUnderAGapInTheCeilingIsKept) {
+  const Scene scene = noisyScan();
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  int uncovered = 0;
+  for (const auto& p : floor.points()) {
+    Ray up{p + Eigen::Vector3f(0, 0, 0.05f), Eigen::Vector3f::UnitZ()};
+    Hit hit;
+    caster.intersect(&up, &hit, 1);
+    uncovered += hit.triangle < 0;
+  }
+  // The scan's ceiling misses about 2 x 2 m and a strip along a wall.
+  EXPECT_GT(uncovered, 100) << "floor under the ceiling's gap was dropped";
+  EXPECT_LT(uncovered, static_cast<int>(floor.size()) / 2);
+}
+
+TEST(FloorMap, RoomWithoutCeilingHasAFloor) {
+  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+  boxes.erase(boxes.begin() + 1);  // the ceiling slab
+  const Scene scene = boxesScene(boxes);
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  ASSERT_FALSE(floor.empty());
+  EXPECT_FALSE(floor.hasCeiling());
+  EXPECT_GT(floor.area(), 15.0);
+  for (const auto& p : floor.points()) ASSERT_NEAR(p.y(), 0.0f, 1e-3f);
+}
+
+TEST(FloorMap, GroundOutsideAndRoofAreNotInside) {
+  // The room on a 30 x 30 m ground: the ground and the roof have nothing above them and no walls
+  // around them; only the room's floor is walkable.
+  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+  boxes.push_back({{-15.0f, -0.2f, -15.0f}, {15.0f, -0.1f, 15.0f}});
+  const Scene scene = boxesScene(boxes);
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  ASSERT_FALSE(floor.empty());
+  EXPECT_TRUE(floor.hasCeiling());
+  for (const auto& p : floor.points()) {
+    ASSERT_NEAR(p.y(), 0.0f, 1e-3f) << p.transpose();
+    ASSERT_LT(std::abs(p.x()), 3.0f) << p.transpose();
+    ASSERT_LT(std::abs(p.z()), 2.5f) << p.transpose();
+  }
+}
+
+TEST(FloorMap, NobodyStandsOverAHoleInTheFloor) {
+  // The floor slab has a 1 x 1 m hole over a basement 1.2 m below: what shows through it is
+  // too small and too low (1.1 m of headroom around) to walk in.
+  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+  boxes[0] = {{-3.1f, -0.1f, -2.6f}, {0.5f, 0.0f, 2.6f}};
+  boxes.push_back({{1.5f, -0.1f, -2.6f}, {3.1f, 0.0f, 2.6f}});
+  boxes.push_back({{0.5f, -0.1f, -2.6f}, {1.5f, 0.0f, 0.5f}});
+  boxes.push_back({{0.5f, -0.1f, 1.5f}, {1.5f, 0.0f, 2.6f}});
+  boxes.push_back({{-3.1f, -1.3f, -2.6f}, {3.1f, -1.2f, 2.6f}});  // the basement's floor
+  const Scene scene = boxesScene(boxes);
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  ASSERT_FALSE(floor.empty());
+  for (const auto& p : floor.points()) {
+    ASSERT_NEAR(p.y(), 0.0f, 1e-3f);
+    ASSERT_FALSE(p.x() > 0.5f && p.x() < 1.5f && p.z() > 0.5f && p.z() < 1.5f) << p.transpose();
+  }
+  EXPECT_GT(floor.area(), 12.0);
+}
+
+TEST(FloorMap, StairsLeaveNoPointInMidAir) {
+  // A 8 x 6 m hall, 5.2 m high, with five 0.3 m treads rising 1/6 m each from x = 0 to a
+  // platform 1 m high over x = 1.5 .. 4.
+  std::vector<testing::BoxSpec> boxes = {
+      {{-4.1f, -0.1f, -3.1f}, {4.1f, 0.0f, 3.1f}}, {{-4.1f, 5.2f, -3.1f}, {4.1f, 5.3f, 3.1f}},
+      {{-4.1f, 0.0f, -3.1f}, {-4.0f, 5.2f, 3.1f}}, {{4.0f, 0.0f, -3.1f}, {4.1f, 5.2f, 3.1f}},
+      {{-4.0f, 0.0f, -3.1f}, {4.0f, 5.2f, -3.0f}}, {{-4.0f, 0.0f, 3.0f}, {4.0f, 5.2f, 3.1f}},
+      {{1.5f, 0.0f, -3.0f}, {4.0f, 1.0f, 3.0f}}};
+  for (int i = 0; i < 5; ++i)
+    boxes.push_back({{0.3f * i, 0.0f, -1.0f}, {0.3f * (i + 1), (i + 1) / 6.0f, 1.0f}});
+  const Scene scene = boxesScene(boxes);
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  double ground = 0, platform = 0;
+  const double cell = 0.01;  // the default cell is 0.1 m: 0.01 m^2 per point
+  for (const auto& p : floor.points()) {
+    // On a tread, the ground or the platform: a multiple of 1/6 m, never between.
+    const float level = std::round(p.y() * 6.0f) / 6.0f;
+    ASSERT_NEAR(p.y(), level, 1e-3f) << p.transpose();
+    ASSERT_GE(level, 0.0f);
+    ASSERT_LE(level, 1.0f + 1e-3f);
+    ground += level == 0.0f ? cell : 0.0;
+    platform += std::abs(level - 1.0f) < 1e-3f ? cell : 0.0;
+  }
+  EXPECT_GT(ground, 15.0);
+  EXPECT_GT(platform, 8.0);
+}
+
+TEST(FloorMap, ClutterIsNotFloor) {
+  // Boxes of 15-35 cm, 10-50 cm high, strewn over the room's floor: their tops are flat and
+  // connect to the floor within a step, but no footprint fits on them.
+  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+  Rng rng(11);
+  for (int k = 0; k < 25; ++k) {
+    const float x = static_cast<float>(rng.uniform(-2.5, 2.5));
+    const float z = static_cast<float>(rng.uniform(-2.0, 2.0));
+    const float w = static_cast<float>(rng.uniform(0.15, 0.35));
+    const float h = static_cast<float>(rng.uniform(0.1, 0.5));
+    boxes.push_back({{x, 0.0f, z}, {x + w, h, z + w}});
+  }
+  const Scene scene = boxesScene(boxes);
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  ASSERT_FALSE(floor.empty());
+  EXPECT_GT(floor.area(), 8.0);
+  for (const auto& p : floor.points()) ASSERT_NEAR(p.y(), 0.0f, 1e-3f) << p.transpose();
 }
 
 TEST(FloorMap, UpAxisOptionFindsTheFloorOfAZUpScene) {

@@ -27,7 +27,7 @@ TEST(PairStream, DeliversPairsInTheBandFromWorkerThreads) {
   for (int i = 0; i < 8; ++i) {
     auto p = stream.next();
     ASSERT_TRUE(p.has_value());
-    EXPECT_GE(p->covis.covis, 0.5);
+    EXPECT_GE(p->covis[1].covis, 0.5);
     EXPECT_EQ(p->rgb[0].width, 40);
     EXPECT_TRUE(seen.insert(p->index).second) << "pair " << p->index << " delivered twice";
   }

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 
+#include "fake_sample.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -16,20 +17,7 @@ namespace {
 namespace fs = std::filesystem;
 
 PairSample fakePair(uint64_t index, bool depth) {
-  PairSample s;
-  s.scene = "my.scene";
-  s.index = index;
-  s.seed = 5;
-  for (int k = 0; k < 2; ++k) {
-    s.camera[k] = Camera::fromHfov(16, 16, 60);
-    s.camera[k].t_cam2world = Eigen::Vector3d(k, 1.5, index);
-    s.rgb[k] = Image8(16, 16, 3, static_cast<uint8_t>(40 * k + index));
-    if (depth) s.depth[k] = ImageF(16, 16, 1, 2.0f + k);
-  }
-  s.covis.covis = 0.6;
-  s.covis.v_ij = 0.6;
-  s.covis.v_ji = 0.7;
-  return s;
+  return testing::fakeSample("my.scene", index, 2, depth);
 }
 
 std::string writeShard(const std::string& dir, int n, bool depth) {

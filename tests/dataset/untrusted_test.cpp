@@ -10,6 +10,7 @@
 #include <filesystem>
 
 #include "dataset/shard.h"
+#include "fake_sample.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -20,12 +21,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string goodRecord(const std::string& scene, uint64_t index) {
-  PairSample s;
-  s.scene = scene;
-  s.index = index;
-  for (int k = 0; k < 2; ++k) s.camera[k] = Camera::fromHfov(16, 16, 60);
-  s.covis.covis = s.covis.v_ij = s.covis.v_ji = 0.5;
-  return sampleRecord(s).dump();
+  return sampleRecord(testing::fakeSample(scene, index, 2, false, 0.5)).dump();
 }
 
 struct Entry {

@@ -14,6 +14,7 @@
 
 #include "model/croco_net.h"
 #include "test_paths.h"
+#include "test_tar.h"
 #include "trainer/distributed.h"
 #include "trainer/fused_adamw.h"
 #include "trainer/trainer.h"
@@ -25,32 +26,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// One ustar member: a 512-byte header (name, size, type '0', checksum), the data, zero padding.
-void appendTarMember(std::string& tar, const std::string& name, const std::vector<uint8_t>& data) {
-  char h[512] = {};
-  std::snprintf(h, 100, "%s", name.c_str());
-  std::snprintf(h + 100, 8, "%07o", 0644);
-  std::snprintf(h + 108, 8, "%07o", 0);
-  std::snprintf(h + 116, 8, "%07o", 0);
-  std::snprintf(h + 124, 12, "%011llo", static_cast<unsigned long long>(data.size()));
-  std::snprintf(h + 136, 12, "%011o", 0);
-  h[156] = '0';
-  std::memcpy(h + 257, "ustar", 6);
-  std::memcpy(h + 263, "00", 2);
-  std::memset(h + 148, ' ', 8);
-  unsigned sum = 0;
-  for (unsigned char c : h) sum += c;
-  std::snprintf(h + 148, 8, "%06o", sum);
-  tar.append(h, 512);
-  tar.append(reinterpret_cast<const char*>(data.data()), data.size());
-  tar.append((512 - data.size() % 512) % 512, '\0');
-}
-
 // `pairs` pairs of smooth random 64 x 64 images (shifted views of one pattern), as JPEGs in a
 // tar shard laid out as generate_pairs writes them: <key>.1.jpg, <key>.2.jpg.
 std::string writeShard(const std::string& dir, int pairs) {
   Rng rng(7);
-  std::string tar;
+  std::vector<testing::TarMember> members;
   for (int k = 0; k < pairs; ++k) {
     const double fx = 0.05 + 0.2 * rng.uniform(), fy = 0.05 + 0.2 * rng.uniform();
     for (int view = 1; view <= 2; ++view) {
@@ -60,13 +40,13 @@ std::string writeShard(const std::string& dir, int pairs) {
           for (int c = 0; c < 3; ++c)
             img.pixel(x, y)[c] = static_cast<uint8_t>(
                 127 + 120 * std::sin(fx * (x + 4 * view) + fy * y + 2.0 * c + k));
-      char key[32];
-      std::snprintf(key, sizeof key, "%08d.%d.jpg", k, view);
-      appendTarMember(tar, key, encodeImage(img, "jpg", 90));
+      char name[32];
+      std::snprintf(name, sizeof name, "%08d.%d.jpg", k, view);
+      const auto jpeg = encodeImage(img, "jpg", 90);
+      members.emplace_back(name, std::string(jpeg.begin(), jpeg.end()));
     }
   }
-  tar.append(1024, '\0');
-  const std::string path = dir + "/pairs-000000.tar";
+  const std::string tar = testing::ustar(members), path = dir + "/pairs-000000.tar";
   std::ofstream(path, std::ios::binary).write(tar.data(), static_cast<std::streamsize>(tar.size()));
   return path;
 }

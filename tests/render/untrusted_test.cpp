@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
+#include <array>
 #include <chrono>
 #include <fstream>
+#include <limits>
 
 #include <nlohmann/json.hpp>
 
@@ -136,6 +138,83 @@ TEST(UntrustedScene, ConfiguredLimitsAreEnforced) {
   fewObjVertices.maxVertices = 100;
   EXPECT_NE(refusal(dir + "/big.obj", fewObjVertices).find("more than the limit of 100"),
             std::string::npos);
+}
+
+// A binary little-endian PLY as ScanNet writes it (float x y z, uchar RGBA, uchar-counted int
+// index lists), from raw vertices and faces; `header` overrides the element counts.
+std::string scannetPly(const std::vector<std::array<float, 3>>& vertices,
+                       const std::vector<std::vector<int32_t>>& faces,
+                       const std::string& vertexCount = "", const std::string& faceCount = "") {
+  std::string out = "ply\nformat binary_little_endian 1.0\nelement vertex " +
+                    (vertexCount.empty() ? std::to_string(vertices.size()) : vertexCount) +
+                    "\nproperty float x\nproperty float y\nproperty float z\n"
+                    "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                    "property uchar alpha\nelement face " +
+                    (faceCount.empty() ? std::to_string(faces.size()) : faceCount) +
+                    "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (const auto& v : vertices) {
+    out.append(reinterpret_cast<const char*>(v.data()), 12);
+    out += std::string("\x80\x80\x80\xff", 4);
+  }
+  for (const auto& f : faces) {
+    out += static_cast<char>(f.size());
+    out.append(reinterpret_cast<const char*>(f.data()), 4 * f.size());
+  }
+  return out;
+}
+
+// Both PLY readers (our binary one and assimp's, for ASCII and binary files) refuse the same bad
+// files, each with one line naming the file; none allocates what the header claims.
+TEST(UntrustedScene, BadPlyFilesAreRefusedByBothReaders) {
+  const std::string dir = testing::scratchDir("badply");
+  const std::vector<std::array<float, 3>> quad = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  const std::vector<std::vector<int32_t>> faces = {{0, 1, 2}, {0, 2, 3}};
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  struct Case {
+    std::string name, bytes, why;
+  };
+  const std::string good = scannetPly(quad, faces);
+  const std::vector<Case> cases = {
+      {"truncated", good.substr(0, good.size() - 5), "truncated"},
+      {"index", scannetPly(quad, {{0, 1, 2}, {0, 2, 4}}), "index"},
+      {"negative", scannetPly(quad, {{0, 1, 2}, {0, -1, 3}}), "index"},
+      {"empty", scannetPly(quad, {}), "no triangles"},
+      {"lines", scannetPly(quad, {{0, 1}, {2, 3}}), "no triangles"},
+      {"nan", scannetPly({{0, 0, 0}, {1, 0, 0}, {1, nan, 0}, {0, 1, 0}}, faces), "not finite"},
+      {"inf", scannetPly({{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, -inf}}, faces), "not finite"},
+      {"huge", scannetPly(quad, faces, "1000000000000"), "1000000000000"},
+      {"hugefaces", scannetPly(quad, faces, "", "1000000000000"), "1000000000000"},
+  };
+  const auto start = std::chrono::steady_clock::now();
+  std::ofstream(dir + "/good.ply", std::ios::binary) << good;
+  for (bool fast : {true, false}) {
+    LoadOptions o;
+    o.plyFastPath = fast;
+    EXPECT_EQ(loadScene(dir + "/good.ply", o).mesh.numTriangles(), 2u);
+    for (const Case& c : cases) {
+      const std::string path = dir + "/" + c.name + ".ply";
+      std::ofstream(path, std::ios::binary) << c.bytes;
+      const std::string why = refusal(path, o);
+      EXPECT_NE(why.find(c.why), std::string::npos)
+          << c.name << (fast ? " (fast path): " : " (assimp): ") << why;
+    }
+  }
+  // The same in ASCII, which assimp reads.
+  const std::string ascii = plyHeader("ascii", "4", "2");
+  const std::vector<Case> asciiCases = {
+      {"a_index", ascii + "0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 9\n", "index"},
+      {"a_nan", ascii + "0 0 0\n1 0 0\nnan 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", "not finite"},
+      {"a_empty", plyHeader("ascii", "3", "0") + "0 0 0\n1 0 0\n0 1 0\n", "no triangles"},
+      {"a_huge", plyHeader("ascii", "1000000000000", "2") + "0 0 0\n", "1000000000000"},
+  };
+  for (const Case& c : asciiCases) {
+    const std::string path = dir + "/" + c.name + ".ply";
+    std::ofstream(path) << c.bytes;
+    const std::string why = refusal(path);
+    EXPECT_NE(why.find(c.why), std::string::npos) << c.name << ": " << why;
+  }
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(10));
 }
 
 // A glTF whose one triangle is instanced by `nodes` nodes.

@@ -3,11 +3,11 @@
 // read, and a member that does not decode is an error naming the shard and the pair.
 #include <gtest/gtest.h>
 
-#include <cstring>
 #include <fstream>
 
 #include "test_errors.h"
 #include "test_paths.h"
+#include "test_tar.h"
 #include "trainer/pair_dataset.h"
 #include "util/error.h"
 #include "util/image_io.h"
@@ -15,49 +15,10 @@
 namespace paircast {
 namespace {
 
-struct Member {
-  Member(std::string n, std::string d, char t = '0', std::string size = "")
-      : name(std::move(n)), data(std::move(d)), type(t), sizeField(std::move(size)) {}
-  std::string name, data;
-  char type;              // ustar type flag: '0' file, '1' hard link, '2' symlink, '5' folder
-  std::string sizeField;  // written instead of the real size when set
-};
-
-// A ustar archive, header by header, so that a test can write what no tar tool would.
-std::string ustar(const std::vector<Member>& members) {
-  std::string out;
-  for (const Member& m : members) {
-    char h[512] = {};
-    std::strncpy(h, m.name.c_str(), 100);
-    std::snprintf(h + 100, 8, "%07o", 0644);
-    std::snprintf(h + 108, 8, "%07o", 0);
-    std::snprintf(h + 116, 8, "%07o", 0);
-    if (m.sizeField.empty())
-      std::snprintf(h + 124, 12, "%011o", static_cast<unsigned>(m.data.size()));
-    else
-      std::memcpy(h + 124, m.sizeField.data(), std::min<size_t>(12, m.sizeField.size()));
-    std::snprintf(h + 136, 12, "%011o", 0);
-    h[156] = m.type;
-    std::memcpy(h + 257,
-                "ustar\0"
-                "00",
-                8);
-    std::memset(h + 148, ' ', 8);
-    unsigned sum = 0;
-    for (unsigned char c : std::string(h, 512)) sum += c;
-    std::snprintf(h + 148, 8, "%06o", sum);
-    out.append(h, 512);
-    out += m.data;
-    out.append((512 - m.data.size() % 512) % 512, '\0');
-  }
-  return out + std::string(1024, '\0');
-}
+using testing::ustar;
 
 std::string jpeg() {
-  Image8 img(8, 8, 3);
-  for (size_t i = 0; i < img.data.size(); ++i) img.data[i] = static_cast<uint8_t>(i * 7);
-  const auto bytes = encodeImage(img, "jpg", 90);
-  return std::string(bytes.begin(), bytes.end());
+  return testing::jpegBytes();
 }
 
 std::string write(const std::string& name, const std::string& bytes) {

@@ -1,10 +1,11 @@
-#include "dataset/svg.h"
+#include "util/plot.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
-namespace paircast::svg {
+namespace paircast::plot {
 namespace {
 
 struct Frame {
@@ -31,18 +32,21 @@ std::string open(const Axes& a) {
          "fill='white'/>";
 }
 
-// Axis lines, 5 ticks on each axis, labels and title.
+// Axis lines, ticks at round values on each axis with grid lines across, labels and title.
 std::string frame(const Frame& f, const Axes& a) {
   std::string s;
   const double L = f.left, R = f.width - f.right, T = f.top, B = f.height - f.bottom;
   s += "<path d='M" + num(L) + " " + num(T) + " V" + num(B) + " H" + num(R) +
        "' stroke='#333' fill='none'/>";
-  for (int i = 0; i <= 4; ++i) {
-    const double x = f.x0 + (f.x1 - f.x0) * i / 4, y = f.y0 + (f.y1 - f.y0) * i / 4;
-    s += "<text x='" + num(f.px(x)) + "' y='" + num(B + 14) + "' text-anchor='middle'>" +
-         num(x, "%.3g") + "</text>";
+  const Ticks xs = ticks(f.x0, f.x1), ys = ticks(f.y0, f.y1);
+  for (double x : xs.values) {
+    s += "<path d='M" + num(f.px(x)) + " " + num(B) + " v4' stroke='#333'/>";
+    s += "<text x='" + num(f.px(x)) + "' y='" + num(B + 15) + "' text-anchor='middle'>" +
+         tickLabel(x, xs.step) + "</text>";
+  }
+  for (double y : ys.values) {
     s += "<text x='" + num(L - 4) + "' y='" + num(f.py(y) + 4) + "' text-anchor='end'>" +
-         num(y, "%.3g") + "</text>";
+         tickLabel(y, ys.step) + "</text>";
     s += "<path d='M" + num(L) + " " + num(f.py(y)) + " H" + num(R) +
          "' stroke='#ddd' stroke-width='0.5'/>";
   }
@@ -69,7 +73,58 @@ std::string viridis(double t) {  // a short viridis-like ramp
   return b;
 }
 
+// m x 10^e, computed so that decimal steps are the nearest doubles (0.1, not 0.1000...2).
+double decimal(double m, int e) {
+  return e >= 0 ? m * std::pow(10.0, e) : m / std::pow(10.0, -e);
+}
+
 }  // namespace
+
+Ticks ticks(double lo, double hi, int target) {
+  Ticks t;
+  if (!std::isfinite(lo) || !std::isfinite(hi) || hi < lo) return t;
+  target = std::max(1, target);
+  // Halves first: hi - lo may overflow where the step does not.
+  const double raw = (hi / 2 - lo / 2) * (2.0 / target);
+  const double scale = std::max(std::abs(lo), std::abs(hi));
+  if (!(raw > scale * 1e-12) || raw < std::numeric_limits<double>::min() * 1e3) {
+    t.values = {lo};  // equal ends, or a span below what the ends' precision can tell
+    return t;
+  }
+  int e = static_cast<int>(std::floor(std::log10(raw)));
+  double m = 0;
+  for (double c : {1.0, 2.0, 5.0})
+    if (m == 0 && decimal(c, e) >= raw * (1 - 1e-9)) m = c;
+  if (m == 0) m = 1, ++e;
+  t.step = decimal(m, e);
+  // Multiples k x step within the range, allowing for rounding at the ends.
+  const double k0 = std::ceil(lo / t.step - 1e-9), k1 = std::floor(hi / t.step + 1e-9);
+  for (int i = 0; k0 + i <= k1 && i <= target + 2; ++i) {  // |k| < 1e12: exact in a double
+    const double v = decimal((k0 + i) * m, e);
+    t.values.push_back(v == 0 ? 0.0 : v);  // no "-0"
+  }
+  return t;
+}
+
+std::string tickLabel(double value, double step) {
+  char b[64];
+  if (value == 0) value = 0;  // no "-0"
+  if (!std::isfinite(value) || !std::isfinite(step)) step = 0;
+  if (step > 0 && step >= 1e-4 && std::abs(value) < 1e6) {
+    const int decimals = std::max(0, static_cast<int>(-std::floor(std::log10(step) + 1e-9)));
+    std::snprintf(b, sizeof b, "%.*f", decimals, value);
+  } else {
+    // As many significant digits as the step's position below the value's leading digit.
+    int digits = 4;
+    if (step > 0 && std::isfinite(value) && value != 0)
+      digits = std::clamp(static_cast<int>(std::floor(std::log10(std::abs(value)) + 1e-9) -
+                                           std::floor(std::log10(step) + 1e-9)) +
+                              1,
+                          1, 17);
+    std::snprintf(b, sizeof b, "%.*g", digits, value);
+  }
+  return b;
+}
 
 std::string escape(const std::string& text) {
   std::string out;
@@ -194,4 +249,4 @@ std::string cameraPlot(const std::vector<Arrow>& arrows, const Axes& a) {
   return s + frame(f, a) + "</svg>\n";
 }
 
-}  // namespace paircast::svg
+}  // namespace paircast::plot

@@ -1,10 +1,11 @@
-// Small self-contained SVG charts for the HTML reports: no scripts, no fonts to fetch.
+// Small self-contained SVG charts for reports and training curves: no scripts, no fonts to
+// fetch. Axes carry ticks at round values (1, 2 or 5 times a power of ten).
 #pragma once
 
 #include <string>
 #include <vector>
 
-namespace paircast::svg {
+namespace paircast::plot {
 
 struct Series {
   std::string label;
@@ -18,6 +19,18 @@ struct Axes {
   std::string title, xLabel, yLabel;
   int width = 560, height = 340;
 };
+
+// Ticks of an axis over [lo, hi]: the multiples of one step that lie in the range, the step the
+// smallest of 1, 2 or 5 times a power of ten that is at least (hi - lo) / target. So there are
+// at most target + 1 ticks, and at least 2 when target >= 5. A single tick at lo when the ends
+// are equal (or closer than a double can tell apart); none when an end is not finite or hi < lo.
+struct Ticks {
+  double step = 0;  // 0 when there is at most one tick
+  std::vector<double> values;
+};
+Ticks ticks(double lo, double hi, int target = 6);
+// A tick's label with as many decimals as the step needs: 0.25 -> "0.25", 1e6 steps -> "2e+06".
+std::string tickLabel(double value, double step);
 
 // Escapes &, <, >, ' and " for text and attributes.
 std::string escape(const std::string& text);
@@ -37,4 +50,4 @@ struct Arrow {
 };
 std::string cameraPlot(const std::vector<Arrow>& arrows, const Axes& axes);
 
-}  // namespace paircast::svg
+}  // namespace paircast::plot

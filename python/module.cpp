@@ -1,0 +1,574 @@
+// paircast._paircast: the renderer, co-visibility, live pair stream and shard reader for Python.
+// Arrays leave C++ without a copy where C++ owns one buffer per array (the buffer moves into a
+// capsule that numpy frees), and with one copy where views are stacked into [V, ...]. The GIL is
+// released around loading, rendering, waiting for pairs and decoding.
+//
+// Legend: V views, H, W pixels.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <deque>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <thread>
+
+#include "covis/covisibility.h"
+#include "dataset/pair_stream.h"
+#include "dataset/shard.h"
+#include "render/ray_caster.h"
+#include "render/scene_loader.h"
+#include "util/error.h"
+#include "util/image_io.h"
+
+namespace py = pybind11;
+
+namespace paircast {
+namespace {
+
+// ---- Arrays -------------------------------------------------------------------------------------
+
+// Hands `data` to numpy without a copy: the vector moves into a capsule that numpy frees.
+template <typename T>
+py::array_t<T> adopt(std::vector<T>&& data, std::vector<py::ssize_t> shape) {
+  auto* owner = new std::vector<T>(std::move(data));
+  py::capsule free(owner, [](void* p) { delete static_cast<std::vector<T>*>(p); });
+  return py::array_t<T>(std::move(shape), owner->data(), free);
+}
+
+// [H, W, C] as numpy; a 1-channel map drops the channel axis ([H, W]).
+template <typename T>
+py::array_t<T> adopt(Image<T>&& image) {
+  std::vector<py::ssize_t> shape{image.height, image.width};
+  if (image.channels != 1) shape.push_back(image.channels);
+  return adopt(std::move(image.data), std::move(shape));
+}
+
+// Views of equal size stacked into [V, H, W(, C)]: the one copy of a multi-view array.
+template <typename T>
+py::array_t<T> stack(const std::vector<const Image<T>*>& views) {
+  PAIRCAST_CHECK(!views.empty());
+  const Image<T>& first = *views[0];
+  std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(views.size()), first.height, first.width};
+  if (first.channels != 1) shape.push_back(first.channels);
+  py::array_t<T> out(shape);
+  T* dst = out.mutable_data();
+  for (const Image<T>* v : views) {
+    PAIRCAST_CHECK(v->size() == first.size());
+    std::memcpy(dst, v->data.data(), v->size() * sizeof(T));
+    dst += v->size();
+  }
+  return out;
+}
+
+// A float32 [H, W] (or [H, W, 1]) depth map from numpy, checked against its camera.
+ImageF depthFromPy(const py::array& array, const Camera& camera, const std::string& name) {
+  auto a = py::array_t<float, py::array::c_style | py::array::forcecast>::ensure(array);
+  if (!a) throw Error(name, "depth is not a numeric array");
+  const bool shapeOk = (a.ndim() == 2 || (a.ndim() == 3 && a.shape(2) == 1)) &&
+                       a.shape(0) == camera.height && a.shape(1) == camera.width;
+  if (!shapeOk)
+    throw Error(name, "depth must be float32 [H, W] matching the camera (" +
+                          std::to_string(camera.height) + " x " + std::to_string(camera.width) +
+                          ")");
+  ImageF depth(camera.width, camera.height, 1);
+  std::memcpy(depth.data.data(), a.data(), depth.size() * sizeof(float));
+  return depth;
+}
+
+// ---- Cameras ------------------------------------------------------------------------------------
+
+// Python values (dicts, lists, tuples, numbers, numpy arrays and scalars) as JSON, so that a
+// camera dict goes through the same cameraFromJson checks as render_view's camera files.
+nlohmann::json toJson(py::handle h, const std::string& name) {
+  if (h.is_none()) return nullptr;
+  if (py::isinstance<py::bool_>(h)) return h.cast<bool>();
+  if (py::isinstance<py::int_>(h)) return h.cast<int64_t>();
+  if (py::isinstance<py::float_>(h)) return h.cast<double>();
+  if (py::isinstance<py::str>(h)) return h.cast<std::string>();
+  if (py::isinstance<py::dict>(h)) {
+    nlohmann::json j = nlohmann::json::object();
+    for (auto item : h.cast<py::dict>())
+      j[py::str(item.first).cast<std::string>()] = toJson(item.second, name);
+    return j;
+  }
+  if (py::isinstance<py::list>(h) || py::isinstance<py::tuple>(h)) {
+    nlohmann::json j = nlohmann::json::array();
+    for (auto item : h) j.push_back(toJson(item, name));
+    return j;
+  }
+  if (py::hasattr(h, "tolist")) return toJson(h.attr("tolist")(), name);  // numpy
+  throw Error(name, "unsupported value of type " +
+                        py::str(h.get_type().attr("__name__")).cast<std::string>());
+}
+
+Camera cameraFromPy(py::handle h, const std::string& name) {
+  return cameraFromJson(toJson(h, name), name);
+}
+
+py::array_t<double> matrixToPy(const Eigen::Matrix3d& m) {
+  py::array_t<double> a({3, 3});
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) a.mutable_at(r, c) = m(r, c);
+  return a;
+}
+
+// CroCo's keys, with numpy arrays: camera_intrinsics [3, 3], R_cam2world [3, 3], t_cam2world [3].
+py::dict cameraToPy(const Camera& c) {
+  py::dict d;
+  d["camera_intrinsics"] = matrixToPy(c.K);
+  d["R_cam2world"] = matrixToPy(c.R_cam2world);
+  py::array_t<double> t(3);
+  for (int i = 0; i < 3; ++i) t.mutable_at(i) = c.t_cam2world[i];
+  d["t_cam2world"] = t;
+  d["width"] = c.width;
+  d["height"] = c.height;
+  return d;
+}
+
+// ---- Samples ------------------------------------------------------------------------------------
+
+// The one conversion of a PairSample to Python, shared by every sample source.
+py::dict sampleToDict(const PairSample& s) {
+  const int V = s.views();
+  PAIRCAST_CHECK(V >= 1 && s.rgb.size() == static_cast<size_t>(V) &&
+                 s.covis.size() == static_cast<size_t>(V));
+  std::vector<const Image8*> rgb;
+  std::vector<const ImageF*> depth;
+  py::list cameras;
+  py::array_t<double> covis(V - 1);
+  for (int k = 0; k < V; ++k) {
+    rgb.push_back(&s.rgb[k]);
+    if (k < static_cast<int>(s.depth.size()) && !s.depth[k].data.empty())
+      depth.push_back(&s.depth[k]);
+    cameras.append(cameraToPy(s.camera[k]));
+    if (k > 0) covis.mutable_at(k - 1) = s.covis[k].covis;
+  }
+  py::dict d;
+  d["images"] = stack(rgb);                                    // uint8 [V, H, W, 3]
+  if (depth.size() == rgb.size()) d["depths"] = stack(depth);  // float32 [V, H, W]
+  d["cameras"] = cameras;
+  d["covis"] = covis;  // [V - 1]: covis of each view k >= 1 with view 0 (the reference)
+  if (s.visibility.size() == static_cast<size_t>(V)) {
+    // [V, V]: v_ij, the share of view i seen by view j; each view's valid fraction on the diagonal.
+    py::array_t<double> visibility({V, V});
+    for (int i = 0; i < V; ++i)
+      for (int j = 0; j < V; ++j) visibility.mutable_at(i, j) = s.visibility[i].at(j);
+    d["visibility"] = visibility;
+  }
+  d["scene"] = s.scene;
+  d["index"] = s.index;
+  d["seed"] = s.seed;
+  return d;
+}
+
+// ---- Scenes -------------------------------------------------------------------------------------
+
+// A loaded scene and its BVH; the caster refers to scene.mesh, so neither ever moves.
+struct PyScene {
+  Scene scene;
+  std::unique_ptr<RayCaster> caster;
+};
+
+// A str or os.PathLike as a path.
+std::string pathFromPy(py::handle h) {
+  return py::module_::import("os").attr("fspath")(h).cast<std::string>();
+}
+
+// One path, or an iterable of them (scene files, folders, .txt lists).
+std::vector<std::string> pathsFromPy(py::handle h) {
+  if (py::isinstance<py::str>(h) || py::hasattr(h, "__fspath__")) return {pathFromPy(h)};
+  std::vector<std::string> out;
+  for (auto item : h) out.push_back(pathFromPy(item));
+  return out;
+}
+
+std::unique_ptr<PyScene> loadPyScene(py::handle pathObject, const std::string& up, double scale) {
+  const std::string path = pathFromPy(pathObject);
+  LoadOptions options;
+  options.up = parseUpAxis(up);
+  options.scale = scale;
+  if (!(scale > 0) || !std::isfinite(scale)) throw Error(path, "scale must be positive");
+  auto s = std::make_unique<PyScene>();
+  py::gil_scoped_release release;
+  s->scene = loadScene(path, options);
+  s->caster = std::make_unique<RayCaster>(s->scene.mesh);
+  return s;
+}
+
+py::dict renderPy(const PyScene& s, py::handle cameraDict, bool rgb, bool depth, bool normals,
+                  int supersample) {
+  const Camera camera = cameraFromPy(cameraDict, "camera");
+  if (supersample < 1 || supersample > 4) throw Error("supersample must be in 1..4");
+  RenderOptions options;
+  options.rgb = rgb;
+  options.normals = normals;
+  options.ids = false;
+  options.supersample = supersample;
+  Frame frame;
+  {
+    py::gil_scoped_release release;
+    s.caster->render(camera, options, frame);
+  }
+  py::dict d;
+  if (rgb) d["rgb"] = adopt(std::move(frame.rgb));              // uint8 [H, W, 3]
+  if (depth) d["depth"] = adopt(std::move(frame.depth));        // float32 [H, W]
+  if (normals) d["normals"] = adopt(std::move(frame.normals));  // float32 [H, W, 3]
+  return d;
+}
+
+py::dict covisibilityPy(py::handle cam1, const py::array& depth1, py::handle cam2,
+                        const py::array& depth2, double absTol, double relTol,
+                        const std::string& normalize) {
+  const Camera c1 = cameraFromPy(cam1, "cam1"), c2 = cameraFromPy(cam2, "cam2");
+  const ImageF d1 = depthFromPy(depth1, c1, "depth1"), d2 = depthFromPy(depth2, c2, "depth2");
+  CovisOptions options;
+  options.absTol = static_cast<float>(absTol);
+  options.relTol = static_cast<float>(relTol);
+  options.normalize = parseCovisNormalize(normalize);
+  CovisResult r;
+  {
+    py::gil_scoped_release release;
+    r = computeCovisibility(c1, d1, c2, d2, options);
+  }
+  py::dict d;
+  d["v12"] = r.v_ij;
+  d["v21"] = r.v_ji;
+  d["covis"] = r.covis;
+  d["valid1"] = r.valid_i;
+  d["valid2"] = r.valid_j;
+  return d;
+}
+
+// ---- The live stream ----------------------------------------------------------------------------
+
+class PyPairStream {
+ public:
+  PyPairStream(py::handle scenes, uint64_t seed, int resolution, double hfov, double minCovis,
+               double maxCovis, int views, const std::string& up, double scale, int threads,
+               int start, int step, uint64_t offset, size_t queue) {
+    if (views < 1 || views > kMaxViews)
+      throw py::value_error("views must be in 1.." + std::to_string(kMaxViews) + ", got " +
+                            std::to_string(views));
+    if (resolution < 8 || resolution > 8192) throw Error("resolution must be in 8..8192");
+    if (!(hfov > 0 && hfov < 180)) throw Error("hfov must be in (0, 180) degrees");
+    if (threads < 0) throw Error("threads must be >= 0 (0: one per core)");
+    if (!(minCovis >= 0 && minCovis <= maxCovis && maxCovis <= 1))
+      throw Error("the covis band must satisfy 0 <= min_covis <= max_covis <= 1");
+    if (!(scale > 0) || !std::isfinite(scale)) throw Error("scale must be positive");
+    PairStreamOptions o;
+    o.scenes = pathsFromPy(scenes);
+    o.load.up = parseUpAxis(up);
+    o.load.scale = scale;
+    o.pair.resolution = resolution;
+    o.pair.hfov = hfov;
+    o.pair.minCovis = minCovis;
+    o.pair.maxCovis = maxCovis;
+    o.pair.views = views;
+    validatePairOptions(o.pair);  // here, not per scene inside PairStream, where it would skip
+    o.seed = seed;
+    o.firstIndex = offset;
+    o.threads = threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency());
+    o.queueCapacity = std::max<size_t>(1, queue);
+    o.partIndex = start;
+    o.partCount = step;
+    py::gil_scoped_release release;
+    stream_ = std::make_shared<PairStream>(o);
+  }
+
+  py::dict next() {
+    // A local owner: close() from another thread must not free the stream under next().
+    std::shared_ptr<PairStream> stream = stream_;
+    if (!stream) throw py::stop_iteration();
+    std::optional<PairSample> s;
+    {
+      py::gil_scoped_release release;
+      s = stream->next();
+    }
+    if (!s) throw py::stop_iteration();
+    return sampleToDict(*s);
+  }
+
+  void close() {
+    std::shared_ptr<PairStream> stream = std::move(stream_);
+    if (!stream) return;
+    stream->stop();  // wakes a next() waiting in another thread
+    py::gil_scoped_release release;
+    stream.reset();  // joins the workers, unless a next() still holds it
+  }
+
+  size_t scenes() const { return stream_ ? stream_->usableScenes() : 0; }
+  uint64_t position() const { return stream_ ? stream_->position() : 0; }
+
+ private:
+  std::shared_ptr<PairStream> stream_;
+};
+
+// ---- Shards -------------------------------------------------------------------------------------
+
+// A shard read by readShard on a background thread that decodes into a bounded queue, so that
+// decoding overlaps the training step. Malformed samples become warnings, as readShard reports
+// them.
+class PyShardReader {
+ public:
+  struct Decoded {
+    std::string key;
+    std::vector<Image8> rgb;
+    std::vector<ImageF> depth;
+    nlohmann::json record;
+  };
+
+  PyShardReader(py::handle path, bool depth, size_t queue)
+      : path_(pathFromPy(path)), depth_(depth), capacity_(std::max<size_t>(1, queue)) {
+    thread_ = std::thread([this] { run(); });
+  }
+  ~PyShardReader() { close(); }
+
+  // The next decoded sample as a dict, or StopIteration; rethrows the reader's error.
+  py::dict next() {
+    std::optional<Decoded> d;
+    std::vector<std::string> warnings;
+    std::exception_ptr error;
+    {
+      py::gil_scoped_release release;
+      std::unique_lock<std::mutex> lock(mu_);
+      cv_.wait(lock, [&] { return !queue_.empty() || done_ || !warnings_.empty(); });
+      warnings.swap(warnings_);
+      if (!queue_.empty()) {
+        d = std::move(queue_.front());
+        queue_.pop_front();
+        cv_.notify_all();
+      } else if (done_) {
+        error = error_;
+        error_ = nullptr;
+      }
+    }
+    for (const auto& w : warnings)
+      if (PyErr_WarnEx(PyExc_RuntimeWarning, w.c_str(), 1) < 0) throw py::error_already_set();
+    if (error) std::rethrow_exception(error);
+    if (!d) {
+      if (!warnings.empty()) return next();
+      throw py::stop_iteration();
+    }
+    return toDict(std::move(*d));
+  }
+
+  void close() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) {
+      py::gil_scoped_release release;
+      thread_.join();
+    }
+  }
+
+ private:
+  struct Stopped {};
+
+  void run() {
+    try {
+      readShard(
+          path_,
+          [&](ShardSample&& s) {
+            Decoded d;
+            d.key = s.key;
+            for (size_t k = 0; k < s.jpeg.size(); ++k) {
+              const std::string name = path_ + ": " + s.key + "." + std::to_string(k + 1);
+              d.rgb.push_back(decodeImage8(s.jpeg[k].data(), s.jpeg[k].size(), name + ".jpg"));
+              if (depth_ && k < s.depthExr.size() && !s.depthExr[k].empty())
+                d.depth.push_back(
+                    decodeImageF(s.depthExr[k].data(), s.depthExr[k].size(), name + ".depth.exr"));
+            }
+            d.record = std::move(s.record);
+            std::unique_lock<std::mutex> lock(mu_);
+            cv_.wait(lock, [&] { return stop_ || queue_.size() < capacity_; });
+            if (stop_) throw Stopped{};
+            queue_.push_back(std::move(d));
+            cv_.notify_all();
+          },
+          [&](const std::string& message) {
+            std::lock_guard<std::mutex> lock(mu_);
+            warnings_.push_back(message);
+            cv_.notify_all();
+          });
+    } catch (const Stopped&) {
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(mu_);
+      error_ = std::current_exception();
+    }
+    std::lock_guard<std::mutex> lock(mu_);
+    done_ = true;
+    cv_.notify_all();
+  }
+
+  py::dict toDict(Decoded&& d) {
+    const SampleRecord r = parseSampleRecord(d.record, path_ + ": sample '" + d.key + "'");
+    PairSample s;
+    s.scene = r.scene;
+    s.index = r.index;
+    const auto seed = d.record.find("seed");
+    if (seed != d.record.end() && seed->is_number_unsigned()) s.seed = seed->get<uint64_t>();
+    const size_t V = static_cast<size_t>(r.views);
+    if (d.rgb.size() != V || r.camera.size() != V)
+      throw Error(path_, "sample '" + d.key + "' does not have the views its record names");
+    for (const Image8& image : d.rgb)
+      if (image.size() != d.rgb[0].size())
+        throw Error(path_, "sample '" + d.key + "' has views of different sizes");
+    s.camera = r.camera;
+    s.rgb = std::move(d.rgb);
+    if (d.depth.size() == V) s.depth = std::move(d.depth);
+    s.covis.resize(V);
+    s.covis[0].covis = 1.0;
+    // Each view's covis with view 1: CroCo's covisibility_ratios after view 1's valid fraction.
+    const auto ratios = d.record.find("covisibility_ratios");
+    for (size_t k = 1; k < V; ++k) {
+      if (ratios != d.record.end() && ratios->is_array() && ratios->size() == V &&
+          (*ratios)[k].is_number())
+        s.covis[k].covis = (*ratios)[k].get<double>();
+      else if (k == 1)
+        s.covis[k].covis = r.covis;
+    }
+    // CroCo's pairwise_visibility_ratios, when whole: [V][V].
+    const auto pairwise = d.record.find("pairwise_visibility_ratios");
+    if (pairwise != d.record.end() && pairwise->is_array() && pairwise->size() == V) {
+      std::vector<std::vector<double>> visibility;
+      for (const auto& row : *pairwise) {
+        if (!row.is_array() || row.size() != V) break;
+        visibility.emplace_back();
+        for (const auto& v : row) visibility.back().push_back(v.is_number() ? v.get<double>() : 0);
+      }
+      if (visibility.size() == V) s.visibility = std::move(visibility);
+    }
+    py::dict out = sampleToDict(s);
+    out["key"] = d.key;
+    return out;
+  }
+
+  std::string path_;
+  bool depth_;
+  size_t capacity_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::deque<Decoded> queue_;
+  std::vector<std::string> warnings_;
+  std::exception_ptr error_;
+  bool stop_ = false, done_ = false;
+  std::thread thread_;
+};
+
+py::array_t<uint8_t> decodeImagePy(const py::bytes& data, const std::string& name) {
+  const std::string_view bytes = data;
+  Image8 image;
+  {
+    py::gil_scoped_release release;
+    image = decodeImage8(bytes.data(), bytes.size(), name, 3);
+  }
+  return adopt(std::move(image));
+}
+
+// uint8 [H, W, 3] (or [H, W] gray) to PNG or JPEG bytes, with the encoder generate_pairs uses.
+py::bytes encodeImagePy(const py::array& array, const std::string& format, int quality) {
+  auto a = py::array_t<uint8_t, py::array::c_style>::ensure(array);
+  if (!a || a.dtype().kind() != 'u' || !(a.ndim() == 2 || (a.ndim() == 3 && a.shape(2) == 3)))
+    throw Error("image must be uint8 [H, W, 3] or [H, W]");
+  if (quality < 1 || quality > 100) throw Error("quality must be in 1..100");
+  Image8 image(static_cast<int>(a.shape(1)), static_cast<int>(a.shape(0)), a.ndim() == 3 ? 3 : 1);
+  std::memcpy(image.data.data(), a.data(), image.size());
+  std::vector<unsigned char> bytes;
+  {
+    py::gil_scoped_release release;
+    bytes = encodeImage(image, format, quality);
+  }
+  return py::bytes(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+}
+
+// A float image (EXR) held in bytes: [H, W] for one channel, else [H, W, C].
+py::array_t<float> decodeExrPy(const py::bytes& data, const std::string& name) {
+  const std::string_view bytes = data;
+  ImageF image;
+  {
+    py::gil_scoped_release release;
+    image = decodeImageF(bytes.data(), bytes.size(), name);
+  }
+  return adopt(std::move(image));
+}
+
+}  // namespace
+}  // namespace paircast
+
+PYBIND11_MODULE(_paircast, m) {
+  using namespace paircast;
+  m.doc() = "paircast: Embree rendering, co-visibility and live CroCo pairs";
+  // Bad input (a missing scene, a bad camera, a corrupt shard): one line naming what is wrong.
+  py::register_exception<Error>(m, "Error", PyExc_ValueError);
+
+  py::class_<PyScene>(m, "Scene", "A mesh scene with its BVH, ready to render")
+      .def_property_readonly("name", [](const PyScene& s) { return s.scene.name; })
+      .def_property_readonly("path", [](const PyScene& s) { return s.scene.path; })
+      .def_property_readonly("triangles",
+                             [](const PyScene& s) { return s.scene.mesh.triangles.size(); })
+      .def_property_readonly("warnings", [](const PyScene& s) { return s.scene.warnings; })
+      .def("render", &renderPy, py::arg("camera"), py::arg("rgb") = true, py::arg("depth") = true,
+           py::arg("normals") = false, py::arg("supersample") = 1,
+           "Renders one view. camera: a dict with CroCo's keys (camera_intrinsics, R_cam2world, "
+           "t_cam2world, width, height). Returns a dict of numpy arrays: rgb uint8 [H, W, 3], "
+           "depth float32 [H, W] z-depth in scene units (0 on a miss), normals float32 [H, W, 3] "
+           "(unit world-frame normals facing the camera, 0 on a miss).")
+      .def("__repr__", [](const PyScene& s) {
+        return "<paircast.Scene '" + s.scene.name + "', " +
+               std::to_string(s.scene.mesh.triangles.size()) + " triangles>";
+      });
+
+  m.def("load_scene", &loadPyScene, py::arg("path"), py::arg("up") = "y", py::arg("scale") = 1.0,
+        "Loads a mesh scene (glb, gltf, obj, ply, ...) and builds its BVH. up: 'y' or 'z'; "
+        "scale multiplies positions (file units to metres).");
+
+  m.def("covisibility", &covisibilityPy, py::arg("cam1"), py::arg("depth1"), py::arg("cam2"),
+        py::arg("depth2"), py::arg("abs_tol") = 0.03, py::arg("rel_tol") = 0.03,
+        py::arg("normalize") = "valid",
+        "Co-visibility of two views from their z-depth maps (float32 [H, W], 0 on a miss), by "
+        "reprojection. Returns v12 (share of view 1 seen by view 2), v21, covis = min(v12, v21), "
+        "valid1, valid2.");
+
+  py::class_<PyPairStream>(m, "PairStream",
+                           "Pairs rendered live by worker threads, as generate_pairs makes them")
+      .def(py::init<py::handle, uint64_t, int, double, double, double, int, const std::string&,
+                    double, int, int, int, uint64_t, size_t>(),
+           py::arg("scenes"), py::arg("seed") = 0, py::arg("resolution") = 256,
+           py::arg("hfov") = 60.0, py::arg("min_covis") = 0.5, py::arg("max_covis") = 1.0,
+           py::arg("views") = 2, py::arg("up") = "y", py::arg("scale") = 1.0,
+           py::arg("threads") = 0, py::arg("start") = 0, py::arg("step") = 1, py::arg("offset") = 0,
+           py::arg("queue") = 16)
+      .def("__iter__", [](py::object self) { return self; })
+      .def("__next__", &PyPairStream::next)
+      .def("close", &PyPairStream::close)
+      .def("__enter__", [](py::object self) { return self; })
+      .def("__exit__", [](PyPairStream& s, py::args) { s.close(); })
+      .def_property_readonly("scenes", &PyPairStream::scenes)
+      .def_property_readonly("position", &PyPairStream::position);
+
+  py::class_<PyShardReader>(m, "ShardReader", "The samples of one tar shard, decoded")
+      .def(py::init<py::handle, bool, size_t>(), py::arg("path"), py::arg("depth") = false,
+           py::arg("queue") = 8)
+      .def("__iter__", [](py::object self) { return self; })
+      .def("__next__", &PyShardReader::next)
+      .def("close", &PyShardReader::close)
+      .def("__enter__", [](py::object self) { return self; })
+      .def("__exit__", [](PyShardReader& r, py::args) { r.close(); });
+
+  m.def("decode_image", &decodeImagePy, py::arg("data"), py::arg("name") = "image.jpg",
+        "Decodes a PNG or JPEG held in bytes to uint8 [H, W, 3]; name picks the format.");
+  m.def("encode_image", &encodeImagePy, py::arg("image"), py::arg("format") = "png",
+        py::arg("quality") = 95,
+        "Encodes uint8 [H, W, 3] as 'png' or 'jpg' bytes (generate_pairs' encoder; quality for "
+        "JPEG).");
+  m.def("decode_exr", &decodeExrPy, py::arg("data"), py::arg("name") = "image.exr",
+        "Decodes an EXR held in bytes to float32 [H, W] (one channel) or [H, W, C].");
+}
