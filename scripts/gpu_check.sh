@@ -10,7 +10,8 @@
 #   scripts/gpu_check.sh --cpu-dry-run                  # the same steps on a CPU, tiny preset
 #
 # Outputs go to $OUT when it is set (else gpu-check-out/): gpu_check.log (everything),
-# bench_train.json, pretrain_summary.json, pretrain_log.jsonl, loss.svg, checkpoint_check.json.
+# bench_train.json, bench_train_unfused.json (CUDA: LibTorch's own AdamW step),
+# pretrain_summary.json, pretrain_log.jsonl, loss.svg, checkpoint_check.json.
 # Environment: PYTHON (a python3 with torch; default python3), JOBS (default nproc), STEPS
 # (pretrain steps, default 300), BATCH (default 64).
 set -uo pipefail
@@ -25,6 +26,7 @@ JOBS=${JOBS:-$(nproc)}
 G=$PWD/.gpu
 [[ -d "$G/shards" && -d "$G/croco/models" ]] ||
   { echo "gpu_check: .gpu/ is missing: run scripts/gpu_prepare.sh on the CPU machine first"; exit 2; }
+TMPD=${TMPDIR:-/tmp}  # what does not come back: at most 8 files come back from $OUT
 declare -A RESULT
 stage() { echo; echo "=== $(date +%T) $*"; }
 ok() { RESULT[$1]=$2; echo "gpu_check: $1: $2"; }
@@ -64,10 +66,10 @@ cmake -S . -B "$BUILD_DIR" "${GENERATOR[@]}" -DCMAKE_BUILD_TYPE=Release -DPAIRCA
   -DPAIRCAST_GTEST_SOURCE_DIR="$G/googletest" -DPAIRCAST_NCCL_INCLUDE_DIR="$NCCL_INC" \
   -DCMAKE_DISABLE_FIND_PACKAGE_embree=ON -DCMAKE_DISABLE_FIND_PACKAGE_assimp=ON \
   -DCMAKE_DISABLE_FIND_PACKAGE_OpenImageIO=ON -DCMAKE_DISABLE_FIND_PACKAGE_LibArchive=ON \
-  "${EXTRA[@]}" > "$OUT/configure.txt" 2>&1
+  "${EXTRA[@]}" > "$TMPD/configure.txt" 2>&1
 rc=$?
-grep -E "^-- paircast|Torch|CUDA|Error|error" "$OUT/configure.txt" | head -20
-if ((rc)); then tail -30 "$OUT/configure.txt"; ok build "configure failed"; exit 1; fi
+grep -E "^-- paircast|Torch|CUDA|Error|error" "$TMPD/configure.txt" | head -20
+if ((rc)); then tail -30 "$TMPD/configure.txt"; ok build "configure failed"; exit 1; fi
 $NICE cmake --build "$BUILD_DIR" -j "$JOBS" --target pretrain model_info bench_train gpu_tests 2>&1 | tail -15
 [[ -x "$BUILD_DIR/tools/pretrain" && -x "$BUILD_DIR/tests/gpu_tests" ]] || { ok build "failed"; exit 1; }
 ok build "$((SECONDS - t0)) s"
@@ -82,12 +84,19 @@ ok tests "$([[ $rc == 0 ]] && echo passed || echo "FAILED (rc $rc)")"
 stage "bench_train: $PRESET, 224 x 224, $DEVICE (bf16 on CUDA), batch $BATCH, beside the official step"
 timeout 240 "$BUILD_DIR/bench/bench_train" --presets "$PRESET" --batch "$BATCH" --steps "$BENCH_STEPS" \
   --warmup-steps "$WARM" --workers "$WORKERS" --threads "$THREADS" --device "$DEVICE" --amp bf16 \
-  --data "$G/shards/*.tar" --croco-dir "$G/croco" --python "$PYTHON" | tee "$OUT/bench_train.txt"
-tail -1 "$OUT/bench_train.txt" > "$OUT/bench_train.json"
-ok bench_train "$(grep -E "pairs/s" "$OUT/bench_train.txt" | tr '\n' ' ' | tr -s ' ')"
+  --data "$G/shards/*.tar" --croco-dir "$G/croco" --python "$PYTHON" | tee "$TMPD/bench_train.txt"
+tail -1 "$TMPD/bench_train.txt" > "$OUT/bench_train.json"
+ok bench_train "$(grep -E "pairs/s" "$TMPD/bench_train.txt" | tr '\n' ' ' | tr -s ' ')"
+if [[ $DEVICE == cuda ]]; then  # what the fused AdamW step is worth
+  timeout 150 "$BUILD_DIR/bench/bench_train" --presets "$PRESET" --batch "$BATCH" --steps "$BENCH_STEPS" \
+    --warmup-steps "$WARM" --workers "$WORKERS" --threads "$THREADS" --device "$DEVICE" --amp bf16 \
+    --data "$G/shards/*.tar" --no-fused-adamw | tee "$TMPD/bench_unfused.txt"
+  tail -1 "$TMPD/bench_unfused.txt" > "$OUT/bench_train_unfused.json"
+  ok bench_unfused "$(grep -E "pairs/s" "$TMPD/bench_unfused.txt" | tr '\n' ' ' | tr -s ' ')"
+fi
 
 stage "pretrain: $PRESET from shards on $DEVICE for $STEPS steps"
-RUN=${TMPDIR:-/tmp}/gpu_check_run
+RUN=$TMPD/gpu_check_run
 rm -rf "$RUN"
 timeout 300 "$BUILD_DIR/tools/pretrain" --data "$G/shards/*.tar" --preset "$PRESET" \
   --batch-size "$BATCH" --max-steps "$STEPS" --epochs 100 --warmup-epochs 2 --blr 6e-4 \
@@ -124,6 +133,6 @@ PAIRCAST_PROCESS_GROUP=1 WORLD_SIZE=1 RANK=0 LOCAL_RANK=0 MASTER_ADDR=127.0.0.1 
 ok process_group "rc ${PIPESTATUS[0]}"
 
 stage "summary"
-for k in build render_libs tests bench_train pretrain checkpoint process_group; do
+for k in build render_libs tests bench_train bench_unfused pretrain checkpoint process_group; do
   printf '%-14s %s\n' "$k" "${RESULT[$k]:-not run}"
 done
