@@ -1,29 +1,49 @@
-// bench_train: pairs/s of the whole pre-training step (data included) for tiny and small at
-// batch 16 on CPU, from shards and with pairs rendered live, side by side with the official
-// CroCo train step in python3-torch (model only) when --croco-dir names a checkout of naver/croco.
+// bench_train: pairs/s of the whole pre-training step (data included), from shards and with
+// pairs rendered live, side by side with the official CroCo train step (naver/croco's CroCoNet,
+// MaskedMSE and AdamW, model only) in Python when --croco-dir names a checkout of naver/croco.
+// CPU by default (tiny and small at batch 16); on CUDA (--device cuda --amp bf16) it also gives
+// the model FLOP utilisation, with the paper's FLOP convention and with the full count.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "dataset/generate_job.h"
+#include "model/flops.h"
 #include "trainer/trainer.h"
+#include "util/error.h"
+#if PAIRCAST_WITH_RENDER
+#include "dataset/generate_job.h"
+#endif
 
 using namespace paircast;
 namespace fs = std::filesystem;
 
 namespace {
 
-double officialTrainSeconds(const std::string& crocoDir, const std::string& preset, int batch,
-                            int threads) {
-  if (crocoDir.empty()) return 0;
-  const std::string cmd = "/usr/bin/python3 " + std::string(PAIRCAST_SOURCE_DIR) +
+struct Options {
+  std::vector<std::string> presets = {"tiny", "small"};
+  int batch = 16, steps = 12, warmupSteps = 2, threads = 2, workers = 2, imgSize = 224;
+  std::string crocoDir, python = "/usr/bin/python3", device = "cpu", amp = "bf16";
+  std::vector<std::string> data;  // shards; none: generated from scenes/ (full build)
+  bool live = true, fusedAdamW = true;
+  double peakTflops = 800.0;
+};
+
+// The official step's seconds per iteration, timed by tests/model/croco_ref.py on the same
+// device, batch and thread count; 0 when it could not run.
+double officialTrainSeconds(const Options& o, const std::string& preset) {
+  if (o.crocoDir.empty()) return 0;
+  const std::string cmd = o.python + " " + std::string(PAIRCAST_SOURCE_DIR) +
                           "/tests/model/croco_ref.py bench --preset " + preset + " --batch " +
-                          std::to_string(batch) + " --threads " + std::to_string(threads) +
-                          " --repeat 3 --croco-dir '" + crocoDir + "' 2>/dev/null | grep ^SUMMARY";
+                          std::to_string(o.batch) + " --threads " + std::to_string(o.threads) +
+                          " --device " + o.device + " --amp " +
+                          (o.device == "cuda" ? o.amp : "none") + " --optimizer --repeat " +
+                          std::to_string(o.device == "cuda" ? 20 : 3) + " --croco-dir '" +
+                          o.crocoDir + "' 2>&1 | grep ^SUMMARY";
   std::string line;
   if (FILE* p = popen(cmd.c_str(), "r")) {
     char buf[1024];
@@ -34,78 +54,141 @@ double officialTrainSeconds(const std::string& crocoDir, const std::string& pres
   return at == std::string::npos ? 0 : std::stod(line.substr(at + 8));
 }
 
+// Steady-state pairs/s and data wait from OUT/log.jsonl, leaving out the first `skip` steps
+// (CUDA context, cuBLAS handles and the caching allocator warm up there).
+std::pair<double, double> steadyRate(const std::string& out, int batch, int skip) {
+  std::ifstream in(out + "/log.jsonl");
+  std::string line;
+  double seconds = 0, wait = 0;
+  int n = 0;
+  while (std::getline(in, line)) {
+    const auto j = nlohmann::json::parse(line, nullptr, false);
+    if (!j.is_object() || j.value("step", int64_t{0}) < skip) continue;
+    const double s = batch / j["pairs_per_s"].get<double>();
+    seconds += s;
+    wait += s * j["data_wait"].get<double>();
+    ++n;
+  }
+  if (n == 0) return {0, 0};
+  return {n * batch / seconds, wait / seconds};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::vector<std::string> presets = {"tiny", "small"};
-  int batch = 16, steps = 12, threads = 2;
-  std::string crocoDir;
-  bool live = true;
+  Options o;
   CLI::App app{"Pre-training step speed, data included"};
-  app.add_option("--presets", presets, "Presets");
-  app.add_option("--batch", batch, "Batch size");
-  app.add_option("--steps", steps, "Timed iterations per run");
-  app.add_option("--threads", threads, "Torch threads");
-  app.add_option("--croco-dir", crocoDir,
+  app.add_option("--presets", o.presets, "Presets");
+  app.add_option("--batch", o.batch, "Batch size");
+  app.add_option("--steps", o.steps, "Iterations per run");
+  app.add_option("--warmup-steps", o.warmupSteps, "First iterations left out of the rate");
+  app.add_option("--threads", o.threads, "Torch threads");
+  app.add_option("--workers", o.workers, "Data worker threads");
+  app.add_option("--img-size", o.imgSize, "Training crop size");
+  app.add_option("--data", o.data,
+                 "Tar shards or globs to train from (default: pairs generated from scenes/)");
+  app.add_option("--device", o.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_option("--amp", o.amp, "On CUDA: bf16, fp16 or none")
+      ->check(CLI::IsMember({"bf16", "fp16", "none"}));
+  app.add_flag("!--no-fused-adamw", o.fusedAdamW, "On CUDA, LibTorch's unfused AdamW step");
+  app.add_option("--peak-tflops", o.peakTflops,
+                 "The device's dense bf16 peak for the utilisation (H100 and H200: ~800 measured)");
+  app.add_option("--croco-dir", o.crocoDir,
                  "A checkout of naver/croco, to time its train step alongside");
-  app.add_flag("!--no-live", live, "Skip the live-rendering runs");
+  app.add_option("--python", o.python, "The Python with torch that runs the official step");
+  app.add_flag("!--no-live", o.live, "Skip the live-rendering runs");
   CLI11_PARSE(app, argc, argv);
   try {
-    torch::set_num_threads(threads);
+    torch::set_num_threads(o.threads);
     const std::string tmp =
         (fs::temp_directory_path() / ("bench_train_" + std::to_string(::getpid()))).string();
-    GenerateConfig g;
-    g.scenes = {std::string(PAIRCAST_SOURCE_DIR) + "/scenes"};
-    g.out = tmp + "/pairs";
-    g.pairsPerScene = (batch * (steps + 2)) / 3 + 8;
-    g.pair.resolution = 256;
-    g.progress = false;
-    runGenerate(g);
+    std::vector<std::string> shards = o.data;
+#if PAIRCAST_WITH_RENDER
+    const std::string scenes = std::string(PAIRCAST_SOURCE_DIR) + "/scenes";
+    if (shards.empty()) {
+      GenerateConfig g;
+      g.scenes = {scenes};
+      g.out = tmp + "/pairs";
+      g.pairsPerScene = (o.batch * (o.steps + 2)) / 3 + 8;
+      g.pair.resolution = 256;
+      g.progress = false;
+      runGenerate(g);
+      shards = {tmp + "/pairs/pairs-*.tar"};
+    }
+#else
+    if (shards.empty()) throw Error("this trainer-only build renders nothing: give --data shards");
+    o.live = false;
+#endif
     nlohmann::json rows = nlohmann::json::array();
-    std::printf("batch %d, %d torch threads, 224x224 crops of 256x256 pairs, %d steps\n", batch,
-                threads, steps);
-    for (const auto& preset : presets) {
+    std::printf(
+        "batch %d, %s%s, %d torch threads, %d workers, %dx%d crops, %d steps (%d left out)\n",
+        o.batch, o.device.c_str(), o.device == "cuda" ? (" " + o.amp).c_str() : "", o.threads,
+        o.workers, o.imgSize, o.imgSize, o.steps, o.warmupSteps);
+    for (const auto& preset : o.presets) {
       for (const bool isLive : {false, true}) {
-        if (isLive && !live) continue;
+        if (isLive && !o.live) continue;
         TrainConfig c;
-        if (isLive)
-          c.live = {std::string(PAIRCAST_SOURCE_DIR) + "/scenes"};
-        else
-          c.shards = {tmp + "/pairs/pairs-*.tar"};
+#if PAIRCAST_WITH_RENDER
+        if (isLive) c.live = {scenes};
+#endif
+        if (!isLive) c.shards = shards;
         c.model = presetConfig(preset);
-        c.batchSize = batch;
-        c.maxSteps = steps;
+        c.model.img_size = o.imgSize;
+        c.batchSize = o.batch;
+        c.maxSteps = o.steps;
         c.epochs = 100;
         c.saveEvery = 1000000;
         c.out = tmp + "/run-" + preset + (isLive ? "-live" : "-shards");
-        c.workers = 2;
+        c.workers = o.workers;
+        c.device = o.device;
+        c.amp = o.amp;
+        c.fusedAdamW = o.fusedAdamW;
         c.progress = false;
         const nlohmann::json s = runPretrain(c);
-        const double pps = s["pairs_per_s"], wait = s["data_wait"];
-        std::printf("%-6s %-7s %6.2f pairs/s  data-wait %5.1f%%\n", preset.c_str(),
+        auto [pps, wait] = steadyRate(c.out, o.batch, o.warmupSteps);
+        if (pps <= 0) pps = s["pairs_per_s"], wait = s["data_wait"];
+        std::printf("%-6s %-7s %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
                     isLive ? "live" : "shards", pps, 100 * wait);
-        nlohmann::json row = {{"preset", preset},
-                              {"source", isLive ? "live" : "shards"},
-                              {"pairs_per_s", pps},
-                              {"data_wait", wait}};
+        nlohmann::json row = {{"preset", preset},   {"source", isLive ? "live" : "shards"},
+                              {"pairs_per_s", pps}, {"data_wait", wait},
+                              {"loss", s["loss"]},  {"fused_adamw", s.value("fused_adamw", false)}};
+        if (o.device == "cuda") {
+          // Forward and backward: 3x the forward FLOPs.
+          const FlopCount f = countFlops(c.model);
+          const double mfuPaper = 3 * f.flops * pps / (o.peakTflops * 1e12);
+          const double mfuFull = 3 * f.flops_full * pps / (o.peakTflops * 1e12);
+          std::printf("  MFU %.1f%% (paper's FLOPs), %.1f%% (full count) of %.0f TFLOP/s",
+                      100 * mfuPaper, 100 * mfuFull, o.peakTflops);
+          row["mfu_paper"] = mfuPaper;
+          row["mfu_full"] = mfuFull;
+        }
+        std::printf("\n");
         if (!isLive) {
-          const double off = officialTrainSeconds(crocoDir, preset, batch, threads);
+          const double off = officialTrainSeconds(o, preset);
           if (off > 0) {
             std::printf(
-                "%-6s official CroCo train step (model only, python3-torch): %6.2f pairs/s -> ours "
-                "%.2fx\n",
-                preset.c_str(), batch / off, pps / (batch / off));
-            row["official_pairs_per_s"] = batch / off;
-            row["ratio"] = pps / (batch / off);
+                "%-6s official CroCo train step (model only): %8.2f pairs/s -> ours %.2fx\n",
+                preset.c_str(), o.batch / off, pps / (o.batch / off));
+            row["official_pairs_per_s"] = o.batch / off;
+            row["ratio"] = pps / (o.batch / off);
+          } else if (!o.crocoDir.empty()) {
+            std::printf("%-6s official step did not run (%s with torch, --croco-dir)\n",
+                        preset.c_str(), o.python.c_str());
           }
         }
         rows.push_back(row);
       }
     }
     fs::remove_all(tmp);
-    std::printf(
-        "%s\n",
-        nlohmann::json({{"batch", batch}, {"threads", threads}, {"results", rows}}).dump().c_str());
+    std::printf("%s\n", nlohmann::json({{"batch", o.batch},
+                                        {"threads", o.threads},
+                                        {"device", o.device},
+                                        {"amp", o.device == "cuda" ? o.amp : "none"},
+                                        {"img_size", o.imgSize},
+                                        {"peak_tflops", o.peakTflops},
+                                        {"results", rows}})
+                            .dump()
+                            .c_str());
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_train: error: %s\n", e.what());

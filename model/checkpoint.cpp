@@ -2,6 +2,8 @@
 
 #include <caffe2/serialize/inline_container.h>
 #include <caffe2/serialize/istream_adapter.h>
+#include <torch/csrc/jit/serialization/export.h>
+#include <torch/csrc/jit/serialization/pickler.h>
 #include <torch/serialize.h>
 
 #include <cstring>
@@ -604,6 +606,31 @@ c10::IValue jsonToIValue(const nlohmann::json& j) {
   return c10::IValue();
 }
 
+// torch::pickle_save without TorchScript's type tags: it wraps every dict and list in
+// torch.jit._pickle.restore_type_tag(value, "Dict[str, Tensor]"), a global that Python's
+// torch.load refuses with weights_only=True, its default since PyTorch 2.6. Python needs only
+// the plain dicts and lists; our reader (above) needs no tags either.
+std::vector<char> pickleSave(const c10::IValue& value) {
+  std::vector<char> pickled;
+  torch::jit::Pickler pickler(
+      [&](const char* bytes, size_t n) { pickled.insert(pickled.end(), bytes, bytes + n); },
+      /*tensor_table=*/nullptr, /*type_renamer=*/nullptr, /*memoized_class_types=*/nullptr,
+      /*get_tensor_id=*/nullptr, /*tag_aggregates=*/false);
+  pickler.protocol();
+  pickler.pushIValue(value);
+  pickler.stop();
+  std::vector<char> archive;
+  caffe2::serialize::PyTorchStreamWriter writer([&](const void* bytes, size_t n) {
+    const char* b = static_cast<const char*>(bytes);
+    archive.insert(archive.end(), b, b + n);
+    return n;
+  });
+  torch::jit::writeArchiveAndTensors("data", pickled.data(), pickled.size(), pickler.tensorData(),
+                                     writer);
+  writer.writeEndOfFile();
+  return archive;
+}
+
 }  // namespace
 
 std::map<std::string, torch::Tensor> stateDict(CroCoNet& model) {
@@ -627,7 +654,7 @@ void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
     root.insert(it.key(), jsonToIValue(it.value()));
   auto nested = nestTensors(extraTensors);
   for (const auto& entry : nested) root.insert_or_assign(entry.key(), entry.value());
-  const std::vector<char> bytes = torch::pickle_save(root);
+  const std::vector<char> bytes = pickleSave(root);
   writeFileAtomic(path, std::string_view(bytes.data(), bytes.size()));
 }
 

@@ -15,13 +15,23 @@ torch::nn::LayerNorm layerNorm(int dim) {
   return torch::nn::LayerNorm(torch::nn::LayerNormOptions({dim}).eps(kLayerNormEps));
 }
 
+// x W^T + b through at::linear, which folds the bias into the GEMM (addmm) for 3-D input. The
+// C++ frontend's Linear::forward (F::linear) runs matmul and then `output += bias`: one more
+// pass over every linear layer's output, which made our CPU forward slower than Python's.
+torch::Tensor linear(const torch::nn::Linear& layer, const torch::Tensor& x) {
+  return torch::linear(x, layer->weight, layer->bias);
+}
+
 // softmax(q k^T / sqrt(Dh)) v over [B, H, Nq, Dh] x [B, H, Nk, Dh].
 torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& v) {
 #if TORCH_VERSION_MAJOR >= 2
+  // One fused kernel (flash or memory-efficient attention on CUDA, a flash kernel on CPU).
   return at::scaled_dot_product_attention(q, k, v);
 #else
+  // The scale is applied to q [Nq, Dh], not to the scores [Nq, Nk]: matmul copies the strided
+  // q into a contiguous one anyway, so the multiplication takes that copy's place.
   const double scale = 1.0 / std::sqrt(static_cast<double>(q.size(-1)));
-  return torch::softmax(torch::matmul(q, k.transpose(-2, -1)) * scale, -1).matmul(v);
+  return torch::softmax(torch::matmul(q * scale, k.transpose(-2, -1)), -1).matmul(v);
 #endif
 }
 
@@ -71,7 +81,7 @@ MlpImpl::MlpImpl(int dim, int hidden) {
 }
 
 torch::Tensor MlpImpl::forward(const torch::Tensor& x) {
-  return fc2(F::gelu(fc1(x)));
+  return linear(fc2, F::gelu(linear(fc1, x)));
 }
 
 AttentionImpl::AttentionImpl(int dim, int heads_, double rope) : heads(heads_), ropeFreq(rope) {
@@ -82,14 +92,15 @@ AttentionImpl::AttentionImpl(int dim, int heads_, double rope) : heads(heads_), 
 
 torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor& pos) {
   const int64_t B = x.size(0), N = x.size(1), C = x.size(2);
-  auto qkvOut =
-      qkv(x).reshape({B, N, 3, heads, C / heads}).permute({2, 0, 3, 1, 4});  // [3, B, H, N, Dh]
+  auto qkvOut = linear(qkv, x)
+                    .reshape({B, N, 3, heads, C / heads})
+                    .permute({2, 0, 3, 1, 4});  // [3, B, H, N, Dh]
   auto q = qkvOut[0], k = qkvOut[1], v = qkvOut[2];
   if (ropeFreq > 0) {
     q = applyRope2d(q, pos, ropeFreq);
     k = applyRope2d(k, pos, ropeFreq);
   }
-  return proj(attention(q, k, v).transpose(1, 2).reshape({B, N, C}));
+  return linear(proj, attention(q, k, v).transpose(1, 2).reshape({B, N, C}));
 }
 
 CrossAttentionImpl::CrossAttentionImpl(int dim, int heads_, double rope)
@@ -106,12 +117,13 @@ torch::Tensor CrossAttentionImpl::forward(const torch::Tensor& query, const torc
   auto split = [&](const torch::Tensor& t, int64_t n) {
     return t.reshape({B, n, heads, C / heads}).permute({0, 2, 1, 3});
   };
-  auto q = split(projq(query), Nq), k = split(projk(mem), Nk), v = split(projv(mem), Nk);
+  auto q = split(linear(projq, query), Nq), k = split(linear(projk, mem), Nk),
+       v = split(linear(projv, mem), Nk);
   if (ropeFreq > 0) {
     q = applyRope2d(q, qpos, ropeFreq);
     k = applyRope2d(k, kpos, ropeFreq);
   }
-  return proj(attention(q, k, v).transpose(1, 2).reshape({B, Nq, C}));
+  return linear(proj, attention(q, k, v).transpose(1, 2).reshape({B, Nq, C}));
 }
 
 BlockImpl::BlockImpl(int dim, int heads, int mlpRatio, double rope) {
@@ -243,8 +255,8 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
     throw Error("mask must be [B, " + std::to_string(N) + "] bool");
   auto feat1 = encode(img1, mask);             // [B, Nv, D]
   auto feat2 = encode(img2, torch::Tensor());  // [B, N, D]
-  auto vis1 = decoder_embed(feat1);            // [B, Nv, Dd]
-  auto f2 = decoder_embed(feat2);              // [B, N, Dd]
+  auto vis1 = linear(decoder_embed, feat1);    // [B, Nv, Dd]
+  auto f2 = linear(decoder_embed, feat2);      // [B, N, Dd]
   const int64_t Dd = vis1.size(2);
   auto f1 = mask_token.to(vis1.dtype()).expand({B, N, Dd}).clone();
   f1.index_put_({mask.logical_not()}, vis1.reshape({-1, Dd}));
@@ -265,7 +277,7 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
     out = out.narrow(1, 0, N);  // the first image's tokens
   }
   CroCoOutput result;
-  result.prediction = prediction_head(dec_norm(out));
+  result.prediction = linear(prediction_head, dec_norm(out));
   result.mask = mask;
   result.target = patchify(img1, config_.patch_size);
   return result;

@@ -16,8 +16,7 @@ int main(int argc, char** argv) {
   app.add_option("--croco-dir", c.crocoDir, "A CroCo pairs folder (pairs.txt)");
   app.add_option("--live", c.live, "Scenes: pairs rendered on the fly");
   app.add_option("--data-weight", c.shardsWeight, "Share of samples from --data when mixing");
-  app.add_option("--croco-weight", c.crocoWeight,
-                 "Share of samples from --croco-dir when mixing");
+  app.add_option("--croco-weight", c.crocoWeight, "Share of samples from --croco-dir when mixing");
   app.add_option("--live-weight", c.liveWeight, "Share of samples from --live when mixing");
   app.add_option("--preset", preset, "tiny, small or base")
       ->check(CLI::IsMember({"tiny", "small", "base"}));
@@ -37,6 +36,9 @@ int main(int argc, char** argv) {
   app.add_option("--device", c.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
   app.add_option("--amp", c.amp, "On CUDA: bf16, fp16 (with a dynamic loss scale) or none")
       ->check(CLI::IsMember({"bf16", "fp16", "none"}));
+  app.add_flag("!--no-fused-adamw", c.fusedAdamW,
+               "On CUDA, step AdamW with LibTorch's own per-parameter kernels instead of the "
+               "fused one (LibTorch >= 2.1)");
   app.add_option("--seed", c.seed, "Random seed");
   app.add_option("--workers", c.workers, "Data worker threads")->check(CLI::Range(1, 256));
   app.add_option("--save-every", c.saveEvery, "Iterations between checkpoints");

@@ -58,9 +58,28 @@ struct Distributed::Impl {};
 
 Distributed::~Distributed() = default;
 
+bool Distributed::hasGloo() {
+#if defined(PAIRCAST_HAVE_GLOO)
+  return true;
+#else
+  return false;
+#endif
+}
+
+bool Distributed::hasNccl() {
+#if defined(PAIRCAST_HAVE_NCCL)
+  return true;
+#else
+  return false;
+#endif
+}
+
 std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& device) {
   const int world = envInt("WORLD_SIZE", 1);
-  if (world <= 1) return nullptr;
+  // PAIRCAST_PROCESS_GROUP=1 makes a group even for one process, so that one GPU runs the
+  // multi-GPU code path (NCCL all-reduces and broadcasts) end to end.
+  const char* force = std::getenv("PAIRCAST_PROCESS_GROUP");
+  if (world < 1 || (world == 1 && !(force && std::string(force) == "1"))) return nullptr;
 #if !defined(PAIRCAST_HAVE_C10D)
   (void)device;
   throw Error(

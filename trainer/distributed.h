@@ -20,8 +20,12 @@ EnvironmentRole environmentRole();
 
 class Distributed {
  public:
-  // nullptr when WORLD_SIZE is unset or 1. Throws paircast::Error on a bad environment.
+  // nullptr when WORLD_SIZE is unset or 1 (unless PAIRCAST_PROCESS_GROUP=1, which makes a group
+  // of one). Throws paircast::Error on a bad environment.
   static std::unique_ptr<Distributed> fromEnvironment(const std::string& device);
+  // The process groups this build has: Gloo (CPU) and NCCL (CUDA).
+  static bool hasGloo();
+  static bool hasNccl();
   ~Distributed();
 
   int rank() const { return rank_; }

@@ -16,13 +16,16 @@
 #include <numeric>
 #include <thread>
 
+#if PAIRCAST_WITH_RENDER
 #include "dataset/pair_stream.h"
+#endif
 #include "model/autocast.h"
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
 #include "model/reconstruct.h"
 #include "trainer/augment.h"
 #include "trainer/distributed.h"
+#include "trainer/fused_adamw.h"
 #include "trainer/grad_scaler.h"
 #include "trainer/pair_dataset.h"
 #include "util/atomic_file.h"
@@ -67,6 +70,7 @@ torch::Tensor sampleMask(const CroCoConfig& m, uint64_t seed, const std::string&
   return mask;
 }
 
+#if PAIRCAST_WITH_RENDER
 // Live pairs: rendered by a PairStream, augmented like the others. The stream is read in
 // order by the training thread, so its position in a checkpoint resumes it exactly.
 class LiveLoader {
@@ -98,6 +102,18 @@ class LiveLoader {
   const TrainConfig& c_;
   std::unique_ptr<PairStream> stream_;
 };
+#else
+// The trainer-only build (PAIRCAST_WITH_RENDER=OFF) has no renderer.
+class LiveLoader {
+ public:
+  LiveLoader(const TrainConfig&, uint64_t, int, int) {
+    throw Error(
+        "--live needs the renderer: this is a trainer-only build (PAIRCAST_WITH_RENDER=OFF)");
+  }
+  void next(uint64_t, torch::Tensor&, torch::Tensor&, torch::Tensor&) {}
+  uint64_t position() const { return 0; }
+};
+#endif
 
 // One weighted data source: a dataset on disk, or the live stream (dataset == nullptr).
 struct Source {
@@ -476,8 +492,10 @@ class Pretraining {
   }
 
   // From OUT/checkpoint-last.pth with --resume (the log cut back to its step), else a new log.
-  // Then the model goes to its device, with rank 0's weights on every rank.
+  // The model goes to its device first, so that restored optimizer state lands there too; then
+  // rank 0's weights go to every rank.
   void resumeOrStartLog() {
+    model_->to(device_);
     if (c_.resume && fs::exists(ckptPath_)) {
       restoreCheckpoint();
       cutLogToCheckpoint();
@@ -486,7 +504,6 @@ class Pretraining {
     } else if (!c_.resume && lead_) {
       writeFileAtomic(logPath_, "");
     }
-    model_->to(device_);
     if (dist_) dist_->broadcast(ordered_);
   }
 
@@ -555,6 +572,7 @@ class Pretraining {
         {"interrupted", interrupted_},
         {"checkpoint", ckptPath_}};
     s["world_size"] = world_;
+    s["fused_adamw"] = c_.fusedAdamW && device_.is_cuda() && fusedAdamWCompiled();
     s["pairs_by_source"] = loader_->counts();
     if (scaler_->enabled()) s["loss_scale"] = scaler_->scale();
     if (lead_) writeFileAtomic((fs::path(c_.out) / "summary.json").string(), s.dump(1) + "\n");
@@ -651,7 +669,7 @@ class Pretraining {
     // With a loss scale, gradients that overflowed skip the step (on every rank alike: they
     // were all-reduced) and the scale backs off.
     const bool finite = scaler_->unscale(ordered_);
-    if (finite) opt_->step();
+    if (finite && !(c_.fusedAdamW && fusedAdamWStep(*opt_))) opt_->step();
     scaler_->update(finite);
     if (!finite && lead_) {
       progress_.breakLine();

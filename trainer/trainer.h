@@ -40,6 +40,7 @@ struct TrainConfig {
   // Mixed precision on CUDA: "bf16" (autocast), "fp16" (autocast and a dynamic loss scale, as
   // torch.cuda.amp.GradScaler) or "none" (float32, TF32 matmuls).
   std::string amp = "bf16";
+  bool fusedAdamW = true;  // on CUDA with LibTorch >= 2.1: AdamW as one fused kernel per group
   bool forceLossScaling = false;  // the fp16 loss scale on any device (tests)
   double initScale = 65536.0;     // GradScaler's defaults
   int scaleGrowthInterval = 2000;

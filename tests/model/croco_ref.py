@@ -107,7 +107,10 @@ PRESETS = {
 
 
 def bench(args):
-    """Times the official CroCoNet (from --croco-dir) at a preset: forward, forward+backward."""
+    """Times the official CroCoNet (from --croco-dir) at a preset: forward, and the train step
+    (forward and backward, plus AdamW's step with --optimizer, as CroCo's pretrain.py sets it up:
+    betas (0.9, 0.95), weight decay 0.05 except on biases and 1-D parameters; torch's default
+    implementation, foreach on CUDA). On CUDA each time is the median over --repeat steps."""
     torch.set_num_threads(args.threads)
     if not args.croco_dir:
         print("SUMMARY croco_ref bench skipped: no --croco-dir")
@@ -116,32 +119,65 @@ def bench(args):
     from models.croco import CroCoNet  # noqa: E402  (the user's checkout of naver/croco)
     from models.criterion import MaskedMSE  # noqa: E402
     torch.manual_seed(0)
-    net = CroCoNet(**PRESETS[args.preset])
+    dev = torch.device(args.device)
+    cuda = dev.type == "cuda"
+    net = CroCoNet(**PRESETS[args.preset]).to(dev)
     crit = MaskedMSE(norm_pix_loss=True)
-    img1 = torch.randn(args.batch, 3, 224, 224)
-    img2 = torch.randn(args.batch, 3, 224, 224)
+    img1 = torch.randn(args.batch, 3, 224, 224, device=dev)
+    img2 = torch.randn(args.batch, 3, 224, 224, device=dev)
+    amp = {"bf16": torch.bfloat16, "fp16": torch.float16}.get(args.amp)
+    opt = None
+    if args.optimizer:
+        decay = [p for n, p in net.named_parameters() if p.ndim > 1 and not n.endswith(".bias")]
+        no_decay = [p for n, p in net.named_parameters() if p.ndim <= 1 or n.endswith(".bias")]
+        opt = torch.optim.AdamW([{"params": decay, "weight_decay": 0.05},
+                                 {"params": no_decay, "weight_decay": 0.0}],
+                                lr=1.5e-4, betas=(0.9, 0.95))
+    if cuda:
+        torch.backends.cuda.matmul.allow_tf32 = True
+        torch.backends.cudnn.allow_tf32 = True
+
+    clock = time.process_time if args.cpu_time else time.perf_counter
+
+    def sync():
+        if cuda:
+            torch.cuda.synchronize()
 
     def best(fn):
         fn()
+        fn()
+        sync()
         times = []
         for _ in range(args.repeat):
-            t = time.perf_counter()
+            t = clock()
             fn()
-            times.append(time.perf_counter() - t)
-        return min(times)
+            sync()
+            times.append(clock() - t)
+        times.sort()
+        return times[len(times) // 2] if cuda else times[0]
+
+    def autocast():
+        return torch.autocast(dev.type, dtype=amp, enabled=cuda and amp is not None)
 
     def fwd():
-        with torch.no_grad():
+        with torch.no_grad(), autocast():
             net(img1, img2)
 
     def fwdbwd():
-        out, mask, target = net(img1, img2)
-        loss = crit(out, mask, target)
-        net.zero_grad()
+        with autocast():
+            out, mask, target = net(img1, img2)
+            loss = crit(out, mask, target)
+        if opt is None:
+            net.zero_grad()
         loss.backward()
+        if opt is not None:
+            opt.step()
+            opt.zero_grad(set_to_none=True)
 
-    print("SUMMARY croco_ref bench preset=%s batch=%d threads=%d forward_s=%.4f train_s=%.4f"
-          % (args.preset, args.batch, args.threads, best(fwd), best(fwdbwd)))
+    print("SUMMARY croco_ref bench preset=%s batch=%d threads=%d device=%s amp=%s optimizer=%d "
+          "torch=%s forward_s=%.4f train_s=%.4f"
+          % (args.preset, args.batch, args.threads, args.device, args.amp, int(bool(opt)),
+             torch.__version__, best(fwd), best(fwdbwd)))
     return 0
 
 
@@ -158,6 +194,11 @@ def main():
     b.add_argument("--threads", type=int, default=2)
     b.add_argument("--repeat", type=int, default=3)
     b.add_argument("--croco-dir", default="", help="a checkout of naver/croco: time its CroCoNet")
+    b.add_argument("--cpu-time", action="store_true", help="process CPU seconds, not wall-clock")
+    b.add_argument("--device", default="cpu", help="cpu or cuda")
+    b.add_argument("--amp", default="none", choices=["none", "bf16", "fp16"],
+                   help="autocast dtype on CUDA")
+    b.add_argument("--optimizer", action="store_true", help="the train step includes AdamW's step")
     o = sub.add_parser("officialize", help="re-save CKPT laid out as official CroCo checkpoints")
     o.add_argument("ckpt")
     o.add_argument("out")

@@ -1,0 +1,256 @@
+// util/image_io.h for the trainer-only build (PAIRCAST_WITH_RENDER=OFF), without OpenImageIO:
+// JPEG through libjpeg-turbo (decode and encode), PNG written with stored (uncompressed)
+// deflate blocks, which needs no zlib. EXR and PNG decoding need the full build and say so.
+#include <algorithm>
+#include <csetjmp>
+#include <cstdint>
+#include <cstdio>  // before jpeglib.h, which uses FILE
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <string>
+
+#include <jpeglib.h>
+
+#include "util/atomic_file.h"
+#include "util/error.h"
+#include "util/image_io.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+
+const char* const kFullBuild =
+    "needs the full build (this one was configured with PAIRCAST_WITH_RENDER=OFF)";
+
+std::string lowerExt(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext.empty() ? ext : ext.substr(1);
+}
+
+// libjpeg reports errors through error_exit, which must not return: it longjmps back here.
+struct JpegError {
+  jpeg_error_mgr mgr;
+  std::jmp_buf jump;
+  char message[JMSG_LENGTH_MAX];
+};
+
+void onJpegError(j_common_ptr cinfo) {
+  auto* err = reinterpret_cast<JpegError*>(cinfo->err);
+  (*cinfo->err->format_message)(cinfo, err->message);
+  std::longjmp(err->jump, 1);
+}
+
+void onJpegWarning(j_common_ptr, int) {}  // corrupt-data warnings: the decode goes on
+
+// Decodes into a malloc'd buffer (no C++ object lives across setjmp). Returns an empty string on
+// success, else libjpeg's message.
+std::string decodeJpeg(const unsigned char* data, size_t size, int channels, int* width,
+                       int* height, unsigned char** pixels) {
+  jpeg_decompress_struct cinfo;
+  JpegError err;
+  cinfo.err = jpeg_std_error(&err.mgr);
+  err.mgr.error_exit = onJpegError;
+  err.mgr.emit_message = onJpegWarning;
+  unsigned char* volatile out = nullptr;
+  if (setjmp(err.jump)) {
+    std::free(out);
+    jpeg_destroy_decompress(&cinfo);
+    return err.message;
+  }
+  jpeg_create_decompress(&cinfo);
+  jpeg_mem_src(&cinfo, data, static_cast<unsigned long>(size));
+  jpeg_read_header(&cinfo, TRUE);
+  cinfo.out_color_space = channels == 1 ? JCS_GRAYSCALE : JCS_RGB;
+  // Checked before anything is allocated: a few bytes of header can claim any size, and the
+  // files come from shards users download.
+  const uint64_t pixelCount = static_cast<uint64_t>(cinfo.image_width) * cinfo.image_height;
+  if (pixelCount == 0 || pixelCount > (uint64_t(1) << 28)) {
+    std::snprintf(err.message, sizeof err.message, "image is too large or empty (%ux%u)",
+                  cinfo.image_width, cinfo.image_height);
+    jpeg_destroy_decompress(&cinfo);
+    return err.message;
+  }
+  jpeg_start_decompress(&cinfo);
+  const size_t stride = static_cast<size_t>(cinfo.output_width) * cinfo.output_components;
+  out = static_cast<unsigned char*>(std::malloc(stride * cinfo.output_height));
+  if (!out) {
+    std::snprintf(err.message, sizeof err.message, "out of memory");
+    std::longjmp(err.jump, 1);
+  }
+  while (cinfo.output_scanline < cinfo.output_height) {
+    JSAMPROW row = out + stride * cinfo.output_scanline;
+    jpeg_read_scanlines(&cinfo, &row, 1);
+  }
+  jpeg_finish_decompress(&cinfo);
+  *width = static_cast<int>(cinfo.output_width);
+  *height = static_cast<int>(cinfo.output_height);
+  *pixels = out;
+  jpeg_destroy_decompress(&cinfo);
+  return {};
+}
+
+std::string encodeJpeg(const Image8& image, int quality, unsigned char** bytes,
+                       unsigned long* size) {
+  jpeg_compress_struct cinfo;
+  JpegError err;
+  cinfo.err = jpeg_std_error(&err.mgr);
+  err.mgr.error_exit = onJpegError;
+  if (setjmp(err.jump)) {
+    jpeg_destroy_compress(&cinfo);
+    return err.message;
+  }
+  jpeg_create_compress(&cinfo);
+  jpeg_mem_dest(&cinfo, bytes, size);
+  cinfo.image_width = static_cast<JDIMENSION>(image.width);
+  cinfo.image_height = static_cast<JDIMENSION>(image.height);
+  cinfo.input_components = image.channels;
+  cinfo.in_color_space = image.channels == 1 ? JCS_GRAYSCALE : JCS_RGB;
+  jpeg_set_defaults(&cinfo);
+  jpeg_set_quality(&cinfo, quality, TRUE);
+  jpeg_start_compress(&cinfo, TRUE);
+  const size_t stride = static_cast<size_t>(image.width) * image.channels;
+  while (cinfo.next_scanline < cinfo.image_height) {
+    JSAMPROW row = const_cast<unsigned char*>(image.data.data()) + stride * cinfo.next_scanline;
+    jpeg_write_scanlines(&cinfo, &row, 1);
+  }
+  jpeg_finish_compress(&cinfo);
+  jpeg_destroy_compress(&cinfo);
+  return {};
+}
+
+uint32_t crc32(const unsigned char* p, size_t n, uint32_t crc = 0) {
+  crc = ~crc;
+  for (size_t i = 0; i < n; ++i) {
+    crc ^= p[i];
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  return ~crc;
+}
+
+void put32(std::vector<unsigned char>& v, uint32_t x) {
+  for (int s = 24; s >= 0; s -= 8) v.push_back(static_cast<unsigned char>(x >> s));
+}
+
+void pngChunk(std::vector<unsigned char>& png, const char* type,
+              const std::vector<unsigned char>& body) {
+  put32(png, static_cast<uint32_t>(body.size()));
+  const size_t start = png.size();
+  png.insert(png.end(), type, type + 4);
+  png.insert(png.end(), body.begin(), body.end());
+  put32(png, crc32(png.data() + start, png.size() - start));
+}
+
+// An 8-bit gray or RGB PNG whose zlib stream holds stored blocks (no compression).
+std::vector<unsigned char> encodePng(const Image8& image) {
+  if (image.channels != 1 && image.channels != 3) throw Error("PNG: 1 or 3 channels only");
+  const size_t stride = static_cast<size_t>(image.width) * image.channels;
+  std::vector<unsigned char> raw;  // [H, 1 + W C]: filter byte 0, then the row
+  raw.reserve((stride + 1) * image.height);
+  for (int y = 0; y < image.height; ++y) {
+    raw.push_back(0);
+    raw.insert(raw.end(), image.data.begin() + y * stride, image.data.begin() + (y + 1) * stride);
+  }
+  std::vector<unsigned char> z = {0x78, 0x01};
+  uint32_t a = 1, b = 0;  // Adler-32
+  for (unsigned char c : raw) {
+    a = (a + c) % 65521;
+    b = (b + a) % 65521;
+  }
+  for (size_t at = 0; at < raw.size() || at == 0;) {
+    const size_t n = std::min<size_t>(65535, raw.size() - at);
+    const bool last = at + n == raw.size();
+    z.push_back(last ? 1 : 0);
+    z.push_back(static_cast<unsigned char>(n & 0xff));
+    z.push_back(static_cast<unsigned char>(n >> 8));
+    z.push_back(static_cast<unsigned char>(~n & 0xff));
+    z.push_back(static_cast<unsigned char>((~n >> 8) & 0xff));
+    z.insert(z.end(), raw.begin() + at, raw.begin() + at + n);
+    at += n;
+    if (last) break;
+  }
+  put32(z, (b << 16) | a);
+  std::vector<unsigned char> png = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  std::vector<unsigned char> header;
+  put32(header, static_cast<uint32_t>(image.width));
+  put32(header, static_cast<uint32_t>(image.height));
+  header.insert(header.end(),
+                {8, static_cast<unsigned char>(image.channels == 1 ? 0 : 2), 0, 0, 0});
+  pngChunk(png, "IHDR", header);
+  pngChunk(png, "IDAT", z);
+  pngChunk(png, "IEND", {});
+  return png;
+}
+
+}  // namespace
+
+std::vector<unsigned char> encodeImage(const Image8& image, std::string_view format,
+                                       int jpegQuality) {
+  if (image.width <= 0 || image.height <= 0 || image.channels <= 0)
+    throw Error("cannot encode an empty image");
+  if (format == "png") return encodePng(image);
+  if (format != "jpg" && format != "jpeg")
+    throw Error("image." + std::string(format), std::string("encoding ") + kFullBuild);
+  if (image.channels != 1 && image.channels != 3) throw Error("JPEG: 1 or 3 channels only");
+  unsigned char* bytes = nullptr;
+  unsigned long size = 0;
+  const std::string failure = encodeJpeg(image, jpegQuality, &bytes, &size);
+  std::vector<unsigned char> out;
+  if (failure.empty()) out.assign(bytes, bytes + size);
+  std::free(bytes);
+  if (!failure.empty()) throw Error("image.jpg", "cannot encode: " + failure);
+  return out;
+}
+
+std::vector<unsigned char> encodeExr(const ImageF&, bool) {
+  throw Error("image.exr", std::string("EXR ") + kFullBuild);
+}
+
+void writeImage(const std::string& path, const Image8& image, int jpegQuality) {
+  const std::string ext = lowerExt(path);
+  if (ext != "png" && ext != "jpg" && ext != "jpeg")
+    throw Error(path, "unsupported image extension (use .png, .jpg or .jpeg)");
+  auto bytes = encodeImage(image, ext, jpegQuality);
+  writeFileAtomic(path,
+                  std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+
+void writeExr(const std::string& path, const ImageF&, bool) {
+  throw Error(path, std::string("EXR ") + kFullBuild);
+}
+
+Image8 decodeImage8(const void* data, size_t size, const std::string& name, int channels) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  if (size < 3 || p[0] != 0xFF || p[1] != 0xD8 || p[2] != 0xFF)
+    throw Error(name, std::string("not a JPEG; other formats ") + kFullBuild);
+  int w = 0, h = 0;
+  unsigned char* pixels = nullptr;
+  const int nc = channels == 1 ? 1 : 3;
+  const std::string failure = decodeJpeg(p, size, nc, &w, &h, &pixels);
+  if (!failure.empty()) throw Error(name, "cannot decode image: " + failure);
+  Image8 image;
+  image.width = w;
+  image.height = h;
+  image.channels = nc;
+  image.data.assign(pixels, pixels + static_cast<size_t>(w) * h * nc);
+  std::free(pixels);
+  return image;
+}
+
+Image8 readImage8(const std::string& path, int channels) {
+  if (!fs::exists(path)) throw Error(path, "no such file");
+  const std::string bytes = readFile(path);
+  return decodeImage8(bytes.data(), bytes.size(), path, channels);
+}
+
+ImageF decodeImageF(const void*, size_t, const std::string& name) {
+  throw Error(name, std::string("float images (EXR) ") + kFullBuild);
+}
+
+ImageF readImageF(const std::string& path) {
+  throw Error(path, std::string("float images (EXR) ") + kFullBuild);
+}
+
+}  // namespace paircast
