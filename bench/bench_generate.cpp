@@ -139,7 +139,7 @@ RenderLimit average(const RenderLimit& a, const RenderLimit& b) {
 }
 
 nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, unsigned threads,
-                        int screen, bool audit) {
+                        int screen, bool audit, double margin) {
   GenerateConfig c;
   c.scenes = {arg.path};
   c.load.up = arg.up;
@@ -149,6 +149,7 @@ nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, 
   c.progress = false;
   c.pair.screenResolution = screen;
   c.pair.auditScreening = audit;
+  c.pair.screenCovisMargin = margin;
   return runGenerate(c);
 }
 
@@ -167,6 +168,8 @@ int main(int argc, char** argv) {
   app.add_option("--ref-pairs", refPairs, "Pairs compared with ref_covis.py");
   int screen = kAutoScreen, auditPairs = 0;
   app.add_option("--screen-resolution", screen, "Screening resolution (default: automatic)");
+  double margin = PairOptions{}.screenCovisMargin;
+  app.add_option("--screen-margin", margin, "Screening's covis margin");
   app.add_option("--audit-pairs", auditPairs,
                  "Pairs of the audited run for the false-rejection rate (default: --pairs)");
   CLI11_PARSE(app, argc, argv);
@@ -196,15 +199,16 @@ int main(int argc, char** argv) {
       // The limit is measured before and after the generation runs, and averaged, so that a
       // change of machine load during the runs shows in both figures.
       const RenderLimit before = measureRenderLimit(scenes[s], threads, 256);
-      const nlohmann::json sum = generate(scenes[s], out, pairs, threads, screen, false);
+      const nlohmann::json sum = generate(scenes[s], out, pairs, threads, screen, false, margin);
       if (!sum["skipped_scenes"].empty()) {
         std::printf("%-22s skipped: %s\n", name.c_str(),
                     sum["skipped_scenes"][0]["reason"].get<std::string>().c_str());
         continue;
       }
-      const nlohmann::json plain = generate(scenes[s], out + "-plain", pairs, threads, 0, false);
+      const nlohmann::json plain =
+          generate(scenes[s], out + "-plain", pairs, threads, 0, false, margin);
       const nlohmann::json audit =
-          generate(scenes[s], out + "-audit", auditPairs, threads, screen, true);
+          generate(scenes[s], out + "-audit", auditPairs, threads, screen, true, margin);
       const RenderLimit after = measureRenderLimit(scenes[s], threads, 256);
       const RenderLimit limit = average(before, after);
       const double rate = sum["pairs_per_second"].get<double>();

@@ -43,7 +43,7 @@ struct PairOptions {
   // 0 turns it off; kAutoScreen picks resolution / 8 (at least 16), and off below 64 pixels.
   // docs/dataset.md has the measurements behind the defaults.
   int screenResolution = kAutoScreen;
-  double screenCovisMargin = 0.1;
+  double screenCovisMargin = 0.15;
   double screenValidMargin = 0.05;
   // Benchmarks: also render every screened-out view at full resolution, to count the ones that
   // would have passed (PairSample::falseRejections). It changes no output.

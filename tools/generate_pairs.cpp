@@ -87,6 +87,9 @@ int main(int argc, char** argv) {
                  "Screen candidates on depth at this resolution first (0: off; default: an "
                  "eighth of --resolution, at least 16, off below 64)")
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--screen-margin", cfg.pair.screenCovisMargin,
+                 "Screening keeps candidates whose low-resolution covis is within this of the band")
+      ->check(CLI::Range(0.0, 1.0));
   app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
                "Also write 8-bit co-visibility masks (255: seen by the other view)");
   bool allowSkipped = false;
