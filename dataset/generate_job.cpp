@@ -40,8 +40,6 @@ constexpr auto since = secondsSince;
 
 constexpr int kHistogramBins = 20;
 
-constexpr auto fmtIndex = crocoIndex;
-
 void histogramAdd(std::vector<uint64_t>& h, double covis) {
   int b = static_cast<int>(covis * kHistogramBins);
   h[std::clamp(b, 0, kHistogramBins - 1)]++;
@@ -158,7 +156,7 @@ class GenerateRun {
   void planScenes();
   void planItems();
   std::string crocoStem(const SceneJob& s, uint64_t k) const {
-    return (fs::path(cfg_.out) / s.name / fmtIndex(k)).string();
+    return (fs::path(cfg_.out) / s.name / crocoIndex(k)).string();
   }
   std::string outPath(const std::string& stem, const std::string& ext) const {
     return (fs::path(cfg_.out) / (stem + part_ + ext)).string();
@@ -256,7 +254,7 @@ void GenerateRun::planItems() {
     if (cfg_.croco) removeStaleTemporaries((fs::path(cfg_.out) / job.name).string());
     for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
       const std::string key = sampleKey(job.name, k);
-      const nlohmann::json rec = journal_->contains(key) ? journal_->find(key) : nlohmann::json();
+      const nlohmann::json rec = journal_->find(key);
       if (rec.is_object() && rec.value("failed", false)) continue;  // known to have no sample
       const bool shardDone = !cfg_.shards || inShards.count(key);
       const bool crocoDone =
@@ -534,8 +532,8 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
     if (rec.contains("covis")) histogramAdd(histogram_, rec["covis"].get<double>());
     up = rec.value("up", up);
     if (!cfg_.croco) continue;
-    multiviews[fmtIndex(k)] = multiviewEntry(rec, journal_->path() + ": " + recordKey(rec));
-    pairsTxt += crocoPairLines(job.name, fmtIndex(k), cfg_.pair.views);
+    multiviews[crocoIndex(k)] = multiviewEntry(rec, journal_->path() + ": " + recordKey(rec));
+    pairsTxt += crocoPairLines(job.name, crocoIndex(k), cfg_.pair.views);
   }
   perScene[job.name] = scenePairs;
   if (!cfg_.croco) return;
@@ -599,22 +597,30 @@ nlohmann::json GenerateRun::summaryJson(double seconds) const {
 
 }  // namespace
 
+std::vector<std::string> sortedFilesUnder(const std::string& dir,
+                                          const std::function<bool(const fs::path&)>& keep) {
+  std::vector<std::string> found;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(dir, ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec))
+    if (it->is_regular_file(ec) && keep(it->path())) found.push_back(it->path().string());
+  std::sort(found.begin(), found.end());
+  return found;
+}
+
 std::vector<std::string> expandSceneList(const std::vector<std::string>& args) {
+  auto isScene = [](const fs::path& p) {
+    const std::string ext = p.extension().string();
+    if (ext == ".mtl" || ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".json" ||
+        ext == ".txt" || ext == ".md" || ext == ".bin" || ext == ".exr")
+      return false;
+    return isSupportedSceneFile(p.string());
+  };
   std::vector<std::string> out;
   for (const auto& arg : args) {
     std::error_code ec;
     if (fs::is_directory(arg, ec)) {
-      std::vector<std::string> found;
-      for (auto it = fs::recursive_directory_iterator(arg, ec);
-           it != fs::recursive_directory_iterator(); it.increment(ec)) {
-        if (!it->is_regular_file(ec)) continue;
-        const std::string ext = it->path().extension().string();
-        if (ext == ".mtl" || ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".json" ||
-            ext == ".txt" || ext == ".md" || ext == ".bin" || ext == ".exr")
-          continue;
-        if (isSupportedSceneFile(it->path().string())) found.push_back(it->path().string());
-      }
-      std::sort(found.begin(), found.end());
+      const std::vector<std::string> found = sortedFilesUnder(arg, isScene);
       out.insert(out.end(), found.begin(), found.end());
     } else if (fs::is_regular_file(arg, ec) && fs::path(arg).extension() == ".txt") {
       std::ifstream in(arg);

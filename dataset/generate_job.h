@@ -5,6 +5,8 @@
 // append-only journal, <out>/.paircast/journal.jsonl (docs/dataset.md).
 #pragma once
 
+#include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -32,6 +34,10 @@ struct GenerateConfig {
   LoadOptions load;
   PairOptions pair;  // views, covis band, screening, covis masks, ...
 };
+
+// The regular files under `dir` (recursively) that `keep` accepts, sorted by path.
+std::vector<std::string> sortedFilesUnder(
+    const std::string& dir, const std::function<bool(const std::filesystem::path&)>& keep);
 
 // Expands the --scenes arguments into scene files, sorted within each folder, in argument order.
 // Throws paircast::Error naming an argument that does not exist.

@@ -37,7 +37,6 @@ Journal::~Journal() {
 // Reads every whole line; a torn tail (no newline) is cut off so that appends start clean.
 void Journal::load() {
   index_.clear();
-  damaged_ = 0;
   const off_t end = ::lseek(fd_, 0, SEEK_END);
   if (end < 0) throw Error(path_, "cannot read the journal: " + lastError());
   std::string data(static_cast<size_t>(end), '\0');
@@ -52,11 +51,7 @@ void Journal::load() {
     const auto record =
         nlohmann::json::parse(data.begin() + pos, data.begin() + nl, nullptr, false);
     const std::string key = record.is_object() ? keyOf_(record) : std::string();
-    if (key.empty()) {
-      ++damaged_;
-      continue;
-    }
-    index_[key] = {pos, static_cast<uint32_t>(nl - pos)};
+    if (!key.empty()) index_[key] = {pos, static_cast<uint32_t>(nl - pos)};
   }
   size_ = pos;
   if (size_ != data.size() && ::ftruncate(fd_, static_cast<off_t>(size_)) != 0)

@@ -16,7 +16,8 @@ namespace paircast {
 class Journal {
  public:
   // Opens (creating) the journal at `path` and indexes its records by `keyOf(record)`. Lines that
-  // are not JSON objects are counted and ignored. Throws paircast::Error naming the file.
+  // are not JSON objects, or that keyOf gives "", are ignored. Throws paircast::Error naming the
+  // file.
   Journal(const std::string& path, std::string (*keyOf)(const nlohmann::json&));
   ~Journal();
   Journal(const Journal&) = delete;
@@ -24,9 +25,6 @@ class Journal {
 
   // The record of `key` as it was when the journal was opened or last reopen()ed, or null.
   nlohmann::json find(const std::string& key) const;
-  bool contains(const std::string& key) const { return index_.count(key) != 0; }
-  size_t size() const { return index_.size(); }
-  size_t damagedLines() const { return damaged_; }
 
   // Appends one record. Not thread-safe: one writer. Throws paircast::Error on a failed write (a
   // full disk included); the journal then ends at the last whole line.
@@ -50,7 +48,6 @@ class Journal {
   uint64_t size_ = 0;  // bytes of whole lines
   size_t unsynced_ = 0;
   SteadyClock::time_point lastSync_;
-  size_t damaged_ = 0;
   std::unordered_map<std::string, Span> index_;
 };
 

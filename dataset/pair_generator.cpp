@@ -65,6 +65,7 @@ struct PairGenerator::View {
   ImageF depth;        // [H, W, 1] full resolution
   ImageF screenDepth;  // [S, S, 1] screening resolution (empty without screening)
   Image8 rgb;          // [H, W, 3], empty until rendered
+  double valid = 0;    // share of depth's pixels with depth > 0
   CovisResult covis;   // against view 0, full resolution
 };
 
@@ -118,7 +119,8 @@ std::optional<PairGenerator::View> PairGenerator::referenceView(Rng& rng, PairSa
   v.at = sampler_.sampleReference(intrinsics_, rng);
   if (screenedOut(nullptr, v, s)) return std::nullopt;
   renderFull(v, options_.screenResolution > 0, s);
-  if (validFraction(v.depth) < options_.minValidFraction) return std::nullopt;
+  v.valid = validFraction(v.depth);
+  if (v.valid < options_.minValidFraction) return std::nullopt;
   return v;
 }
 
@@ -131,7 +133,8 @@ std::optional<PairGenerator::View> PairGenerator::otherView(const View& ref,
     if (screenedOut(&ref, v, s)) continue;
     // A view that passed screening is likely kept: its colour comes in the same pass.
     renderFull(v, options_.screenResolution > 0, s);
-    if (validFraction(v.depth) < options_.minValidFraction) continue;
+    v.valid = validFraction(v.depth);
+    if (v.valid < options_.minValidFraction) continue;
     const auto t0 = Clock::now();
     v.covis = computeCovisibility(ref.at.camera, ref.depth, v.at.camera, v.depth, options_.covis);
     s.covisSeconds += since(t0);
@@ -207,14 +210,14 @@ void PairGenerator::finish(std::vector<View>& views, PairSample& s) const {
   const int V = static_cast<int>(views.size());
   for (View& v : views) {
     if (!v.rgb.data.empty()) continue;
-    const ImageF depth = std::move(v.depth);
+    ImageF depth = std::move(v.depth);
     renderFull(v, true, s);
-    v.depth = depth;
+    v.depth = std::move(depth);
   }
   const auto t0 = Clock::now();
   s.covis.assign(V, CovisResult{});
   s.visibility.assign(V, std::vector<double>(V, 1.0));
-  for (int i = 0; i < V; ++i) s.visibility[i][i] = validFraction(views[i].depth);
+  for (int i = 0; i < V; ++i) s.visibility[i][i] = views[i].valid;
   s.covis[0] = {1.0, 1.0, 1.0, s.visibility[0][0], s.visibility[0][0]};
   for (int k = 1; k < V; ++k) {
     s.covis[k] = views[k].covis;

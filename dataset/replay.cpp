@@ -6,6 +6,7 @@
 #include <set>
 
 #include "dataset/croco_layout.h"
+#include "dataset/generate_job.h"
 #include "dataset/habitat_frame.h"
 #include "dataset/pair_generator.h"
 #include "dataset/shard.h"
@@ -24,12 +25,8 @@ std::vector<std::string> metadataFiles(const std::vector<std::string>& args) {
   for (const auto& arg : args) {
     std::error_code ec;
     if (fs::is_directory(arg, ec)) {
-      std::vector<std::string> found;
-      for (auto it = fs::recursive_directory_iterator(arg, ec);
-           it != fs::recursive_directory_iterator(); it.increment(ec))
-        if (it->is_regular_file(ec) && it->path().filename() == "metadata.json")
-          found.push_back(it->path().string());
-      std::sort(found.begin(), found.end());
+      const std::vector<std::string> found =
+          sortedFilesUnder(arg, [](const fs::path& p) { return p.filename() == "metadata.json"; });
       if (found.empty()) throw Error(arg, "holds no metadata.json");
       files.insert(files.end(), found.begin(), found.end());
     } else if (fs::is_regular_file(arg, ec)) {
@@ -78,7 +75,8 @@ struct ReplayFile {
 class Replayer {
  public:
   explicit Replayer(const ReplayConfig& cfg) : cfg_(cfg) {}
-  void replay(ReplayFile& file);
+  // Renders the file's samples; returns its pairs.txt lines.
+  std::string replay(ReplayFile& file);
   size_t samples = 0, views = 0;
 
  private:
@@ -109,7 +107,7 @@ Camera Replayer::camera(const nlohmann::json& entry, int k, const Camera& intrin
   return c;
 }
 
-void Replayer::replay(ReplayFile& file) {
+std::string Replayer::replay(ReplayFile& file) {
   const nlohmann::json& meta = file.meta;
   const auto [W, H] = widthHeight(meta, file.path);
   const double hfov = meta.at("hfov").get<double>();
@@ -161,6 +159,7 @@ void Replayer::replay(ReplayFile& file) {
   out["replayed_from"] = file.path;
   writeFileAtomic((dir / "metadata.json").string(), out.dump() + "\n");
   writeFileAtomic((dir / "pairs.txt").string(), pairs);
+  return pairs;
 }
 
 }  // namespace
@@ -220,8 +219,7 @@ nlohmann::json runReplay(const ReplayConfig& cfg) {
         throw Error(f.path, "its scene '" + f.meta["scene"].get<std::string>() +
                                 "' was not found (give the dataset folder with --scene-root)");
       f.scene = *scene;
-      replayer.replay(f);
-      pairs += readFile((fs::path(cfg.out) / f.name / "pairs.txt").string());
+      pairs += replayer.replay(f);
       done.push_back({{"metadata", f.path}, {"scene", f.scene}, {"out", f.name}});
       if (cfg.progress)
         std::fprintf(stderr, "[generate_pairs] replayed %s (%s)\n", f.path.c_str(),

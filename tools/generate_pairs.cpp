@@ -9,18 +9,19 @@
 
 using namespace paircast;
 
-// 0: done. 1 (with an error line): no pair could be made. 4: done, but scenes were skipped (they
-// are listed in summary.json), unless --allow-skipped-scenes.
-int exitStatus(const nlohmann::json& summary, const std::string& out, bool allowSkipped) {
-  const size_t skipped = summary["skipped_scenes"].size();
-  if (summary["pairs"].get<uint64_t>() == 0)
-    throw Error(out + "/summary.json", "no pair could be made (" + std::to_string(skipped) +
-                                           " scene(s) skipped; reasons listed there)");
+// 0: done. 1 (with an error line): nothing could be made. 4: done, but some inputs (scenes, or
+// metadata files with --from-metadata) were skipped (they are listed in summary.json), unless
+// --allow-skipped-scenes.
+int exitStatus(size_t made, size_t skipped, const char* inputs, const std::string& out,
+               bool allowSkipped) {
+  if (made == 0)
+    throw Error(out + "/summary.json", "nothing could be made (" + std::to_string(skipped) + " " +
+                                           inputs + " skipped; reasons listed there)");
   if (skipped == 0 || allowSkipped) return 0;
   std::fprintf(stderr,
-               "generate_pairs: %zu scene(s) skipped (listed in %s/summary.json); exit status 4 "
+               "generate_pairs: %zu %s skipped (listed in %s/summary.json); exit status 4 "
                "(--allow-skipped-scenes makes it 0)\n",
-               skipped, out.c_str());
+               skipped, inputs, out.c_str());
   return 4;
 }
 
@@ -110,9 +111,8 @@ int main(int argc, char** argv) {
       replay.progress = !quiet;
       const nlohmann::json summary = runReplay(replay);
       std::printf("%s\n", summary.dump().c_str());
-      if (summary["samples"].get<size_t>() == 0)
-        throw Error(cfg.out + "/summary.json", "no sample could be replayed");
-      return summary["skipped"].empty() || allowSkipped ? 0 : 4;
+      return exitStatus(summary["samples"].get<size_t>(), summary["skipped"].size(),
+                        "metadata file(s)", cfg.out, allowSkipped);
     }
     if (cfg.scenes.empty()) throw Error("--scenes (or --from-metadata) is required");
     cfg.shards = format != "croco";
@@ -129,6 +129,7 @@ int main(int argc, char** argv) {
       summary["report"] = writeDatasetReport(ro)["report"];
     }
     std::printf("%s\n", summary.dump().c_str());
-    return exitStatus(summary, cfg.out, allowSkipped);
+    return exitStatus(summary["pairs"].get<size_t>(), summary["skipped_scenes"].size(), "scene(s)",
+                      cfg.out, allowSkipped);
   });
 }
