@@ -109,29 +109,41 @@ struct RenderLimit {
   double pairsPerSecond() const { return 1.0 / (2.0 * rgbDepthSeconds); }
 };
 
-// Renders of views as the sampler places them (reference views), at 256x256, hfov 60.
-RenderLimit measureRenderLimit(const SceneArg& arg, unsigned threads, int resolution) {
-  LoadOptions lo;
-  lo.up = arg.up;
-  Scene scene = loadScene(arg.path, lo);
-  const RayCaster caster(scene.mesh);
-  const ViewpointSampler sampler(scene, caster, {});
-  Rng rng(7);
-  std::vector<Camera> views;
-  const Camera K = Camera::fromHfov(resolution, resolution, 60);
-  for (int i = 0; i < 64; ++i) views.push_back(sampler.sampleView(K, rng));
-  RenderLimit r;
-  r.rgbDepthSeconds = secondsPerRender(caster, views, threads, true);
-  r.depthSeconds = secondsPerRender(caster, views, threads, false);
-  for (Camera& c : views) {
-    Camera small = Camera::fromHfov(resolution / 4, resolution / 4, 60);
-    small.R_cam2world = c.R_cam2world;
-    small.t_cam2world = c.t_cam2world;
-    c = small;
+// The scene, its BVH and views as the sampler places them (reference views), at `resolution`
+// and hfov 60, loaded once and measured as often as asked.
+class RenderProbe {
+ public:
+  RenderProbe(const SceneArg& arg, int resolution)
+      : scene_(load(arg)), caster_(scene_.mesh), sampler_(scene_, caster_, {}) {
+    Rng rng(7);
+    const Camera K = Camera::fromHfov(resolution, resolution, 60);
+    for (int i = 0; i < 64; ++i) {
+      views_.push_back(sampler_.sampleView(K, rng));
+      Camera small = Camera::fromHfov(resolution / 4, resolution / 4, 60);
+      small.R_cam2world = views_.back().R_cam2world;
+      small.t_cam2world = views_.back().t_cam2world;
+      smallViews_.push_back(small);
+    }
   }
-  r.screenDepthSeconds = secondsPerRender(caster, views, threads, false);
-  return r;
-}
+  RenderLimit measure(unsigned threads) const {
+    RenderLimit r;
+    r.rgbDepthSeconds = secondsPerRender(caster_, views_, threads, true);
+    r.depthSeconds = secondsPerRender(caster_, views_, threads, false);
+    r.screenDepthSeconds = secondsPerRender(caster_, smallViews_, threads, false);
+    return r;
+  }
+
+ private:
+  static Scene load(const SceneArg& arg) {
+    LoadOptions lo;
+    lo.up = arg.up;
+    return loadScene(arg.path, lo);
+  }
+  Scene scene_;
+  RayCaster caster_;
+  ViewpointSampler sampler_;
+  std::vector<Camera> views_, smallViews_;
+};
 
 RenderLimit average(const RenderLimit& a, const RenderLimit& b) {
   return {(a.rgbDepthSeconds + b.rgbDepthSeconds) / 2, (a.depthSeconds + b.depthSeconds) / 2,
@@ -198,7 +210,8 @@ int main(int argc, char** argv) {
       const std::string out = tmp + "/gen" + std::to_string(s);
       // The limit is measured before and after the generation runs, and averaged, so that a
       // change of machine load during the runs shows in both figures.
-      const RenderLimit before = measureRenderLimit(scenes[s], threads, 256);
+      const RenderProbe probe(scenes[s], 256);
+      const RenderLimit before = probe.measure(threads);
       const nlohmann::json sum = generate(scenes[s], out, pairs, threads, screen, false, margin);
       if (!sum["skipped_scenes"].empty()) {
         std::printf("%-22s skipped: %s\n", name.c_str(),
@@ -209,7 +222,7 @@ int main(int argc, char** argv) {
           generate(scenes[s], out + "-plain", pairs, threads, 0, false, margin);
       const nlohmann::json audit =
           generate(scenes[s], out + "-audit", auditPairs, threads, screen, true, margin);
-      const RenderLimit after = measureRenderLimit(scenes[s], threads, 256);
+      const RenderLimit after = probe.measure(threads);
       const RenderLimit limit = average(before, after);
       const double rate = sum["pairs_per_second"].get<double>();
       const double plainRate = plain["pairs_per_second"].get<double>();
