@@ -17,11 +17,6 @@ using OIIO::ImageOutput;
 using OIIO::ImageSpec;
 using OIIO::TypeDesc;
 
-std::string lowerExt(const std::string& path) {
-  std::string ext = fs::path(path).extension().string();
-  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext.empty() ? ext : ext.substr(1);
-}
 
 // Writes through an in-memory proxy so that every file write goes through writeFileAtomic.
 template <typename T>
@@ -108,17 +103,9 @@ std::vector<unsigned char> encodeExr(const ImageF& image, bool half) {
   return encode(image, "exr", half ? TypeDesc::HALF : TypeDesc::FLOAT, 0);
 }
 
-void writeImage(const std::string& path, const Image8& image, int jpegQuality) {
-  const std::string ext = lowerExt(path);
-  if (ext != "png" && ext != "jpg" && ext != "jpeg")
-    throw Error(path, "unsupported image extension (use .png, .jpg or .jpeg)");
-  auto bytes = encodeImage(image, ext, jpegQuality);
-  writeFileAtomic(path,
-                  std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
-}
 
 void writeExr(const std::string& path, const ImageF& image, bool half) {
-  if (lowerExt(path) != "exr") throw Error(path, "float maps are written as .exr");
+  if (lowerExtension(path) != "exr") throw Error(path, "float maps are written as .exr");
   auto bytes = encodeExr(image, half);
   writeFileAtomic(path,
                   std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));

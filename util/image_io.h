@@ -16,6 +16,9 @@ void writeImage(const std::string& path, const Image8& image, int jpegQuality = 
 // named "R","G","B". Atomic.
 void writeExr(const std::string& path, const ImageF& image, bool half = false);
 
+// The extension of `path` in lower case, without its dot ("" when none).
+std::string lowerExtension(const std::string& path);
+
 // Encodes to bytes in memory; `format` is "png", "jpg" or "exr".
 std::vector<unsigned char> encodeImage(const Image8& image, std::string_view format,
                                        int jpegQuality = 95);

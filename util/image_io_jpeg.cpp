@@ -24,11 +24,6 @@ namespace fs = std::filesystem;
 const char* const kFullBuild =
     "needs the full build (this one was configured with PAIRCAST_WITH_RENDER=OFF)";
 
-std::string lowerExt(const std::string& path) {
-  std::string ext = fs::path(path).extension().string();
-  for (auto& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext.empty() ? ext : ext.substr(1);
-}
 
 // libjpeg reports errors through error_exit, which must not return: it longjmps back here.
 struct JpegError {
@@ -208,14 +203,6 @@ std::vector<unsigned char> encodeExr(const ImageF&, bool) {
   throw Error("image.exr", std::string("EXR ") + kFullBuild);
 }
 
-void writeImage(const std::string& path, const Image8& image, int jpegQuality) {
-  const std::string ext = lowerExt(path);
-  if (ext != "png" && ext != "jpg" && ext != "jpeg")
-    throw Error(path, "unsupported image extension (use .png, .jpg or .jpeg)");
-  auto bytes = encodeImage(image, ext, jpegQuality);
-  writeFileAtomic(path,
-                  std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
-}
 
 void writeExr(const std::string& path, const ImageF&, bool) {
   throw Error(path, std::string("EXR ") + kFullBuild);
