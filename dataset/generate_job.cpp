@@ -95,14 +95,19 @@ struct Result {
   std::optional<EncodedPair> pair;  // for the shard
 };
 
+// "pairs-000042.tar", or "pairs-<part>-000042.tar" for part "-<part>" of several machines.
+std::string shardName(const std::string& part, size_t n) {
+  char name[64];
+  std::snprintf(name, sizeof name, "pairs%s-%06zu.tar", part.c_str(), n);
+  return name;
+}
+
 // Reads the keys of the shards that already exist, in order, stopping at the first gap.
 std::vector<std::vector<std::string>> completedShards(const std::string& out,
-                                                      const std::string& prefix) {
+                                                      const std::string& part) {
   std::vector<std::vector<std::string>> shards;
-  for (int s = 0;; ++s) {
-    char name[64];
-    std::snprintf(name, sizeof name, "%s-%06d.tar", prefix.c_str(), s);
-    const std::string path = (fs::path(out) / name).string();
+  for (size_t s = 0;; ++s) {
+    const std::string path = (fs::path(out) / shardName(part, s)).string();
     if (!fs::exists(path)) break;
     shards.push_back(shardKeys(path));
   }
@@ -225,7 +230,7 @@ GenerateRun::GenerateRun(const GenerateConfig& cfg) : cfg_(cfg) {
   makeDirs((fs::path(cfg.out) / ".paircast").string());
   journal_ = std::make_unique<Journal>(
       (fs::path(cfg.out) / ".paircast" / ("journal" + part_ + ".jsonl")).string(), recordKey);
-  if (cfg.shards) doneShards_ = completedShards(cfg.out, "pairs" + part_);
+  if (cfg.shards) doneShards_ = completedShards(cfg.out, part_);
   for (const auto& keys : doneShards_) shardList_.push_back({{"pairs", keys.size()}});
   planItems();
 }
@@ -446,11 +451,9 @@ void GenerateRun::writeInOrder() {
 }
 
 void GenerateRun::addToShard(const EncodedPair& pair) {
-  if (!shard_) {
-    char name[64];
-    std::snprintf(name, sizeof name, "pairs%s-%06zu.tar", part_.c_str(), shardList_.size());
-    shard_ = std::make_unique<ShardWriter>((fs::path(cfg_.out) / name).string());
-  }
+  if (!shard_)
+    shard_ = std::make_unique<ShardWriter>(
+        (fs::path(cfg_.out) / shardName(part_, shardList_.size())).string());
   shard_->add(pair);
   if (static_cast<int>(shard_->samples()) >= cfg_.shardSize ||
       shard_->bytes() >= cfg_.shardMaxBytes)
@@ -474,11 +477,7 @@ nlohmann::json GenerateRun::summarise() {
     if (!skippedPaths.count(job->path)) summariseScene(*job, perScene, pairsTxt);
   if (cfg_.croco) writeFileAtomic(outPath("pairs", ".txt"), pairsTxt);
   if (cfg_.shards) {
-    for (size_t s = 0; s < shardList_.size(); ++s) {
-      char name[64];
-      std::snprintf(name, sizeof name, "pairs%s-%06zu.tar", part_.c_str(), s);
-      shardList_[s]["name"] = name;
-    }
+    for (size_t s = 0; s < shardList_.size(); ++s) shardList_[s]["name"] = shardName(part_, s);
     const nlohmann::json index = {{"format", "paircast-shards"},
                                   {"format_version", kShardVersion},
                                   {"pairs", pairs_},
