@@ -8,6 +8,7 @@
 #include <cmath>
 #include <mutex>
 
+#include "render/texture_pyramid.h"
 #include "util/error.h"
 
 namespace paircast {
@@ -75,6 +76,13 @@ inline void setupPacket(const PrimaryRays& P, int x0, int y, int width, float sx
   }
 }
 
+// What shading needs besides the hit, fixed for one render.
+struct Lighting {
+  ShadingOptions options;
+  Eigen::Vector3f sunDir;  // unit, towards the sun
+  float sampleSize;        // width of one colour sample at z-depth 1: 1 / (fx * supersample)
+};
+
 inline RTCIntersectContext coherentContext() {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
@@ -84,17 +92,65 @@ inline RTCIntersectContext coherentContext() {
 
 }  // namespace
 
+// What shading one hit needs of its triangle, in one cache line: a hit costs one load here
+// instead of five scattered ones (normal, material, vertex indices, three texture coordinates).
+struct alignas(64) ShadeTriangle {
+  Eigen::Vector3f normal;  // unit geometric normal (sign fixed per hit)
+  Eigen::Vector3f albedo;  // factor x vertex colour (when uniform), linear
+  int32_t texture;         // index into RayCaster::Impl::textures, or -1
+  int32_t varying;         // 1: vertex colours differ over the triangle
+  Eigen::Vector2f uv0;     // texture coordinates: uv0 + u * duv1 + v * duv2 at barycentrics u, v
+  Eigen::Vector2f duv1;
+  Eigen::Vector2f duv2;
+  float texelsPerMetre;    // of the texture's level 0 over this triangle (mean of both axes)
+};
+
 struct RayCaster::Impl {
   RTCScene scene = nullptr;
-  // Per-triangle data precomputed at build time, so that shading a hit is a few loads:
-  std::vector<Eigen::Vector3f> normal;  // [T] unit geometric normal
-  std::vector<Eigen::Vector3f> albedo;  // [T] factor x vertex colour (when uniform), linear
-  std::vector<uint8_t> varying;         // [T] 1: vertex colours differ over the triangle
-  std::vector<int32_t> texture;         // [T] texture index, or -1
+  std::vector<ShadeTriangle> triangles;  // [T], precomputed at build time
+  std::vector<TexturePyramid> textures;  // one per Mesh::textures
+  const Mesh* mesh = nullptr;
+  // Fills the tables above from the mesh.
+  void prepareShading(const Mesh& mesh);
+  void renderTile(const PrimaryRays& P, const RenderOptions& options, const Lighting& light,
+                  int x0, int y0, Frame& frame) const;
+  void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y,
+                     int cols, Frame& frame) const;
+  Eigen::Vector3f shade(const RTCRayHit8& rh, int i, const Lighting& light) const;
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
   }
 };
+
+void RayCaster::Impl::prepareShading(const Mesh& m) {
+  mesh = &m;
+  triangles.resize(m.numTriangles());
+  for (size_t t = 0; t < m.numTriangles(); ++t) {
+    const Eigen::Vector3i& tri = m.triangles[t];
+    const Eigen::Vector3f& p0 = m.positions[tri[0]];
+    // Embree's Ng is (p2 - p0) x (p1 - p0) ... up to sign; its sign is fixed at shading time.
+    const Eigen::Vector3f n = (m.positions[tri[1]] - p0).cross(m.positions[tri[2]] - p0);
+    const Material& mat = m.materials[m.triangleMaterial[t]];
+    const bool sameColour =
+        m.colors[tri[0]] == m.colors[tri[1]] && m.colors[tri[0]] == m.colors[tri[2]];
+    ShadeTriangle& s = triangles[t];
+    s.normal = n.norm() > 0 ? n.normalized() : Eigen::Vector3f::UnitZ();
+    s.albedo = sameColour ? mat.baseColor.cwiseProduct(m.colors[tri[0]]).eval() : mat.baseColor;
+    s.texture = mat.texture;
+    s.varying = !sameColour;
+    s.uv0 = m.uvs[tri[0]];
+    s.duv1 = m.uvs[tri[1]] - m.uvs[tri[0]];
+    s.duv2 = m.uvs[tri[2]] - m.uvs[tri[0]];
+    s.texelsPerMetre = 0.0f;
+    if (s.texture >= 0 && n.norm() > 0) {  // sqrt(texel area / world area)
+      const Texture& tex = m.textures[s.texture];
+      const float uvArea = std::abs(s.duv1.x() * s.duv2.y() - s.duv1.y() * s.duv2.x());
+      s.texelsPerMetre = std::sqrt(uvArea * tex.width * tex.height / n.norm());
+    }
+  }
+  textures.reserve(m.textures.size());
+  for (const Texture& t : m.textures) textures.emplace_back(t);
+}
 
 RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Impl>()) {
   const auto start = std::chrono::steady_clock::now();
@@ -129,25 +185,7 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
   for (size_t t = 0; t < mesh.numTriangles(); ++t) {
     for (int k = 0; k < 3; ++k) indices[3 * t + k] = static_cast<uint32_t>(mesh.triangles[t][k]);
   }
-  const size_t T = mesh.numTriangles();
-  impl_->normal.resize(T);
-  impl_->albedo.resize(T);
-  impl_->varying.resize(T);
-  impl_->texture.resize(T);
-  for (size_t t = 0; t < T; ++t) {
-    const Eigen::Vector3i& tri = mesh.triangles[t];
-    const Eigen::Vector3f& p0 = mesh.positions[tri[0]];
-    // Embree's Ng is (p2 - p0) x (p1 - p0) ... up to sign; its sign is fixed at shading time.
-    Eigen::Vector3f n = (mesh.positions[tri[1]] - p0).cross(mesh.positions[tri[2]] - p0);
-    impl_->normal[t] = n.norm() > 0 ? n.normalized() : Eigen::Vector3f::UnitZ();
-    const Material& mat = mesh.materials[mesh.triangleMaterial[t]];
-    const bool sameColour =
-        mesh.colors[tri[0]] == mesh.colors[tri[1]] && mesh.colors[tri[0]] == mesh.colors[tri[2]];
-    impl_->varying[t] = !sameColour;
-    impl_->texture[t] = mat.texture;
-    impl_->albedo[t] =
-        sameColour ? mat.baseColor.cwiseProduct(mesh.colors[tri[0]]).eval() : mat.baseColor;
-  }
+  impl_->prepareShading(mesh);
   rtcCommitGeometry(geom);
   rtcAttachGeometry(impl_->scene, geom);
   rtcReleaseGeometry(geom);
@@ -185,7 +223,6 @@ void RayCaster::renderDepth(const Camera& camera, ImageF& depth) const {
 
 void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame& frame) const {
   PAIRCAST_CHECK(camera.width > 0 && camera.height > 0);
-  const int ss = std::clamp(options.supersample, 1, 4);
   const int W = camera.width, H = camera.height;
   frame.depth.resize(W, H, 1);
   if (options.rgb) frame.rgb.resize(W, H, 3);
@@ -195,97 +232,109 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
     frame.materialId.resize(W, H, 1);
   }
   const PrimaryRays P(camera);
-  const ShadingOptions& sh = options.shading;
-  const Eigen::Vector3f sunDir = sh.sunDirection.normalized();
-  const Mesh& mesh = mesh_;
-  const Impl& impl = *impl_;
-  RTCScene scene = impl_->scene;
+  const int ss = std::clamp(options.supersample, 1, 4);
+  const Lighting light{options.shading, options.shading.sunDirection.normalized(),
+                       static_cast<float>(1.0 / (camera.K(0, 0) * ss))};
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
-
 #pragma omp parallel for schedule(dynamic, 2)
-  for (int tile = 0; tile < tilesX * tilesY; ++tile) {
-    RTCIntersectContext ctx = coherentContext();
-    RTCRayHit8 rh;
-    alignas(32) int valid[kPacket];
-    Eigen::Vector3f accum[kTileH][kTileW];  // linear colour sums over the sub-samples
-    const int x0 = (tile % tilesX) * kTileW, ty = (tile / tilesX) * kTileH;
-    const int rows = std::min(kTileH, H - ty);
+  for (int tile = 0; tile < tilesX * tilesY; ++tile)
+    impl_->renderTile(P, options, light, (tile % tilesX) * kTileW, (tile / tilesX) * kTileH, frame);
+}
 
-    // Shades the hits of one packet; `centre` also writes the geometry maps.
-    auto shadePacket = [&](int y, bool centre, bool shade) {
-      for (int i = 0; i < kPacket && x0 + i < W; ++i) {
-        const size_t pix = static_cast<size_t>(y) * W + x0 + i;
-        const bool hit = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
-        const int prim = hit ? static_cast<int>(rh.hit.primID[i]) : -1;
-        const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
-        Eigen::Vector3f n = Eigen::Vector3f::Zero();
-        if (hit) {
-          n = impl.normal[prim];
-          if (n.dot(d) > 0) n = -n;
-        }
-        if (centre) {
-          frame.depth.data[pix] = hit ? rh.ray.tfar[i] : 0.0f;
-          if (options.normals) {
-            frame.normals.data[3 * pix] = n.x();
-            frame.normals.data[3 * pix + 1] = n.y();
-            frame.normals.data[3 * pix + 2] = n.z();
-          }
-          if (options.ids) {
-            frame.triangleId.data[pix] = prim;
-            frame.materialId.data[pix] = hit ? mesh.triangleMaterial[prim] : -1;
-          }
-        }
-        if (!shade) continue;
-        if (!hit) {
-          accum[y - ty][i] += sh.background;
-          continue;
-        }
-        Eigen::Vector3f albedo = impl.albedo[prim];
-        const int tex = impl.texture[prim];
-        if (impl.varying[prim] || tex >= 0) {
-          const Eigen::Vector3i& tri = mesh.triangles[prim];
-          const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
-          if (impl.varying[prim])
-            albedo = albedo.cwiseProduct(w * mesh.colors[tri[0]] + u * mesh.colors[tri[1]] +
-                                         v * mesh.colors[tri[2]]);
-          if (tex >= 0) {
-            const Eigen::Vector2f uv =
-                w * mesh.uvs[tri[0]] + u * mesh.uvs[tri[1]] + v * mesh.uvs[tri[2]];
-            albedo = albedo.cwiseProduct(mesh.textures[tex].sample(uv.x(), uv.y()));
-          }
-        }
-        const float cosView = -n.dot(d) / d.norm();
-        const float light =
-            sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, n.dot(sunDir));
-        accum[y - ty][i] += albedo * light;
-      }
-    };
-
-    for (int r = 0; r < rows; ++r)
-      for (int i = 0; i < kTileW; ++i) accum[r][i].setZero();
+// One 8x8 tile: the centre rays give the geometry maps (and the colour without supersampling);
+// each further sub-sample adds a packet per row.
+void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& options,
+                                 const Lighting& light, int x0, int y0, Frame& frame) const {
+  const int W = frame.depth.width, H = frame.depth.height;
+  const int rows = std::min(kTileH, H - y0), cols = std::min(kTileW, W - x0);
+  const int ss = std::clamp(options.supersample, 1, 4);
+  RTCIntersectContext ctx = coherentContext();
+  RTCRayHit8 rh;
+  alignas(32) int valid[kPacket];
+  Eigen::Vector3f colour[kTileH][kTileW];  // linear colour sums over the sub-samples
+  for (int r = 0; r < rows; ++r) {
+    setupPacket(P, x0, y0 + r, W, 0.5f, 0.5f, rh, valid);
+    rtcIntersect8(valid, scene, &ctx, &rh);
+    writeGeometry(rh, options, x0, y0 + r, cols, frame);
+    for (int i = 0; options.rgb && ss == 1 && i < cols; ++i)
+      colour[r][i] = shade(rh, i, light);
+  }
+  if (!options.rgb) return;
+  for (int sub = 0; ss > 1 && sub < ss * ss; ++sub) {
     for (int r = 0; r < rows; ++r) {
-      setupPacket(P, x0, ty + r, W, 0.5f, 0.5f, rh, valid);
+      setupPacket(P, x0, y0 + r, W, (sub % ss + 0.5f) / ss, (sub / ss + 0.5f) / ss, rh, valid);
       rtcIntersect8(valid, scene, &ctx, &rh);
-      shadePacket(ty + r, true, options.rgb && ss == 1);
-    }
-    if (!options.rgb) continue;
-    for (int sy = 0; ss > 1 && sy < ss; ++sy) {
-      for (int sx = 0; sx < ss; ++sx) {
-        for (int r = 0; r < rows; ++r) {
-          setupPacket(P, x0, ty + r, W, (sx + 0.5f) / ss, (sy + 0.5f) / ss, rh, valid);
-          rtcIntersect8(valid, scene, &ctx, &rh);
-          shadePacket(ty + r, false, true);
-        }
-      }
-    }
-    const float inv = 1.0f / static_cast<float>(ss * ss);
-    for (int r = 0; r < rows; ++r) {
-      for (int i = 0; i < kTileW && x0 + i < W; ++i) {
-        uint8_t* px = frame.rgb.pixel(x0 + i, ty + r);
-        for (int c = 0; c < 3; ++c) px[c] = linearToSrgb8(accum[r][i][c] * inv);
+      for (int i = 0; i < cols; ++i) {
+        const Eigen::Vector3f c = shade(rh, i, light);
+        colour[r][i] = sub == 0 ? c : Eigen::Vector3f(colour[r][i] + c);
       }
     }
   }
+  const float inv = 1.0f / static_cast<float>(ss * ss);
+  for (int r = 0; r < rows; ++r) {
+    for (int i = 0; i < cols; ++i) {
+      uint8_t* px = frame.rgb.pixel(x0 + i, y0 + r);
+      for (int c = 0; c < 3; ++c) px[c] = linearToSrgb8(colour[r][i][c] * inv);
+    }
+  }
+}
+
+// Depth, and the normals and ids when asked, of the first `cols` rays of a packet on row y.
+void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0,
+                                    int y, int cols, Frame& frame) const {
+  const size_t row = static_cast<size_t>(y) * frame.depth.width + x0;
+  for (int i = 0; i < cols; ++i) {
+    const bool hit = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+    frame.depth.data[row + i] = hit ? rh.ray.tfar[i] : 0.0f;
+  }
+  if (!options.normals && !options.ids) return;
+  for (int i = 0; i < cols; ++i) {
+    const size_t pix = row + i;
+    const bool hit = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+    const int prim = hit ? static_cast<int>(rh.hit.primID[i]) : -1;
+    if (options.normals) {
+      Eigen::Vector3f n = Eigen::Vector3f::Zero();
+      if (hit) {
+        n = triangles[prim].normal;
+        const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
+        if (n.dot(d) > 0) n = -n;
+      }
+      for (int c = 0; c < 3; ++c) frame.normals.data[3 * pix + c] = n[c];
+    }
+    if (options.ids) {
+      frame.triangleId.data[pix] = prim;
+      frame.materialId.data[pix] = hit ? mesh->triangleMaterial[prim] : -1;
+    }
+  }
+}
+
+// Linear colour of ray i of a packet: albedo (material, vertex colours, texture) times ambient,
+// headlight and sun terms; the background on a miss.
+Eigen::Vector3f RayCaster::Impl::shade(const RTCRayHit8& rh, int i, const Lighting& light) const {
+  const ShadingOptions& sh = light.options;
+  if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) return sh.background;
+  const int prim = static_cast<int>(rh.hit.primID[i]);
+  const ShadeTriangle& t = triangles[prim];
+  const float u = rh.hit.u[i], v = rh.hit.v[i];
+  Eigen::Vector3f albedo = t.albedo;
+  if (t.varying) {
+    const Eigen::Vector3i& tri = mesh->triangles[prim];
+    albedo = albedo.cwiseProduct((1.0f - u - v) * mesh->colors[tri[0]] +
+                                 u * mesh->colors[tri[1]] + v * mesh->colors[tri[2]]);
+  }
+  const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
+  const float nd = t.normal.dot(d);  // the normal is turned towards the camera: n = -sign(nd) Ng
+  const float cosView = std::abs(nd) / d.norm();
+  if (t.texture >= 0) {
+    // The sample covers (z s)^2 / cos m^2 of the surface at z-depth z: the level of detail
+    // matches its texel count by area.
+    const float footprint = rh.ray.tfar[i] * light.sampleSize / std::sqrt(std::max(cosView, 1e-3f));
+    const float lod = TexturePyramid::lodFor(t.texelsPerMetre * footprint);
+    const Eigen::Vector2f uv = t.uv0 + u * t.duv1 + v * t.duv2;
+    albedo = albedo.cwiseProduct(textures[t.texture].sample(uv.x(), uv.y(), lod));
+  }
+  const float sunCos = (nd > 0 ? -1.0f : 1.0f) * t.normal.dot(light.sunDir);
+  return albedo * (sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, sunCos));
 }
 
 void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {

@@ -1,0 +1,95 @@
+#include "render/texture_pyramid.h"
+
+#include <gtest/gtest.h>
+
+#include "render/ray_caster.h"
+
+namespace paircast {
+namespace {
+
+// A w x h texture whose texel (x, y) is white where x + y is even and black elsewhere.
+Texture checkerboard(int w, int h) {
+  Texture t;
+  t.name = "checker";
+  t.width = w;
+  t.height = h;
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int c = 0; c < 3; ++c) t.texels.push_back((x + y) % 2 ? 0 : 255);
+  return t;
+}
+
+TEST(TexturePyramid, HalvesEachSideDownToOneTexel) {
+  const TexturePyramid square(checkerboard(256, 256));
+  EXPECT_EQ(square.levels(), 9);
+  EXPECT_EQ(square.width(8), 1);
+  const TexturePyramid odd(checkerboard(5, 3));  // 5x3, 2x1, 1x1
+  ASSERT_EQ(odd.levels(), 3);
+  EXPECT_EQ(odd.width(1), 2);
+  EXPECT_EQ(odd.height(1), 1);
+}
+
+TEST(TexturePyramid, LevelsAverageInLinearLight) {
+  // Black and white average to linear 0.5 (sRGB 188), not to sRGB 128.
+  const TexturePyramid p(checkerboard(8, 8));
+  for (int level = 1; level < p.levels(); ++level) {
+    const Eigen::Vector3f c = p.texel(level, 0, 0);
+    EXPECT_NEAR(c.x(), 0.5f, 0.01f) << "level " << level;
+    EXPECT_EQ(linearToSrgb8(c.x()), 188) << "level " << level;
+  }
+}
+
+TEST(TexturePyramid, FullSizeMatchesTheTextureAtTexelCentres) {
+  Texture t;
+  t.width = 3;
+  t.height = 2;
+  t.texels = {10, 20, 30, 200, 100, 50, 7, 8, 9, 255, 0, 128, 60, 70, 80, 1, 2, 3};
+  const TexturePyramid p(t);
+  for (int y = 0; y < 2; ++y) {
+    for (int x = 0; x < 3; ++x) {
+      const float u = (x + 0.5f) / 3, v = 1.0f - (y + 0.5f) / 2;
+      EXPECT_TRUE(p.sample(u, v, 0.0f).isApprox(t.sample(u, v), 1e-3f)) << x << "," << y;
+      EXPECT_TRUE(p.sample(u + 2.0f, v - 3.0f, 0.0f).isApprox(t.sample(u, v), 1e-3f));  // wraps
+    }
+  }
+  EXPECT_EQ(p.sample(NAN, 0.5f, 0.0f), Eigen::Vector3f::Zero());
+  EXPECT_EQ(p.sample(0.5f, INFINITY, 0.0f), Eigen::Vector3f::Zero());
+}
+
+TEST(TexturePyramid, LevelOfDetailIsLog2OfTheFootprint) {
+  EXPECT_EQ(TexturePyramid::lodFor(0.3f), 0.0f);
+  EXPECT_EQ(TexturePyramid::lodFor(1.0f), 0.0f);
+  EXPECT_FLOAT_EQ(TexturePyramid::lodFor(4.0f), 2.0f);
+  EXPECT_FLOAT_EQ(TexturePyramid::lodFor(6.0f), 2.5f);  // linear between powers of two
+  EXPECT_FLOAT_EQ(TexturePyramid::lodFor(1024.0f), 10.0f);
+  EXPECT_EQ(TexturePyramid::lodFor(NAN), 0.0f);
+  EXPECT_GE(TexturePyramid::lodFor(INFINITY), 30.0f);
+}
+
+// A far plane tiled with a one-texel checkerboard: each pixel covers many texels. Sampling the
+// full-size texture would give a random mix of black and white pixels (aliasing); the pyramid
+// gives the average everywhere.
+TEST(TexturePyramid, MinifiedCheckerboardRendersAsItsMean) {
+  Mesh mesh;
+  mesh.textures.push_back(checkerboard(64, 64));
+  Material mat;
+  mat.texture = 0;
+  const int m = mesh.addMaterial(mat);
+  const float s = 50.0f, z = 20.0f, tiles = 200.0f;  // 64 * 200 texels over 100 m
+  mesh.addTriangle({-s, -s, z}, {s, -s, z}, {s, s, z}, m, {0, 0}, {tiles, 0}, {tiles, tiles});
+  mesh.addTriangle({-s, -s, z}, {s, s, z}, {-s, s, z}, m, {0, 0}, {tiles, tiles}, {0, tiles});
+  RayCaster caster(mesh);
+  Camera cam = Camera::fromHfov(64, 64, 40.0);  // 0.22 m per pixel at 20 m: ~28 texels
+  RenderOptions opt;
+  opt.shading.ambient = 1.0f;
+  opt.shading.headlight = 0.0f;
+  opt.shading.sun = 0.0f;
+  Frame frame;
+  caster.render(cam, opt, frame);
+  int far = 0;
+  for (uint8_t c : frame.rgb.data) far += std::abs(int(c) - 188) > 3;
+  EXPECT_EQ(far, 0) << "pixels more than 3 levels from the mean grey";
+}
+
+}  // namespace
+}  // namespace paircast
