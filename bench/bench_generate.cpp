@@ -90,7 +90,9 @@ double secondsPerRender(const RayCaster& caster, const std::vector<Camera>& view
         omp_set_num_threads(1);
         Frame frame;
         ImageF depth;
-        RenderOptions ro;
+        RenderOptions ro;  // what generate_pairs renders: colour and depth
+        ro.normals = false;
+        ro.ids = false;
         for (size_t i; (i = next++) < views.size();) {
           if (rgb)
             caster.render(views[i], ro, frame);
@@ -150,8 +152,15 @@ RenderLimit average(const RenderLimit& a, const RenderLimit& b) {
           (a.screenDepthSeconds + b.screenDepthSeconds) / 2};
 }
 
+// Screening settings of a run: resolution (kAutoScreen, 0: off) and the two covis margins.
+struct Screen {
+  int resolution = kAutoScreen;
+  double margin = PairOptions{}.screenCovisMargin;
+  double fineMargin = PairOptions{}.screenFineMargin;
+};
+
 nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, unsigned threads,
-                        int screen, bool audit, double margin) {
+                        Screen screen, bool audit) {
   GenerateConfig c;
   c.scenes = {arg.path};
   c.load.up = arg.up;
@@ -159,9 +168,10 @@ nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, 
   c.pairsPerScene = pairs;
   c.jobs = static_cast<int>(threads);
   c.progress = false;
-  c.pair.screenResolution = screen;
+  c.pair.screenResolution = screen.resolution;
   c.pair.auditScreening = audit;
-  c.pair.screenCovisMargin = margin;
+  c.pair.screenCovisMargin = screen.margin;
+  c.pair.screenFineMargin = screen.fineMargin;
   return runGenerate(c);
 }
 
@@ -178,10 +188,13 @@ int main(int argc, char** argv) {
   app.add_option("--pairs", pairs, "Accepted pairs per scene");
   app.add_option("--jobs", jobs, "Worker threads (default: all cores)");
   app.add_option("--ref-pairs", refPairs, "Pairs compared with ref_covis.py");
-  int screen = kAutoScreen, auditPairs = 0;
-  app.add_option("--screen-resolution", screen, "Screening resolution (default: automatic)");
-  double margin = PairOptions{}.screenCovisMargin;
-  app.add_option("--screen-margin", margin, "Screening's covis margin");
+  int auditPairs = 0;
+  Screen screen;
+  app.add_option("--screen-resolution", screen.resolution,
+                 "Screening resolution (default: automatic)");
+  app.add_option("--screen-margin", screen.margin, "Screening's covis margin");
+  app.add_option("--screen-fine-margin", screen.fineMargin,
+                 "Covis margin of the second screening stage");
   app.add_option("--audit-pairs", auditPairs,
                  "Pairs of the audited run for the false-rejection rate (default: --pairs)");
   CLI11_PARSE(app, argc, argv);
@@ -212,16 +225,16 @@ int main(int argc, char** argv) {
       // change of machine load during the runs shows in both figures.
       const RenderProbe probe(scenes[s], 256);
       const RenderLimit before = probe.measure(threads);
-      const nlohmann::json sum = generate(scenes[s], out, pairs, threads, screen, false, margin);
+      const nlohmann::json sum = generate(scenes[s], out, pairs, threads, screen, false);
       if (!sum["skipped_scenes"].empty()) {
         std::printf("%-22s skipped: %s\n", name.c_str(),
                     sum["skipped_scenes"][0]["reason"].get<std::string>().c_str());
         continue;
       }
       const nlohmann::json plain =
-          generate(scenes[s], out + "-plain", pairs, threads, 0, false, margin);
+          generate(scenes[s], out + "-plain", pairs, threads, Screen{0}, false);
       const nlohmann::json audit =
-          generate(scenes[s], out + "-audit", auditPairs, threads, screen, true, margin);
+          generate(scenes[s], out + "-audit", auditPairs, threads, screen, true);
       const RenderLimit after = probe.measure(threads);
       const RenderLimit limit = average(before, after);
       const double rate = sum["pairs_per_second"].get<double>();

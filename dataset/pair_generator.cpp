@@ -55,7 +55,7 @@ void validatePairOptions(const PairOptions& o) {
   if (o.screenResolution > o.resolution)
     throw Error("--screen-resolution (" + std::to_string(o.screenResolution) +
                 ") must not exceed --resolution (" + std::to_string(o.resolution) + ")");
-  if (!(o.screenCovisMargin >= 0 && o.screenValidMargin >= 0))
+  if (!(o.screenCovisMargin >= 0 && o.screenFineMargin >= 0 && o.screenValidMargin >= 0))
     throw Error("screening margins must be >= 0");
 }
 
@@ -63,7 +63,7 @@ void validatePairOptions(const PairOptions& o) {
 struct PairGenerator::View {
   Viewpoint at;
   ImageF depth;        // [H, W, 1] full resolution
-  ImageF screenDepth;  // [S, S, 1] screening resolution (empty without screening)
+  std::vector<ImageF> screenDepth;  // per screening stage: [S, S, 1]
   Image8 rgb;          // [H, W, 3], empty until rendered
   double valid = 0;    // share of depth's pixels with depth > 0
   CovisResult covis;   // against view 0, full resolution
@@ -78,9 +78,11 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
   validatePairOptions(options);
   options_.screenResolution = screenResolution(options);
-  if (options_.screenResolution > 0)
-    screenIntrinsics_ =
-        Camera::fromHfov(options_.screenResolution, options_.screenResolution, options.hfov);
+  const int S = options_.screenResolution;
+  if (S > 0)
+    screens_.push_back({Camera::fromHfov(S, S, options.hfov), options.screenCovisMargin});
+  if (S > 0 && 4 * (2 * S) <= options.resolution)
+    screens_.push_back({Camera::fromHfov(2 * S, 2 * S, options.hfov), options.screenFineMargin});
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
@@ -149,29 +151,13 @@ bool PairGenerator::inBand(double covis) const {
                          : covis >= options_.minCovis && covis <= options_.maxCovis;
 }
 
-// Renders v's low-resolution depth and says whether it cannot pass: too few valid pixels, or (with
-// a reference) a covis estimate outside the band by more than the margin.
+// Screens v coarse to fine and says whether it cannot pass; counts it, and audits the verdict
+// when asked.
 bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
-  if (options_.screenResolution == 0) return false;
-  Camera cam = screenIntrinsics_;
-  cam.R_cam2world = v.at.camera.R_cam2world;
-  cam.t_cam2world = v.at.camera.t_cam2world;
-  auto t0 = Clock::now();
-  caster_.renderDepth(cam, v.screenDepth);
-  s.screenSeconds += since(t0);
-  bool out = validFraction(v.screenDepth) < options_.minValidFraction - options_.screenValidMargin;
-  if (!out && ref && !options_.accept) {
-    Camera refCam = screenIntrinsics_;
-    refCam.R_cam2world = ref->at.camera.R_cam2world;
-    refCam.t_cam2world = ref->at.camera.t_cam2world;
-    t0 = Clock::now();
-    const double estimate =
-        computeCovisibility(refCam, ref->screenDepth, cam, v.screenDepth, options_.covis).covis;
-    s.screenSeconds += since(t0);
-    out = estimate < options_.minCovis - options_.screenCovisMargin ||
-          estimate > options_.maxCovis + options_.screenCovisMargin;
-    if (out) s.candidateCovis.push_back(static_cast<float>(estimate));
-  }
+  v.screenDepth.resize(screens_.size());
+  bool out = false;
+  for (size_t stage = 0; stage < screens_.size() && !out; ++stage)
+    out = failsStage(stage, ref, v, s);
   if (!out) return false;
   ++s.screened;
   if (options_.auditScreening) {
@@ -185,6 +171,33 @@ bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
     s.falseRejections += kept;
   }
   return true;
+}
+
+// Renders v's depth at the stage's resolution and says whether it cannot pass: too few valid
+// pixels, or (with a reference) a covis estimate outside the band by more than the margin.
+bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, PairSample& s) const {
+  const ScreenStage& screen = screens_[stage];
+  Camera cam = screen.intrinsics;
+  cam.R_cam2world = v.at.camera.R_cam2world;
+  cam.t_cam2world = v.at.camera.t_cam2world;
+  auto t0 = Clock::now();
+  caster_.renderDepth(cam, v.screenDepth[stage]);
+  s.screenSeconds += since(t0);
+  if (validFraction(v.screenDepth[stage]) < options_.minValidFraction - options_.screenValidMargin)
+    return true;
+  if (!ref || options_.accept) return false;
+  Camera refCam = screen.intrinsics;
+  refCam.R_cam2world = ref->at.camera.R_cam2world;
+  refCam.t_cam2world = ref->at.camera.t_cam2world;
+  t0 = Clock::now();
+  const double estimate =
+      computeCovisibility(refCam, ref->screenDepth[stage], cam, v.screenDepth[stage], options_.covis)
+          .covis;
+  s.screenSeconds += since(t0);
+  const bool out = estimate < options_.minCovis - screen.covisMargin ||
+                   estimate > options_.maxCovis + screen.covisMargin;
+  if (out) s.candidateCovis.push_back(static_cast<float>(estimate));
+  return out;
 }
 
 void PairGenerator::renderFull(View& v, bool rgb, PairSample& s) const {

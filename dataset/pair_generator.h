@@ -42,8 +42,11 @@ struct PairOptions {
   // valid fraction and covis there come within the margins of passing go on to full resolution.
   // 0 turns it off; kAutoScreen picks resolution / 8 (at least 16), and off below 64 pixels.
   // docs/dataset.md has the measurements behind the defaults.
+  // A view that passes is screened again at twice the resolution, with the tighter
+  // screenFineMargin, when that is still at most a quarter of the output's side.
   int screenResolution = kAutoScreen;
   double screenCovisMargin = 0.15;
+  double screenFineMargin = 0.08;
   double screenValidMargin = 0.05;
   // Benchmarks: also render every screened-out view at full resolution, to count the ones that
   // would have passed (PairSample::falseRejections). It changes no output.
@@ -107,7 +110,14 @@ class PairGenerator {
   std::optional<View> referenceView(Rng& rng, PairSample& s) const;
   std::optional<View> otherView(const View& ref, const Eigen::Vector3d& target, Rng& rng,
                                 PairSample& s) const;
+  // One screening pass: the intrinsics it renders with, and how far outside the band its covis
+  // estimate may fall.
+  struct ScreenStage {
+    Camera intrinsics;
+    double covisMargin;
+  };
   bool screenedOut(const View* ref, View& v, PairSample& s) const;
+  bool failsStage(size_t stage, const View* ref, View& v, PairSample& s) const;
   void renderFull(View& v, bool rgb, PairSample& s) const;
   bool inBand(double covis) const;
   void finish(std::vector<View>& views, PairSample& s) const;
@@ -117,7 +127,8 @@ class PairGenerator {
   const RayCaster& caster_;
   const ViewpointSampler& sampler_;
   PairOptions options_;
-  Camera intrinsics_, screenIntrinsics_;
+  Camera intrinsics_;
+  std::vector<ScreenStage> screens_;  // coarse to fine; empty without screening
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

@@ -91,6 +91,9 @@ int main(int argc, char** argv) {
   app.add_option("--screen-margin", cfg.pair.screenCovisMargin,
                  "Screening keeps candidates whose low-resolution covis is within this of the band")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--screen-fine-margin", cfg.pair.screenFineMargin,
+                 "The same margin for the second screening stage, at twice the resolution")
+      ->check(CLI::Range(0.0, 1.0));
   app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
                "Also write 8-bit co-visibility masks (255: seen by the other view)");
   bool allowSkipped = false;

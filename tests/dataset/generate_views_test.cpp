@@ -101,7 +101,7 @@ TEST(Screening, KeepsCrocosCovisDistribution) {
   o.keepDepth = false;
   o.screenResolution = 0;
   const std::vector<double> plain = room.accepted(o, 300);
-  o.screenResolution = 32;
+  o.screenResolution = 16;  // the default at 128: screened at 16, then at 32
   size_t screened = 0;
   const std::vector<double> fast = room.accepted(o, 300, &screened);
   ASSERT_GE(plain.size(), 280u);
@@ -134,6 +134,25 @@ TEST(Screening, AuditChangesNoOutputAndCountsFalseRejections) {
   EXPECT_EQ(a, b);
   EXPECT_GT(falseRejections, 0u) << "without a margin, the estimate must miss some";
   EXPECT_LT(falseRejections, screened);
+}
+
+TEST(Screening, FineStageTurnsDownMoreWithTheSameOutput) {
+  const Room room("screen_fine");
+  PairOptions o;
+  o.resolution = 128;
+  o.keepDepth = false;
+  o.screenResolution = 16;   // then 32
+  o.screenFineMargin = 1.0;  // passes everything: one stage in effect
+  o.auditScreening = true;
+  size_t coarse = 0, fine = 0, coarseMisses = 0, fineMisses = 0;
+  const std::vector<double> a = room.accepted(o, 60, &coarse, &coarseMisses);
+  o.screenFineMargin = PairOptions{}.screenFineMargin;
+  const std::vector<double> b = room.accepted(o, 60, &fine, &fineMisses);
+  EXPECT_GT(fine, coarse) << "the second stage turned nothing down";
+  // The random stream does not depend on rendering: a second stage that turns down no view
+  // that would pass leaves the same pairs.
+  EXPECT_EQ(fineMisses, coarseMisses);
+  EXPECT_EQ(a, b);
 }
 
 TEST(MultiView, SamplesHaveNViewsInTheBandWithView1) {
