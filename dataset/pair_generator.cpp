@@ -63,7 +63,9 @@ void validatePairOptions(const PairOptions& o) {
 struct PairGenerator::View {
   Viewpoint at;
   ImageF depth;        // [H, W, 1] full resolution
-  std::vector<ImageF> screenDepth;  // per screening stage: [S, S, 1]
+  // Per screening stage: [S, S, 1]. A reference gets its later stages when a candidate first
+  // reaches them (most references never need them), hence mutable.
+  mutable std::vector<ImageF> screenDepth;
   Image8 rgb;          // [H, W, 3], empty until rendered
   double valid = 0;    // share of depth's pixels with depth > 0
   CovisResult covis;   // against view 0, full resolution
@@ -154,10 +156,10 @@ bool PairGenerator::inBand(double covis) const {
 // Screens v coarse to fine and says whether it cannot pass; counts it, and audits the verdict
 // when asked.
 bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
-  v.screenDepth.resize(screens_.size());
+  // A reference is judged on its valid pixels, which the first stage measures well enough.
+  const size_t stages = ref ? screens_.size() : std::min<size_t>(1, screens_.size());
   bool out = false;
-  for (size_t stage = 0; stage < screens_.size() && !out; ++stage)
-    out = failsStage(stage, ref, v, s);
+  for (size_t stage = 0; stage < stages && !out; ++stage) out = failsStage(stage, ref, v, s);
   if (!out) return false;
   ++s.screened;
   if (options_.auditScreening) {
@@ -177,19 +179,12 @@ bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
 // pixels, or (with a reference) a covis estimate outside the band by more than the margin.
 bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, PairSample& s) const {
   const ScreenStage& screen = screens_[stage];
-  Camera cam = screen.intrinsics;
-  cam.R_cam2world = v.at.camera.R_cam2world;
-  cam.t_cam2world = v.at.camera.t_cam2world;
-  auto t0 = Clock::now();
-  caster_.renderDepth(cam, v.screenDepth[stage]);
-  s.screenSeconds += since(t0);
+  const Camera cam = screenCamera(stage, v, s);
   if (validFraction(v.screenDepth[stage]) < options_.minValidFraction - options_.screenValidMargin)
     return true;
   if (!ref || options_.accept) return false;
-  Camera refCam = screen.intrinsics;
-  refCam.R_cam2world = ref->at.camera.R_cam2world;
-  refCam.t_cam2world = ref->at.camera.t_cam2world;
-  t0 = Clock::now();
+  const Camera refCam = screenCamera(stage, *ref, s);
+  const auto t0 = Clock::now();
   const double estimate =
       computeCovisibility(refCam, ref->screenDepth[stage], cam, v.screenDepth[stage], options_.covis)
           .covis;
@@ -198,6 +193,20 @@ bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, PairSampl
                    estimate > options_.maxCovis + screen.covisMargin;
   if (out) s.candidateCovis.push_back(static_cast<float>(estimate));
   return out;
+}
+
+// v's camera at the stage's resolution; renders v's depth there unless it has it already.
+Camera PairGenerator::screenCamera(size_t stage, const View& v, PairSample& s) const {
+  Camera cam = screens_[stage].intrinsics;
+  cam.R_cam2world = v.at.camera.R_cam2world;
+  cam.t_cam2world = v.at.camera.t_cam2world;
+  v.screenDepth.resize(screens_.size());
+  if (v.screenDepth[stage].data.empty()) {
+    const auto t0 = Clock::now();
+    caster_.renderDepth(cam, v.screenDepth[stage]);
+    s.screenSeconds += since(t0);
+  }
+  return cam;
 }
 
 void PairGenerator::renderFull(View& v, bool rgb, PairSample& s) const {

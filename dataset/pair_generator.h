@@ -118,6 +118,7 @@ class PairGenerator {
   };
   bool screenedOut(const View* ref, View& v, PairSample& s) const;
   bool failsStage(size_t stage, const View* ref, View& v, PairSample& s) const;
+  Camera screenCamera(size_t stage, const View& v, PairSample& s) const;
   void renderFull(View& v, bool rgb, PairSample& s) const;
   bool inBand(double covis) const;
   void finish(std::vector<View>& views, PairSample& s) const;

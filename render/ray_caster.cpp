@@ -83,10 +83,19 @@ struct Lighting {
   float sampleSize;        // width of one colour sample at z-depth 1: 1 / (fx * supersample)
 };
 
-inline RTCIntersectContext coherentContext() {
+// Neighbouring rays of a small image are far apart. Over a large mesh Embree traverses them
+// faster as incoherent (1.3M-triangle scan, one thread: 0.34 against 0.44 ms at 32x32, 2.75
+// against 2.86 ms at 128x128, but 7.8 against 6.5 ms at 256x256); over a small one, slower
+// (2k-triangle apartment: 0.13 against 0.07 ms at 64x64). Meshes count as large from
+// kMediumQualityTriangles, where the BVH quality changes too.
+constexpr int kIncoherentPixels = 128 * 128;
+
+inline RTCIntersectContext primaryContext(int width, int height, bool largeMesh) {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
-  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  ctx.flags = largeMesh && width * height <= kIncoherentPixels
+                  ? RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
+                  : RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   return ctx;
 }
 
@@ -205,9 +214,10 @@ void RayCaster::renderDepth(const Camera& camera, ImageF& depth) const {
   const int W = camera.width, H = camera.height;
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
   RTCScene scene = impl_->scene;
+  const bool largeMesh = mesh_.numTriangles() >= kMediumQualityTriangles;
 #pragma omp parallel for schedule(dynamic, 4)
   for (int tile = 0; tile < tilesX * tilesY; ++tile) {
-    RTCIntersectContext ctx = coherentContext();
+    RTCIntersectContext ctx = primaryContext(W, H, largeMesh);
     RTCRayHit8 rh;
     alignas(32) int valid[kPacket];
     const int x0 = (tile % tilesX) * kTileW, ty = (tile / tilesX) * kTileH;
@@ -248,7 +258,8 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
   const int W = frame.depth.width, H = frame.depth.height;
   const int rows = std::min(kTileH, H - y0), cols = std::min(kTileW, W - x0);
   const int ss = std::clamp(options.supersample, 1, 4);
-  RTCIntersectContext ctx = coherentContext();
+  RTCIntersectContext ctx =
+      primaryContext(W, H, mesh->numTriangles() >= kMediumQualityTriangles);
   RTCRayHit8 rh;
   alignas(32) int valid[kPacket];
   Eigen::Vector3f colour[kTileH][kTileW];  // linear colour sums over the sub-samples
