@@ -157,6 +157,7 @@ struct Screen {
   int resolution = kAutoScreen;
   double margin = PairOptions{}.screenCovisMargin;
   double fineMargin = PairOptions{}.screenFineMargin;
+  double frameMargin = PairOptions{}.screenFrameMargin;
 };
 
 nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, unsigned threads,
@@ -172,6 +173,7 @@ nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, 
   c.pair.auditScreening = audit;
   c.pair.screenCovisMargin = screen.margin;
   c.pair.screenFineMargin = screen.fineMargin;
+  c.pair.screenFrameMargin = screen.frameMargin;
   return runGenerate(c);
 }
 
@@ -195,6 +197,8 @@ int main(int argc, char** argv) {
   app.add_option("--screen-margin", screen.margin, "Screening's covis margin");
   app.add_option("--screen-fine-margin", screen.fineMargin,
                  "Covis margin of the second screening stage");
+  app.add_option("--screen-frame-margin", screen.frameMargin,
+                 "Margin of the in-frame bound checked before rendering (--min-covis: off)");
   app.add_option("--audit-pairs", auditPairs,
                  "Pairs of the audited run for the false-rejection rate (default: --pairs)");
   CLI11_PARSE(app, argc, argv);

@@ -32,13 +32,16 @@ constexpr int kChunk = 256;
 
 // The kernel: counts over the sampled pixels of i. `m` maps (u, v, z) of i to homogeneous pixel
 // coordinates of j.
+// Without j's depth (depthJ null: a Wj x Hj frame), the depth test is left out and the count is
+// of pixels inside j's frame and in front of it.
 PAIRCAST_COVIS_CLONES VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI,
-                                                      const ImageF& depthJ, float absTol,
-                                                      float relTol, int stride, uint8_t* mask) {
-  const int Wi = depthI.width, Hi = depthI.height, Wj = depthJ.width;
-  const float maxX = static_cast<float>(depthJ.width), maxY = static_cast<float>(depthJ.height);
+                                                      const ImageF* depthJ, int Wj, int Hj,
+                                                      float absTol, float relTol, int stride,
+                                                      uint8_t* mask) {
+  const int Wi = depthI.width, Hi = depthI.height;
+  const float maxX = static_cast<float>(Wj), maxY = static_cast<float>(Hj);
   const float lastX = maxX - 1.0f, lastY = maxY - 1.0f;
-  const float* dj = depthJ.data.data();
+  const float* dj = depthJ ? depthJ->data.data() : nullptr;
   const float ax = m.A(0, 0), ay = m.A(1, 0), az = m.A(2, 0);  // d q / d(z u)
   const float bx = m.b.x(), by = m.b.y(), bz = m.b.z();
   VisibleCount count;
@@ -71,14 +74,18 @@ PAIRCAST_COVIS_CLONES VisibleCount countVisibleKernel(const PixelDepthMap& m, co
       }
       // Lookup pass: the depth test against j's nearest pixel.
       size_t visible = 0, nValid = 0;
-      for (int k = 0; k < n; ++k) {
-        const float d = dj[index[k]];
-        visible += ok[k] & validDepth(d) & (std::abs(qz[k] - d) <= absTol + relTol * d);
-        nValid += valid[k];
+      for (int k = 0; k < n; ++k) nValid += valid[k];
+      if (!dj) {
+        for (int k = 0; k < n; ++k) visible += ok[k] & 1;
+      } else {
+        for (int k = 0; k < n; ++k) {
+          const float d = dj[index[k]];
+          visible += ok[k] & validDepth(d) & (std::abs(qz[k] - d) <= absTol + relTol * d);
+        }
       }
       // The mask repeats the test per lane; kept out of the loop above so that stays a plain
       // reduction.
-      if (mask) {
+      if (mask && dj) {
         uint8_t* out = mask + static_cast<size_t>(v) * Wi + u0;
         for (int k = 0; k < n; ++k) {
           const float d = dj[index[k]];
@@ -99,23 +106,36 @@ double fraction(const VisibleCount& c, CovisOptions::Normalize normalize) {
   return den > 0 ? static_cast<double>(c.visible) / static_cast<double>(den) : 0.0;
 }
 
-void checkInputs(const Camera& ci, const ImageF& depthI, const Camera& cj, const ImageF& depthJ,
-                 const CovisOptions& o) {
-  checkDepthMatches(ci, depthI);
-  checkDepthMatches(cj, depthJ);
+void checkOptions(const CovisOptions& o) {
   if (o.stride < 1) throw Error("covis stride must be >= 1, got " + std::to_string(o.stride));
   if (!(o.absTol >= 0.0f && o.relTol >= 0.0f))
     throw Error("covis tolerances must be >= 0 (absTol " + std::to_string(o.absTol) + ", relTol " +
                 std::to_string(o.relTol) + ")");
 }
 
+void checkInputs(const Camera& ci, const ImageF& depthI, const Camera& cj, const ImageF& depthJ,
+                 const CovisOptions& o) {
+  checkDepthMatches(ci, depthI);
+  checkDepthMatches(cj, depthJ);
+  checkOptions(o);
+}
 }  // namespace
 
 VisibleCount countVisible(const Camera& ci, const ImageF& depthI, const Camera& cj,
                           const ImageF& depthJ, const CovisOptions& o) {
   checkInputs(ci, depthI, cj, depthJ, o);
-  return countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, depthJ, o.absTol, o.relTol,
-                            o.stride, nullptr);
+  return countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, &depthJ, depthJ.width,
+                            depthJ.height, o.absTol, o.relTol, o.stride, nullptr);
+}
+
+double inFrameFraction(const Camera& ci, const ImageF& depthI, const Camera& cj,
+                       const CovisOptions& o) {
+  checkDepthMatches(ci, depthI);
+  PAIRCAST_CHECK(cj.width > 0 && cj.height > 0);
+  checkOptions(o);
+  return fraction(countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, nullptr, cj.width,
+                                     cj.height, o.absTol, o.relTol, o.stride, nullptr),
+                  o.normalize);
 }
 
 Image8 visibilityMask(const Camera& ci, const ImageF& depthI, const Camera& cj,
@@ -124,8 +144,8 @@ Image8 visibilityMask(const Camera& ci, const ImageF& depthI, const Camera& cj,
   o.stride = 1;
   checkInputs(ci, depthI, cj, depthJ, o);
   Image8 mask(depthI.width, depthI.height, 1, 0);
-  countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, depthJ, o.absTol, o.relTol, 1,
-                     mask.data.data());
+  countVisibleKernel(pixelFromPixelDepth(ci, cj), depthI, &depthJ, depthJ.width, depthJ.height,
+                     o.absTol, o.relTol, 1, mask.data.data());
   return mask;
 }
 

@@ -55,6 +55,12 @@ Image8 visibilityMask(const Camera& ci, const ImageF& depthI, const Camera& cj,
 double visibleFraction(const Camera& ci, const ImageF& depthI, const Camera& cj,
                        const ImageF& depthJ, const CovisOptions& options = {});
 
+// An upper bound of v_ij that needs no depth of view j: the share of i's valid (sampled)
+// pixels that land inside j's frame and in front of it, occlusion left out. With stride 1,
+// visibleFraction(ci, depthI, cj, any depthJ) never exceeds it.
+double inFrameFraction(const Camera& ci, const ImageF& depthI, const Camera& cj,
+                       const CovisOptions& options = {});
+
 // Both directions. Swapping the views swaps v_ij and v_ji exactly.
 CovisResult computeCovisibility(const Camera& ci, const ImageF& depthI, const Camera& cj,
                                 const ImageF& depthJ, const CovisOptions& options = {});

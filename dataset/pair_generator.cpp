@@ -14,6 +14,9 @@ namespace {
 using Clock = SteadyClock;
 constexpr auto since = secondsSince;
 
+// outOfFrame projects a kFrameScreenSide^2 grid of the reference's pixels.
+constexpr int kFrameScreenSide = 64;
+
 double validFraction(const ImageF& depth) {
   size_t valid = 0;
   for (float d : depth.data) valid += d > 0.0f;
@@ -55,7 +58,8 @@ void validatePairOptions(const PairOptions& o) {
   if (o.screenResolution > o.resolution)
     throw Error("--screen-resolution (" + std::to_string(o.screenResolution) +
                 ") must not exceed --resolution (" + std::to_string(o.resolution) + ")");
-  if (!(o.screenCovisMargin >= 0 && o.screenFineMargin >= 0 && o.screenValidMargin >= 0))
+  if (!(o.screenCovisMargin >= 0 && o.screenFineMargin >= 0 && o.screenFrameMargin >= 0 &&
+        o.screenValidMargin >= 0))
     throw Error("screening margins must be >= 0");
 }
 
@@ -158,7 +162,7 @@ bool PairGenerator::inBand(double covis) const {
 bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
   // A reference is judged on its valid pixels, which the first stage measures well enough.
   const size_t stages = ref ? screens_.size() : std::min<size_t>(1, screens_.size());
-  bool out = false;
+  bool out = ref && outOfFrame(*ref, v, s);
   for (size_t stage = 0; stage < stages && !out; ++stage) out = failsStage(stage, ref, v, s);
   if (!out) return false;
   ++s.screened;
@@ -172,6 +176,20 @@ bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
                         .covis);
     s.falseRejections += kept;
   }
+  return true;
+}
+
+// Whether too little of the reference lands inside v's frame for v to pass: no rendering, the
+// reference's pixels projected into v's camera, occlusion left out.
+bool PairGenerator::outOfFrame(const View& ref, const View& v, PairSample& s) const {
+  if (options_.accept || screens_.empty()) return false;
+  CovisOptions o = options_.covis;
+  o.stride = std::max(1, options_.resolution / kFrameScreenSide);
+  const auto t0 = Clock::now();
+  const double bound = inFrameFraction(ref.at.camera, ref.depth, v.at.camera, o);
+  s.screenSeconds += since(t0);
+  if (bound >= options_.minCovis - options_.screenFrameMargin) return false;
+  s.candidateCovis.push_back(static_cast<float>(bound));
   return true;
 }
 

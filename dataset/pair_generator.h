@@ -47,6 +47,10 @@ struct PairOptions {
   int screenResolution = kAutoScreen;
   double screenCovisMargin = 0.15;
   double screenFineMargin = 0.08;
+  // Before any rendering, a candidate is turned down when the share of the reference's pixels
+  // (every resolution/64-th) inside its frame, an upper bound of covis, is below minCovis by more
+  // than this.
+  double screenFrameMargin = 0.03;
   double screenValidMargin = 0.05;
   // Benchmarks: also render every screened-out view at full resolution, to count the ones that
   // would have passed (PairSample::falseRejections). It changes no output.
@@ -117,6 +121,7 @@ class PairGenerator {
     double covisMargin;
   };
   bool screenedOut(const View* ref, View& v, PairSample& s) const;
+  bool outOfFrame(const View& ref, const View& v, PairSample& s) const;
   bool failsStage(size_t stage, const View* ref, View& v, PairSample& s) const;
   Camera screenCamera(size_t stage, const View& v, PairSample& s) const;
   void renderFull(View& v, bool rgb, PairSample& s) const;

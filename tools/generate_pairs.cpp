@@ -94,6 +94,10 @@ int main(int argc, char** argv) {
   app.add_option("--screen-fine-margin", cfg.pair.screenFineMargin,
                  "The same margin for the second screening stage, at twice the resolution")
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
+                 "Before rendering, turn down candidates whose share of the reference inside their "
+                 "frame is below --min-covis by more than this")
+      ->check(CLI::Range(0.0, 1.0));
   app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
                "Also write 8-bit co-visibility masks (255: seen by the other view)");
   bool allowSkipped = false;

@@ -375,6 +375,32 @@ TEST(Covisibility, MatchesPlainDefinitionOnRandomScenes) {
   EXPECT_LE(differing, total / 2000);
 }
 
+TEST(Covisibility, InFrameFractionBoundsVisibilityFromAbove) {
+  // Hand case: of i's 100 columns, 11 fall outside j's frame (see the occluder case above), so
+  // the bound is 0.89 whatever occludes; random scenes: never below v_ij, and equal to it
+  // without occluders between the views' surfaces.
+  const Camera ci = cameraAt({0, 0, 0}, {0, 0, 4}, 100, 100, 90);
+  const Camera cj = cameraAt({0.9, 0, 0}, {0.9, 0, 4}, 100, 100, 90);
+  std::vector<Rect> scene = {plane(2, 4.0), {2, 2.0, {0.21, -kInf, 0}, {0.61, kInf, 0}}};
+  EXPECT_DOUBLE_EQ(inFrameFraction(ci, analyticDepth(ci, scene), cj), 0.89);
+  const Camera away = cameraAt({0, 0, 0}, {0, 0, -4}, 100, 100, 90);
+  EXPECT_EQ(inFrameFraction(ci, analyticDepth(ci, scene), away), 0.0);
+  Rng rng(12);
+  int tighter = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    const RandomScene room(rng);
+    const Camera a = room.camera(rng, 48, 40), b = room.camera(rng, 56, 44);
+    const ImageF da = analyticDepth(a, room.rects), db = analyticDepth(b, room.rects);
+    const double bound = inFrameFraction(a, da, b), v = visibleFraction(a, da, b, db);
+    EXPECT_GE(bound, v) << "trial " << trial;
+    tighter += bound > v;
+  }
+  EXPECT_GT(tighter, 0) << "occlusion never mattered: the bound is not tested";
+  CovisOptions bad;
+  bad.stride = 0;
+  EXPECT_THROW(inFrameFraction(ci, analyticDepth(ci, scene), cj, bad), Error);
+}
+
 TEST(Covisibility, SwappingViewsSwapsTheDirections) {
   Rng rng(9);
   int partial = 0;
