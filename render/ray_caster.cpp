@@ -104,14 +104,26 @@ inline RTCIntersectContext primaryContext(int width, int height, bool largeMesh)
 // What shading one hit needs of its triangle, in one cache line: a hit costs one load here
 // instead of five scattered ones (normal, material, vertex indices, three texture coordinates).
 struct alignas(64) ShadeTriangle {
+  enum Colour : int32_t {
+    kFlat,       // albedo below
+    kPerVertex,  // corner colours below, interpolated (untextured triangles)
+    kFromMesh,   // albedo below times the mesh's vertex colours (textured triangles with them)
+  };
   Eigen::Vector3f normal;  // unit geometric normal (sign fixed per hit)
-  Eigen::Vector3f albedo;  // factor x vertex colour (when uniform), linear
   int32_t texture;         // index into RayCaster::Impl::textures, or -1
-  int32_t varying;         // 1: vertex colours differ over the triangle
-  Eigen::Vector2f uv0;     // texture coordinates: uv0 + u * duv1 + v * duv2 at barycentrics u, v
-  Eigen::Vector2f duv1;
-  Eigen::Vector2f duv2;
-  float texelsPerMetre;    // of the texture's level 0 over this triangle (mean of both axes)
+  Colour colour;
+  struct Surface {
+    float albedo[3];        // material factor x vertex colour (when uniform), linear
+    float uv0[2], duv1[2], duv2[2];  // texture coordinates: uv0 + u duv1 + v duv2
+    float texelsPerMetre;   // of the texture's level 0 over this triangle (mean of both axes)
+  };
+  struct Corners {
+    float rgb[3][3];  // material factor x each vertex's colour, linear
+  };
+  union {
+    Surface surface;  // kFlat, kFromMesh
+    Corners corners;  // kPerVertex
+  };
 };
 
 struct RayCaster::Impl {
@@ -126,6 +138,9 @@ struct RayCaster::Impl {
   void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y,
                      int cols, Frame& frame) const;
   Eigen::Vector3f shade(const RTCRayHit8& rh, int i, const Lighting& light) const;
+  Eigen::Vector3f texture(const ShadeTriangle& t, float u, float v, float cos, float z,
+                          const Lighting& light) const;
+  static ShadeTriangle shadeTriangle(const Mesh& m, size_t t);
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
   }
@@ -134,31 +149,43 @@ struct RayCaster::Impl {
 void RayCaster::Impl::prepareShading(const Mesh& m) {
   mesh = &m;
   triangles.resize(m.numTriangles());
-  for (size_t t = 0; t < m.numTriangles(); ++t) {
-    const Eigen::Vector3i& tri = m.triangles[t];
-    const Eigen::Vector3f& p0 = m.positions[tri[0]];
-    // Embree's Ng is (p2 - p0) x (p1 - p0) ... up to sign; its sign is fixed at shading time.
-    const Eigen::Vector3f n = (m.positions[tri[1]] - p0).cross(m.positions[tri[2]] - p0);
-    const Material& mat = m.materials[m.triangleMaterial[t]];
-    const bool sameColour =
-        m.colors[tri[0]] == m.colors[tri[1]] && m.colors[tri[0]] == m.colors[tri[2]];
-    ShadeTriangle& s = triangles[t];
-    s.normal = n.norm() > 0 ? n.normalized() : Eigen::Vector3f::UnitZ();
-    s.albedo = sameColour ? mat.baseColor.cwiseProduct(m.colors[tri[0]]).eval() : mat.baseColor;
-    s.texture = mat.texture;
-    s.varying = !sameColour;
-    s.uv0 = m.uvs[tri[0]];
-    s.duv1 = m.uvs[tri[1]] - m.uvs[tri[0]];
-    s.duv2 = m.uvs[tri[2]] - m.uvs[tri[0]];
-    s.texelsPerMetre = 0.0f;
-    if (s.texture >= 0 && n.norm() > 0) {  // sqrt(texel area / world area)
-      const Texture& tex = m.textures[s.texture];
-      const float uvArea = std::abs(s.duv1.x() * s.duv2.y() - s.duv1.y() * s.duv2.x());
-      s.texelsPerMetre = std::sqrt(uvArea * tex.width * tex.height / n.norm());
-    }
-  }
+  for (size_t t = 0; t < m.numTriangles(); ++t) triangles[t] = shadeTriangle(m, t);
   textures.reserve(m.textures.size());
   for (const Texture& t : m.textures) textures.emplace_back(t);
+}
+
+ShadeTriangle RayCaster::Impl::shadeTriangle(const Mesh& m, size_t t) {
+  const Eigen::Vector3i& tri = m.triangles[t];
+  const Eigen::Vector3f& p0 = m.positions[tri[0]];
+  // Embree's Ng is (p2 - p0) x (p1 - p0) ... up to sign; its sign is fixed at shading time.
+  const Eigen::Vector3f n = (m.positions[tri[1]] - p0).cross(m.positions[tri[2]] - p0);
+  const Material& mat = m.materials[m.triangleMaterial[t]];
+  const bool sameColour =
+      m.colors[tri[0]] == m.colors[tri[1]] && m.colors[tri[0]] == m.colors[tri[2]];
+  ShadeTriangle s;
+  s.normal = n.norm() > 0 ? n.normalized() : Eigen::Vector3f::UnitZ();
+  s.texture = mat.texture;
+  if (!sameColour && mat.texture < 0) {
+    s.colour = ShadeTriangle::kPerVertex;
+    for (int k = 0; k < 3; ++k)
+      Eigen::Map<Eigen::Vector3f>(s.corners.rgb[k]) = mat.baseColor.cwiseProduct(m.colors[tri[k]]);
+    return s;
+  }
+  s.colour = sameColour ? ShadeTriangle::kFlat : ShadeTriangle::kFromMesh;
+  ShadeTriangle::Surface& f = s.surface;
+  Eigen::Map<Eigen::Vector3f>(f.albedo) =
+      sameColour ? mat.baseColor.cwiseProduct(m.colors[tri[0]]).eval() : mat.baseColor;
+  const Eigen::Vector2f uv0 = m.uvs[tri[0]], duv1 = m.uvs[tri[1]] - uv0, duv2 = m.uvs[tri[2]] - uv0;
+  Eigen::Map<Eigen::Vector2f>(f.uv0) = uv0;
+  Eigen::Map<Eigen::Vector2f>(f.duv1) = duv1;
+  Eigen::Map<Eigen::Vector2f>(f.duv2) = duv2;
+  f.texelsPerMetre = 0.0f;
+  if (mat.texture >= 0 && n.norm() > 0) {  // sqrt(texel area / world area)
+    const Texture& tex = m.textures[mat.texture];
+    const float uvArea = std::abs(duv1.x() * duv2.y() - duv1.y() * duv2.x());
+    f.texelsPerMetre = std::sqrt(uvArea * tex.width * tex.height / n.norm());
+  }
+  return s;
 }
 
 RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Impl>()) {
@@ -326,26 +353,37 @@ Eigen::Vector3f RayCaster::Impl::shade(const RTCRayHit8& rh, int i, const Lighti
   if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) return sh.background;
   const int prim = static_cast<int>(rh.hit.primID[i]);
   const ShadeTriangle& t = triangles[prim];
-  const float u = rh.hit.u[i], v = rh.hit.v[i];
-  Eigen::Vector3f albedo = t.albedo;
-  if (t.varying) {
-    const Eigen::Vector3i& tri = mesh->triangles[prim];
-    albedo = albedo.cwiseProduct((1.0f - u - v) * mesh->colors[tri[0]] +
-                                 u * mesh->colors[tri[1]] + v * mesh->colors[tri[2]]);
-  }
+  const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
   const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
   const float nd = t.normal.dot(d);  // the normal is turned towards the camera: n = -sign(nd) Ng
   const float cosView = std::abs(nd) / d.norm();
-  if (t.texture >= 0) {
-    // The sample covers (z s)^2 / cos m^2 of the surface at z-depth z: the level of detail
-    // matches its texel count by area.
-    const float footprint = rh.ray.tfar[i] * light.sampleSize / std::sqrt(std::max(cosView, 1e-3f));
-    const float lod = TexturePyramid::lodFor(t.texelsPerMetre * footprint);
-    const Eigen::Vector2f uv = t.uv0 + u * t.duv1 + v * t.duv2;
-    albedo = albedo.cwiseProduct(textures[t.texture].sample(uv.x(), uv.y(), lod));
+  Eigen::Vector3f albedo;
+  if (t.colour == ShadeTriangle::kPerVertex) {
+    using V = Eigen::Map<const Eigen::Vector3f>;
+    albedo = w * V(t.corners.rgb[0]) + u * V(t.corners.rgb[1]) + v * V(t.corners.rgb[2]);
+  } else {
+    albedo = Eigen::Map<const Eigen::Vector3f>(t.surface.albedo);
+    if (t.colour == ShadeTriangle::kFromMesh) {
+      const Eigen::Vector3i& tri = mesh->triangles[prim];
+      albedo = albedo.cwiseProduct(w * mesh->colors[tri[0]] + u * mesh->colors[tri[1]] +
+                                   v * mesh->colors[tri[2]]);
+    }
+    if (t.texture >= 0) albedo = albedo.cwiseProduct(texture(t, u, v, cosView, rh.ray.tfar[i], light));
   }
   const float sunCos = (nd > 0 ? -1.0f : 1.0f) * t.normal.dot(light.sunDir);
   return albedo * (sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, sunCos));
+}
+
+// The texture of t at barycentrics (u, v), seen at z-depth z and at cos to the surface normal.
+// The sample covers (z s)^2 / cos m^2 of the surface: the level of detail matches its texel
+// count by area.
+Eigen::Vector3f RayCaster::Impl::texture(const ShadeTriangle& t, float u, float v, float cos,
+                                         float z, const Lighting& light) const {
+  const ShadeTriangle::Surface& f = t.surface;
+  const float footprint = z * light.sampleSize / std::sqrt(std::max(cos, 1e-3f));
+  const float lod = TexturePyramid::lodFor(f.texelsPerMetre * footprint);
+  return textures[t.texture].sample(f.uv0[0] + u * f.duv1[0] + v * f.duv2[0],
+                                    f.uv0[1] + u * f.duv1[1] + v * f.duv2[1], lod);
 }
 
 void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {

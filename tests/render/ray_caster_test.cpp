@@ -193,6 +193,48 @@ TEST(RayCaster, TexturedQuadShowsTextureColours) {
   }
 }
 
+TEST(RayCaster, VertexColoursAreInterpolatedWithAndWithoutTexture) {
+  // One triangle at z = 1 with red, green and blue corners, lit by ambient light only: every
+  // pixel shows material factor x texture (1x1 white, or none) x the barycentric mix.
+  const Eigen::Vector3f corner[3] = {{0.8f, 0.1f, 0.1f}, {0.1f, 0.7f, 0.1f}, {0.1f, 0.2f, 0.9f}};
+  for (const bool textured : {false, true}) {
+    Mesh mesh;
+    Material mat;
+    mat.baseColor = {0.5f, 1.0f, 0.9f};
+    if (textured) {
+      mesh.textures.push_back(Texture{"white", 1, 1, 3, {255, 255, 255}});
+      mat.texture = 0;
+    }
+    mesh.addTriangle({-2, -2, 1}, {2, -2, 1}, {-2, 2, 1}, mesh.addMaterial(mat));
+    for (int k = 0; k < 3; ++k) mesh.colors[k] = corner[k];
+    RayCaster caster(mesh);
+    Camera cam = Camera::fromHfov(40, 40, 90.0);
+    cam.lookAt({0, 0, 0}, {0, 0, 1}, {0, -1, 0});  // image right = +x, image down = +y
+    RenderOptions opt;
+    opt.shading.ambient = 1.0f;
+    opt.shading.headlight = 0.0f;
+    opt.shading.sun = 0.0f;
+    Frame frame;
+    caster.render(cam, opt, frame);
+    int checked = 0;
+    for (int y = 0; y < 40; ++y) {
+      for (int x = 0; x < 40; ++x) {
+        const float z = frame.depth.data[y * 40 + x];
+        if (z <= 0) continue;
+        const Eigen::Vector3d p = cam.worldFromCamera() * (z * cam.rayCamera(x + 0.5, y + 0.5));
+        const float u = static_cast<float>((p.x() + 2) / 4), v = static_cast<float>((p.y() + 2) / 4);
+        const Eigen::Vector3f linear =
+            mat.baseColor.cwiseProduct((1 - u - v) * corner[0] + u * corner[1] + v * corner[2]);
+        for (int c = 0; c < 3; ++c)
+          EXPECT_NEAR(frame.rgb.pixel(x, y)[c], linearToSrgb8(linear[c]), 1)
+              << (textured ? "textured" : "untextured") << " pixel " << x << "," << y;
+        ++checked;
+      }
+    }
+    EXPECT_GT(checked, 700);
+  }
+}
+
 TEST(RayCaster, SupersamplingKeepsFlatColourAndCentreGeometry) {
   const Mesh mesh = planeMesh(3.0f);
   RayCaster caster(mesh);
