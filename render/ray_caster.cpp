@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <mutex>
@@ -128,8 +129,14 @@ struct alignas(64) ShadeTriangle {
 
 struct RayCaster::Impl {
   RTCScene scene = nullptr;
-  std::vector<ShadeTriangle> triangles;  // [T], precomputed at build time
+  std::vector<ShadeTriangle> triangles;  // [T], precomputed at build time; empty for scans
   std::vector<TexturePyramid> textures;  // one per Mesh::textures
+  // Scans (no texture, colours per vertex): each triangle's corner colours, material factor
+  // included, as 8-bit sRGB (R in the low byte): 12 bytes a triangle against a 64-byte
+  // ShadeTriangle, since on a scan nearly every pixel hits a triangle of its own. The normal then
+  // comes from Embree's hit.
+  std::vector<std::array<uint32_t, 3>> corners;
+  std::array<float, 256> srgbToLinear{};
   const Mesh* mesh = nullptr;
   // Fills the tables above from the mesh.
   void prepareShading(const Mesh& mesh);
@@ -138,6 +145,8 @@ struct RayCaster::Impl {
   void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y,
                      int cols, Frame& frame) const;
   Eigen::Vector3f shade(const RTCRayHit8& rh, int i, const Lighting& light) const;
+  Eigen::Vector3f unitNormal(const RTCRayHit8& rh, int i) const;
+  Eigen::Vector3f albedo(const RTCRayHit8& rh, int i, float cosView, const Lighting& light) const;
   Eigen::Vector3f texture(const ShadeTriangle& t, float u, float v, float cos, float z,
                           const Lighting& light) const;
   static ShadeTriangle shadeTriangle(const Mesh& m, size_t t);
@@ -148,10 +157,26 @@ struct RayCaster::Impl {
 
 void RayCaster::Impl::prepareShading(const Mesh& m) {
   mesh = &m;
-  triangles.resize(m.numTriangles());
-  for (size_t t = 0; t < m.numTriangles(); ++t) triangles[t] = shadeTriangle(m, t);
+  for (int i = 0; i < 256; ++i) srgbToLinear[i] = paircast::srgbToLinear(i / 255.0f);
   textures.reserve(m.textures.size());
   for (const Texture& t : m.textures) textures.emplace_back(t);
+  bool textured = false, varying = false;
+  for (const Material& mat : m.materials) textured = textured || mat.texture >= 0;
+  for (const Eigen::Vector3f& c : m.colors) varying = varying || c != m.colors.front();
+  if (!textured && varying) {
+    corners.resize(m.numTriangles());
+    for (size_t t = 0; t < m.numTriangles(); ++t) {
+      const Eigen::Vector3f& factor = m.materials[m.triangleMaterial[t]].baseColor;
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector3f c = factor.cwiseProduct(m.colors[m.triangles[t][k]]);
+        corners[t][k] = linearToSrgb8(c.x()) | (uint32_t(linearToSrgb8(c.y())) << 8) |
+                        (uint32_t(linearToSrgb8(c.z())) << 16);
+      }
+    }
+    return;
+  }
+  triangles.resize(m.numTriangles());
+  for (size_t t = 0; t < m.numTriangles(); ++t) triangles[t] = shadeTriangle(m, t);
 }
 
 ShadeTriangle RayCaster::Impl::shadeTriangle(const Mesh& m, size_t t) {
@@ -333,7 +358,7 @@ void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& o
     if (options.normals) {
       Eigen::Vector3f n = Eigen::Vector3f::Zero();
       if (hit) {
-        n = triangles[prim].normal;
+        n = unitNormal(rh, i);
         const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
         if (n.dot(d) > 0) n = -n;
       }
@@ -351,27 +376,48 @@ void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& o
 Eigen::Vector3f RayCaster::Impl::shade(const RTCRayHit8& rh, int i, const Lighting& light) const {
   const ShadingOptions& sh = light.options;
   if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) return sh.background;
-  const int prim = static_cast<int>(rh.hit.primID[i]);
-  const ShadeTriangle& t = triangles[prim];
-  const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
+  const Eigen::Vector3f n = unitNormal(rh, i);
   const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
-  const float nd = t.normal.dot(d);  // the normal is turned towards the camera: n = -sign(nd) Ng
+  const float nd = n.dot(d);  // the normal is turned towards the camera: -sign(nd) n
   const float cosView = std::abs(nd) / d.norm();
-  Eigen::Vector3f albedo;
+  const float sunCos = (nd > 0 ? -1.0f : 1.0f) * n.dot(light.sunDir);
+  return albedo(rh, i, cosView, light) *
+         (sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, sunCos));
+}
+
+// Unit geometric normal of ray i's triangle, either sign.
+Eigen::Vector3f RayCaster::Impl::unitNormal(const RTCRayHit8& rh, int i) const {
+  if (!triangles.empty()) return triangles[rh.hit.primID[i]].normal;
+  const Eigen::Vector3f ng(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]);
+  const float norm = ng.norm();
+  return norm > 0 ? Eigen::Vector3f(ng / norm) : Eigen::Vector3f::UnitZ();
+}
+
+Eigen::Vector3f RayCaster::Impl::albedo(const RTCRayHit8& rh, int i, float cosView,
+                                        const Lighting& light) const {
+  const int prim = static_cast<int>(rh.hit.primID[i]);
+  const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
+  if (triangles.empty()) {
+    const auto decode = [&](uint32_t p) {
+      return Eigen::Vector3f(srgbToLinear[p & 255], srgbToLinear[(p >> 8) & 255],
+                             srgbToLinear[(p >> 16) & 255]);
+    };
+    const std::array<uint32_t, 3>& c = corners[prim];
+    return w * decode(c[0]) + u * decode(c[1]) + v * decode(c[2]);
+  }
+  const ShadeTriangle& t = triangles[prim];
   if (t.colour == ShadeTriangle::kPerVertex) {
     using V = Eigen::Map<const Eigen::Vector3f>;
-    albedo = w * V(t.corners.rgb[0]) + u * V(t.corners.rgb[1]) + v * V(t.corners.rgb[2]);
-  } else {
-    albedo = Eigen::Map<const Eigen::Vector3f>(t.surface.albedo);
-    if (t.colour == ShadeTriangle::kFromMesh) {
-      const Eigen::Vector3i& tri = mesh->triangles[prim];
-      albedo = albedo.cwiseProduct(w * mesh->colors[tri[0]] + u * mesh->colors[tri[1]] +
-                                   v * mesh->colors[tri[2]]);
-    }
-    if (t.texture >= 0) albedo = albedo.cwiseProduct(texture(t, u, v, cosView, rh.ray.tfar[i], light));
+    return w * V(t.corners.rgb[0]) + u * V(t.corners.rgb[1]) + v * V(t.corners.rgb[2]);
   }
-  const float sunCos = (nd > 0 ? -1.0f : 1.0f) * t.normal.dot(light.sunDir);
-  return albedo * (sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, sunCos));
+  Eigen::Vector3f a = Eigen::Map<const Eigen::Vector3f>(t.surface.albedo);
+  if (t.colour == ShadeTriangle::kFromMesh) {
+    const Eigen::Vector3i& tri = mesh->triangles[prim];
+    a = a.cwiseProduct(w * mesh->colors[tri[0]] + u * mesh->colors[tri[1]] +
+                       v * mesh->colors[tri[2]]);
+  }
+  if (t.texture >= 0) a = a.cwiseProduct(texture(t, u, v, cosView, rh.ray.tfar[i], light));
+  return a;
 }
 
 // The texture of t at barycentrics (u, v), seen at z-depth z and at cos to the surface normal.

@@ -195,18 +195,24 @@ TEST(RayCaster, TexturedQuadShowsTextureColours) {
 
 TEST(RayCaster, VertexColoursAreInterpolatedWithAndWithoutTexture) {
   // One triangle at z = 1 with red, green and blue corners, lit by ambient light only: every
-  // pixel shows material factor x texture (1x1 white, or none) x the barycentric mix.
+  // pixel shows material factor x texture (1x1 white, or none) x the barycentric mix. Three
+  // meshes, for the renderer's three ways to store colours: a scan's (no texture anywhere), a
+  // textured triangle, and an untextured one in a mesh with a texture elsewhere.
   const Eigen::Vector3f corner[3] = {{0.8f, 0.1f, 0.1f}, {0.1f, 0.7f, 0.1f}, {0.1f, 0.2f, 0.9f}};
-  for (const bool textured : {false, true}) {
+  for (const int variant : {0, 1, 2}) {
+    const bool textured = variant == 1;
     Mesh mesh;
     Material mat;
     mat.baseColor = {0.5f, 1.0f, 0.9f};
-    if (textured) {
-      mesh.textures.push_back(Texture{"white", 1, 1, 3, {255, 255, 255}});
-      mat.texture = 0;
-    }
+    if (variant > 0) mesh.textures.push_back(Texture{"white", 1, 1, 3, {255, 255, 255}});
+    if (textured) mat.texture = 0;
     mesh.addTriangle({-2, -2, 1}, {2, -2, 1}, {-2, 2, 1}, mesh.addMaterial(mat));
     for (int k = 0; k < 3; ++k) mesh.colors[k] = corner[k];
+    if (variant == 2) {  // behind the camera
+      Material other;
+      other.texture = 0;
+      mesh.addTriangle({-1, -1, -5}, {1, -1, -5}, {0, 1, -5}, mesh.addMaterial(other));
+    }
     RayCaster caster(mesh);
     Camera cam = Camera::fromHfov(40, 40, 90.0);
     cam.lookAt({0, 0, 0}, {0, 0, 1}, {0, -1, 0});  // image right = +x, image down = +y
@@ -227,7 +233,7 @@ TEST(RayCaster, VertexColoursAreInterpolatedWithAndWithoutTexture) {
             mat.baseColor.cwiseProduct((1 - u - v) * corner[0] + u * corner[1] + v * corner[2]);
         for (int c = 0; c < 3; ++c)
           EXPECT_NEAR(frame.rgb.pixel(x, y)[c], linearToSrgb8(linear[c]), 1)
-              << (textured ? "textured" : "untextured") << " pixel " << x << "," << y;
+              << "variant " << variant << " pixel " << x << "," << y;
         ++checked;
       }
     }
