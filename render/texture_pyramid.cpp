@@ -38,6 +38,23 @@ uint32_t encode(const Eigen::Vector3f& c) {
          (uint32_t(linearToSrgb8(c.z())) << 16);
 }
 
+// The next level of a w x h level: each side halved (to at least 1), each texel the mean of a
+// 2x2 block in linear light (1x2 or 2x1 where a side is already 1, wrapping on odd sides).
+std::vector<uint32_t> halve(const std::vector<uint32_t>& a, int w, int h) {
+  const int W = std::max(1, w / 2), H = std::max(1, h / 2);
+  std::vector<uint32_t> b(static_cast<size_t>(W) * H);
+  for (int y = 0; y < H; ++y) {
+    const uint32_t* r0 = a.data() + static_cast<size_t>(2 * y % h) * w;
+    const uint32_t* r1 = a.data() + static_cast<size_t>((2 * y + 1) % h) * w;
+    for (int x = 0; x < W; ++x) {
+      const int x0 = 2 * x % w, x1 = (2 * x + 1) % w;
+      const Eigen::Vector3f sum = decode(r0[x0]) + decode(r0[x1]) + decode(r1[x0]) + decode(r1[x1]);
+      b[static_cast<size_t>(y) * W + x] = encode(0.25f * sum);
+    }
+  }
+  return b;
+}
+
 // x - floor(x) for finite x; floats this large are whole numbers.
 float fract(float x) {
   if (!(std::fabs(x) < 2.0e9f)) return 0.0f;
@@ -51,39 +68,28 @@ TexturePyramid::TexturePyramid(const Texture& t) {
   if (t.width <= 0 || t.height <= 0 || (t.channels != 3 && t.channels != 4) ||
       t.texels.size() != static_cast<size_t>(t.width) * t.height * t.channels)
     throw Error("texture '" + t.name + "' has inconsistent size");
-  Level base{t.width, t.height, std::vector<uint32_t>(static_cast<size_t>(t.width) * t.height), {}};
-  for (size_t i = 0; i < base.texels.size(); ++i) {
+  std::vector<uint32_t> packed(static_cast<size_t>(t.width) * t.height);
+  for (size_t i = 0; i < packed.size(); ++i) {
     const uint8_t* p = t.texels.data() + i * t.channels;
-    base.texels[i] = p[0] | (uint32_t(p[1]) << 8) | (uint32_t(p[2]) << 16);
+    packed[i] = p[0] | (uint32_t(p[1]) << 8) | (uint32_t(p[2]) << 16);
   }
-  levels_.push_back(std::move(base));
-  while (levels_.back().width > 1 || levels_.back().height > 1) {
-    const Level& a = levels_.back();
-    Level b{std::max(1, a.width / 2), std::max(1, a.height / 2), {}, {}};
-    b.texels.resize(static_cast<size_t>(b.width) * b.height);
-    for (int y = 0; y < b.height; ++y) {
-      for (int x = 0; x < b.width; ++x) {
-        // The 2x2 block (1x2 or 2x1 where a side is already 1), wrapping on odd sides.
-        const int x0 = 2 * x % a.width, x1 = (2 * x + 1) % a.width;
-        const int y0 = 2 * y % a.height, y1 = (2 * y + 1) % a.height;
-        const uint32_t* r0 = a.texels.data() + static_cast<size_t>(y0) * a.width;
-        const uint32_t* r1 = a.texels.data() + static_cast<size_t>(y1) * a.width;
-        const Eigen::Vector3f sum = decode(r0[x0]) + decode(r0[x1]) + decode(r1[x0]) + decode(r1[x1]);
-        b.texels[static_cast<size_t>(y) * b.width + x] = encode(0.25f * sum);
-      }
-    }
-    levels_.push_back(std::move(b));
-  }
-  for (Level& l : levels_) {
-    l.spread.resize(l.texels.size());
-    for (size_t i = 0; i < l.texels.size(); ++i) l.spread[i] = spread(l.texels[i]);
+  int w = t.width, h = t.height;
+  for (;;) {
+    Level level{w, h, std::vector<uint64_t>(packed.size())};
+    for (size_t i = 0; i < packed.size(); ++i) level.texels[i] = spread(packed[i]);
+    levels_.push_back(std::move(level));
+    if (w == 1 && h == 1) break;
+    packed = halve(packed, w, h);
+    w = std::max(1, w / 2);
+    h = std::max(1, h / 2);
   }
 }
 
 Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
   const Level& l = levels_.at(level);
   PAIRCAST_CHECK(x >= 0 && x < l.width && y >= 0 && y < l.height);
-  return decode(l.texels[static_cast<size_t>(y) * l.width + x]);
+  const uint64_t p = l.texels[static_cast<size_t>(y) * l.width + x];
+  return decode((p & 255) | (((p >> 21) & 255) << 8) | (((p >> 42) & 255) << 16));
 }
 
 Eigen::Vector3f TexturePyramid::sample(float u, float v, float lod) const {
@@ -103,8 +109,8 @@ Eigen::Vector3f TexturePyramid::bilinear(const Level& l, float u, float v) const
   const uint64_t ax = fx & 15, ay = fy & 15;
   const int x0 = ix < 0 ? l.width - 1 : ix, x1 = ix + 1 >= l.width ? 0 : ix + 1;
   const int y0 = iy < 0 ? l.height - 1 : iy, y1 = iy + 1 >= l.height ? 0 : iy + 1;
-  const uint64_t* r0 = l.spread.data() + static_cast<size_t>(y0) * l.width;
-  const uint64_t* r1 = l.spread.data() + static_cast<size_t>(y1) * l.width;
+  const uint64_t* r0 = l.texels.data() + static_cast<size_t>(y0) * l.width;
+  const uint64_t* r1 = l.texels.data() + static_cast<size_t>(y1) * l.width;
   const uint64_t sum = (16 - ay) * ((16 - ax) * r0[x0] + ax * r0[x1]) +
                        ay * ((16 - ax) * r1[x0] + ax * r1[x1]);  // 255 * 256 per lane at most
   constexpr uint64_t kLane = (1u << 21) - 1;

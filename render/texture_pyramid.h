@@ -1,5 +1,5 @@
-// A texture as the renderer samples it: 8-bit sRGB texels in a mip pyramid, filtered trilinearly
-// in linear space, as a GPU samples an sRGB texture with mipmaps.
+// A texture as the renderer samples it: 8-bit sRGB texels in a mip pyramid built in linear light,
+// sampled bilinearly on the level that matches the footprint of the sample.
 //
 // Why a pyramid: a wall a few metres away at 256x256 covers several texels per pixel. Sampling
 // the full-size texture there aliases (the image shimmers with the pose) and, since neighbouring
@@ -28,18 +28,17 @@ class TexturePyramid {
   Eigen::Vector3f texel(int level, int x, int y) const;
 
   // Linear RGB at texture coordinates (u, v) (wrapping; v = 0 at the bottom) at level of detail
-  // `lod`: 0 is level 0, k + f blends levels k and k + 1. Zero for non-finite (u, v).
+  // `lod` (0 is level 0): bilinear on the nearest level. Zero for non-finite (u, v).
   Eigen::Vector3f sample(float u, float v, float lod) const;
 
-  // The level of detail for a pixel that covers `texelsPerPixel` texels of level 0 along its
-  // longer side: log2 of it (piecewise linear between powers of two), 0 below one texel.
+  // The level of detail for a sample `texelsPerPixel` texels of level 0 wide: log2 of it
+  // (piecewise linear between powers of two), 0 below one texel.
   static float lodFor(float texelsPerPixel);
 
  private:
   struct Level {
     int width = 0, height = 0;
-    std::vector<uint32_t> texels;  // [H, W] sRGB, R in the low byte
-    std::vector<uint64_t> spread;  // the same, channels 21 bits apart (see bilinear)
+    std::vector<uint64_t> texels;  // [H, W] 8-bit sRGB R, G, B at bits 0, 21, 42 (see bilinear)
   };
   Eigen::Vector3f bilinear(const Level& level, float u, float v) const;
   std::vector<Level> levels_;
