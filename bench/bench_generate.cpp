@@ -119,13 +119,19 @@ class RenderProbe {
       : scene_(load(arg)), caster_(scene_.mesh), sampler_(scene_, caster_, {}) {
     Rng rng(7);
     const Camera K = Camera::fromHfov(resolution, resolution, 60);
-    for (int i = 0; i < 64; ++i) {
-      views_.push_back(sampler_.sampleView(K, rng));
-      Camera small = Camera::fromHfov(resolution / 4, resolution / 4, 60);
-      small.R_cam2world = views_.back().R_cam2world;
-      small.t_cam2world = views_.back().t_cam2world;
-      smallViews_.push_back(small);
+    // Views as generate_pairs renders them in full: those with enough valid pixels (on an open
+    // floor most random views are sky, which renders for nothing). A scene without any is one
+    // generate_pairs skips; it is measured on random views.
+    const double minValid = PairOptions{}.minValidFraction;
+    ImageF depth;
+    for (int tries = 0; views_.size() < 64 && tries < 64 * 100; ++tries) {
+      const Camera view = sampler_.sampleView(K, rng);
+      caster_.renderDepth(view, depth);
+      size_t valid = 0;
+      for (float d : depth.data) valid += d > 0;
+      if (valid >= minValid * depth.data.size()) add(view, resolution);
     }
+    while (views_.size() < 64) add(sampler_.sampleView(K, rng), resolution);
   }
   RenderLimit measure(unsigned threads) const {
     RenderLimit r;
@@ -136,6 +142,14 @@ class RenderProbe {
   }
 
  private:
+  // A view at the output resolution, and the same at a quarter of it.
+  void add(const Camera& view, int resolution) {
+    views_.push_back(view);
+    Camera small = Camera::fromHfov(resolution / 4, resolution / 4, 60);
+    small.R_cam2world = view.R_cam2world;
+    small.t_cam2world = view.t_cam2world;
+    smallViews_.push_back(small);
+  }
   static Scene load(const SceneArg& arg) {
     LoadOptions lo;
     lo.up = arg.up;
