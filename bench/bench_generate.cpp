@@ -268,7 +268,8 @@ int main(int argc, char** argv) {
           "%-22s %9zu tris  load %.2f s  build %.2f s  %.0f MB\n"
           "    %7.1f pairs/s  limit %6.1f pairs/s  efficiency %.2f  unscreened %6.1f pairs/s "
           "(x%.2f)  acceptance %4.1f%%\n"
-          "    screened %.0f%% of candidates, false rejections %.4f (%.0f of %.0f)  "
+          "    screening turned down %.0f views (of %.0f candidates and their references; "
+          "%.0f indices without a sample), false rejections %.4f (%.0f of %.0f)\n    "
           "RGB+depth / depth-only render %.2fx (%.2f / %.2f ms; depth at 1/4 size %.3f ms)\n"
           "    time: render %4.1f%%  screen %4.1f%%  sampling %4.1f%%  covis %4.1f%%  encode "
           "%4.1f%%  write %4.1f%%\n",
@@ -276,9 +277,8 @@ int main(int argc, char** argv) {
           stats["build_seconds"].get<double>(), stats["bytes"].get<double>() / 1e6, rate,
           limit.pairsPerSecond(), rate / limit.pairsPerSecond(), plainRate, rate / plainRate,
           100 * sum["acceptance"].get<double>(),
-          100 * screening["screened"].get<double>() /
-              std::max(1.0, screening["candidates_this_run"].get<double>()),
-          falseRate, screening["false_rejections"].get<double>(),
+          screening["screened"].get<double>(), screening["candidates_this_run"].get<double>(),
+          sum["failed_pairs"].get<double>(), falseRate, screening["false_rejections"].get<double>(),
           screening["screened"].get<double>(), limit.rgbDepthSeconds / limit.depthSeconds,
           1e3 * limit.rgbDepthSeconds, 1e3 * limit.depthSeconds, 1e3 * limit.screenDepthSeconds,
           100 * split["render"].get<double>(), 100 * split["screen"].get<double>(),
