@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "render/render_albedo.h"
 #include "util/random.h"
 
 namespace paircast {
@@ -173,15 +174,9 @@ TEST(RayCaster, TexturedQuadShowsTextureColours) {
   mat.texture = 0;
   const int m = mesh.addMaterial(mat);
   addQuadZ(mesh, -1, 1, -1, 1, 1.0f, m);  // uv (0,0) at (-1,-1)
-  RayCaster caster(mesh);
   Camera cam = Camera::fromHfov(64, 64, 80.0);
   cam.lookAt({0, 0, -0.1}, {0, 0, 1}, {0, -1, 0});  // image right = +x, image down = +y
-  RenderOptions opt;
-  opt.shading.ambient = 1.0f;
-  opt.shading.headlight = 0.0f;
-  opt.shading.sun = 0.0f;
-  Frame frame;
-  caster.render(cam, opt, frame);
+  const Frame frame = renderAlbedo(mesh, cam);
   // Project each quadrant's centre and compare.
   const Eigen::Vector3d centres[4] = {
       {-0.5, 0.5, 1}, {0.5, 0.5, 1}, {-0.5, -0.5, 1}, {0.5, -0.5, 1}};
@@ -213,15 +208,9 @@ TEST(RayCaster, VertexColoursAreInterpolatedWithAndWithoutTexture) {
       other.texture = 0;
       mesh.addTriangle({-1, -1, -5}, {1, -1, -5}, {0, 1, -5}, mesh.addMaterial(other));
     }
-    RayCaster caster(mesh);
     Camera cam = Camera::fromHfov(40, 40, 90.0);
     cam.lookAt({0, 0, 0}, {0, 0, 1}, {0, -1, 0});  // image right = +x, image down = +y
-    RenderOptions opt;
-    opt.shading.ambient = 1.0f;
-    opt.shading.headlight = 0.0f;
-    opt.shading.sun = 0.0f;
-    Frame frame;
-    caster.render(cam, opt, frame);
+    const Frame frame = renderAlbedo(mesh, cam);
     int checked = 0;
     for (int y = 0; y < 40; ++y) {
       for (int x = 0; x < 40; ++x) {
