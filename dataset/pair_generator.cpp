@@ -66,13 +66,13 @@ void validatePairOptions(const PairOptions& o) {
 // One view while a sample is being made.
 struct PairGenerator::View {
   Viewpoint at;
-  ImageF depth;        // [H, W, 1] full resolution
+  ImageF depth;  // [H, W, 1] full resolution
   // Per screening stage: [S, S, 1]. A reference gets its later stages when a candidate first
   // reaches them (most references never need them), hence mutable.
   mutable std::vector<ImageF> screenDepth;
-  Image8 rgb;          // [H, W, 3], empty until rendered
-  double valid = 0;    // share of depth's pixels with depth > 0
-  CovisResult covis;   // against view 0, full resolution
+  Image8 rgb;         // [H, W, 3], empty until rendered
+  double valid = 0;   // share of depth's pixels with depth > 0
+  CovisResult covis;  // against view 0, full resolution
 };
 
 PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
@@ -85,8 +85,7 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
   validatePairOptions(options);
   options_.screenResolution = screenResolution(options);
   const int S = options_.screenResolution;
-  if (S > 0)
-    screens_.push_back({Camera::fromHfov(S, S, options.hfov), options.screenCovisMargin});
+  if (S > 0) screens_.push_back({Camera::fromHfov(S, S, options.hfov), options.screenCovisMargin});
   if (S > 0 && 4 * (2 * S) <= options.resolution)
     screens_.push_back({Camera::fromHfov(2 * S, 2 * S, options.hfov), options.screenFineMargin});
 }
@@ -203,9 +202,9 @@ bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, PairSampl
   if (!ref || options_.accept) return false;
   const Camera refCam = screenCamera(stage, *ref, s);
   const auto t0 = Clock::now();
-  const double estimate =
-      computeCovisibility(refCam, ref->screenDepth[stage], cam, v.screenDepth[stage], options_.covis)
-          .covis;
+  const double estimate = computeCovisibility(refCam, ref->screenDepth[stage], cam,
+                                              v.screenDepth[stage], options_.covis)
+                              .covis;
   s.screenSeconds += since(t0);
   const bool out = estimate < options_.minCovis - screen.covisMargin ||
                    estimate > options_.maxCovis + screen.covisMargin;

@@ -114,9 +114,9 @@ struct alignas(64) ShadeTriangle {
   int32_t texture;         // index into RayCaster::Impl::textures, or -1
   Colour colour;
   struct Surface {
-    float albedo[3];        // material factor x vertex colour (when uniform), linear
+    float albedo[3];                 // material factor x vertex colour (when uniform), linear
     float uv0[2], duv1[2], duv2[2];  // texture coordinates: uv0 + u duv1 + v duv2
-    float texelsPerMetre;   // of the texture's level 0 over this triangle (mean of both axes)
+    float texelsPerMetre;  // of the texture's level 0 over this triangle (mean of both axes)
   };
   struct Corners {
     float rgb[3][3];  // material factor x each vertex's colour, linear
@@ -140,10 +140,10 @@ struct RayCaster::Impl {
   const Mesh* mesh = nullptr;
   // Fills the tables above from the mesh.
   void prepareShading(const Mesh& mesh);
-  void renderTile(const PrimaryRays& P, const RenderOptions& options, const Lighting& light,
-                  int x0, int y0, Frame& frame) const;
-  void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y,
-                     int cols, Frame& frame) const;
+  void renderTile(const PrimaryRays& P, const RenderOptions& options, const Lighting& light, int x0,
+                  int y0, Frame& frame) const;
+  void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y, int cols,
+                     Frame& frame) const;
   Eigen::Vector3f shade(const RTCRayHit8& rh, int i, const Lighting& light) const;
   Eigen::Vector3f unitNormal(const RTCRayHit8& rh, int i) const;
   Eigen::Vector3f albedo(const RTCRayHit8& rh, int i, float cosView, const Lighting& light) const;
@@ -310,8 +310,7 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
   const int W = frame.depth.width, H = frame.depth.height;
   const int rows = std::min(kTileH, H - y0), cols = std::min(kTileW, W - x0);
   const int ss = std::clamp(options.supersample, 1, 4);
-  RTCIntersectContext ctx =
-      primaryContext(W, H, mesh->numTriangles() >= kMediumQualityTriangles);
+  RTCIntersectContext ctx = primaryContext(W, H, mesh->numTriangles() >= kMediumQualityTriangles);
   RTCRayHit8 rh;
   alignas(32) int valid[kPacket];
   Eigen::Vector3f colour[kTileH][kTileW];  // linear colour sums over the sub-samples
@@ -319,8 +318,7 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
     setupPacket(P, x0, y0 + r, W, 0.5f, 0.5f, rh, valid);
     rtcIntersect8(valid, scene, &ctx, &rh);
     writeGeometry(rh, options, x0, y0 + r, cols, frame);
-    for (int i = 0; options.rgb && ss == 1 && i < cols; ++i)
-      colour[r][i] = shade(rh, i, light);
+    for (int i = 0; options.rgb && ss == 1 && i < cols; ++i) colour[r][i] = shade(rh, i, light);
   }
   if (!options.rgb) return;
   for (int sub = 0; ss > 1 && sub < ss * ss; ++sub) {

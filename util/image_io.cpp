@@ -17,7 +17,6 @@ using OIIO::ImageOutput;
 using OIIO::ImageSpec;
 using OIIO::TypeDesc;
 
-
 // Writes through an in-memory proxy so that every file write goes through writeFileAtomic.
 template <typename T>
 std::vector<unsigned char> encode(const Image<T>& image, const std::string& format, TypeDesc type,
@@ -102,7 +101,6 @@ std::vector<unsigned char> encodeImage(const Image8& image, std::string_view for
 std::vector<unsigned char> encodeExr(const ImageF& image, bool half) {
   return encode(image, "exr", half ? TypeDesc::HALF : TypeDesc::FLOAT, 0);
 }
-
 
 void writeExr(const std::string& path, const ImageF& image, bool half) {
   if (lowerExtension(path) != "exr") throw Error(path, "float maps are written as .exr");

@@ -217,7 +217,8 @@ TEST(RayCaster, VertexColoursAreInterpolatedWithAndWithoutTexture) {
         const float z = frame.depth.data[y * 40 + x];
         if (z <= 0) continue;
         const Eigen::Vector3d p = cam.worldFromCamera() * (z * cam.rayCamera(x + 0.5, y + 0.5));
-        const float u = static_cast<float>((p.x() + 2) / 4), v = static_cast<float>((p.y() + 2) / 4);
+        const float u = static_cast<float>((p.x() + 2) / 4),
+                    v = static_cast<float>((p.y() + 2) / 4);
         const Eigen::Vector3f linear =
             mat.baseColor.cwiseProduct((1 - u - v) * corner[0] + u * corner[1] + v * corner[2]);
         for (int c = 0; c < 3; ++c)
