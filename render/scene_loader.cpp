@@ -253,42 +253,32 @@ size_t plySize(PlyType t) {
   return sizes[static_cast<int>(t)];
 }
 
+// A value of type T from unaligned bytes.
+template <class T>
+T loadUnaligned(const char* p) {
+  T v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
 double plyRead(PlyType t, const char* p) {
   switch (t) {
     case PlyType::Int8:
       return static_cast<int8_t>(*p);
     case PlyType::UInt8:
       return static_cast<uint8_t>(*p);
-    case PlyType::Int16: {
-      int16_t v;
-      std::memcpy(&v, p, 2);
-      return v;
-    }
-    case PlyType::UInt16: {
-      uint16_t v;
-      std::memcpy(&v, p, 2);
-      return v;
-    }
-    case PlyType::Int32: {
-      int32_t v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case PlyType::UInt32: {
-      uint32_t v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case PlyType::Float32: {
-      float v;
-      std::memcpy(&v, p, 4);
-      return v;
-    }
-    case PlyType::Float64: {
-      double v;
-      std::memcpy(&v, p, 8);
-      return v;
-    }
+    case PlyType::Int16:
+      return loadUnaligned<int16_t>(p);
+    case PlyType::UInt16:
+      return loadUnaligned<uint16_t>(p);
+    case PlyType::Int32:
+      return loadUnaligned<int32_t>(p);
+    case PlyType::UInt32:
+      return loadUnaligned<uint32_t>(p);
+    case PlyType::Float32:
+      return loadUnaligned<float>(p);
+    case PlyType::Float64:
+      return loadUnaligned<double>(p);
   }
   return 0;
 }
