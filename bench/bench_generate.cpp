@@ -127,9 +127,7 @@ class RenderProbe {
     for (int tries = 0; views_.size() < 64 && tries < 64 * 100; ++tries) {
       const Camera view = sampler_.sampleView(K, rng);
       caster_.renderDepth(view, depth);
-      size_t valid = 0;
-      for (float d : depth.data) valid += d > 0;
-      if (valid >= minValid * depth.data.size()) add(view, resolution);
+      if (validFraction(depth) >= minValid) add(view, resolution);
     }
     while (views_.size() < 64) add(sampler_.sampleView(K, rng), resolution);
   }

@@ -17,12 +17,6 @@ constexpr auto since = secondsSince;
 // outOfFrame projects a kFrameScreenSide^2 grid of the reference's pixels.
 constexpr int kFrameScreenSide = 64;
 
-double validFraction(const ImageF& depth) {
-  size_t valid = 0;
-  for (float d : depth.data) valid += d > 0.0f;
-  return depth.data.empty() ? 0.0 : static_cast<double>(valid) / depth.data.size();
-}
-
 }  // namespace
 
 Eigen::Vector3d meanWorldPoint(const Camera& camera, const ImageF& depth) {

@@ -19,6 +19,9 @@ struct Frame {
   double validFraction() const;
 };
 
+// Share of a depth map's pixels with depth > 0 (0 for an empty map).
+double validFraction(const ImageF& depth);
+
 struct ShadingOptions {
   float ambient = 0.35f;    // light reaching every surface
   float headlight = 0.55f;  // Lambert term from a light at the camera

@@ -8,19 +8,6 @@
 #include "util/error.h"
 
 namespace paircast {
-namespace {
-
-const std::array<float, 256>& srgbTable() {
-  static const std::array<float, 256> table = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) t[i] = srgbToLinear(i / 255.0f);
-    return t;
-  }();
-  return table;
-}
-
-}  // namespace
-
 float srgbToLinear(float c) {
   return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
 }
@@ -30,6 +17,12 @@ float linearToSrgb(float c) {
   return c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
 }
 
+const std::array<float, 256> kSrgb8ToLinear = [] {
+  std::array<float, 256> t{};
+  for (int i = 0; i < 256; ++i) t[i] = srgbToLinear(i / 255.0f);
+  return t;
+}();
+
 const std::array<uint8_t, 4097> kLinearToSrgb8 = [] {
   std::array<uint8_t, 4097> t{};
   for (int i = 0; i <= 4096; ++i)
@@ -38,7 +31,7 @@ const std::array<uint8_t, 4097> kLinearToSrgb8 = [] {
 }();
 
 Eigen::Vector3f Texture::sample(float u, float v) const {
-  const auto& lut = srgbTable();
+  const auto& lut = kSrgb8ToLinear;
   if (!std::isfinite(u) || !std::isfinite(v)) return Eigen::Vector3f::Zero();
   // Wrap to [0, 1) first, so that the texel indices below need no modulo. Texel centres are at
   // (i + 0.5) / W; image row 0 is v = 1.

@@ -74,5 +74,16 @@ inline uint8_t linearToSrgb8(float c) {
   if (c >= 1.0f) return 255;
   return kLinearToSrgb8[static_cast<int>(c * 4096.0f + 0.5f)];
 }
+// Table of srgbToLinear over the 256 8-bit values.
+extern const std::array<float, 256> kSrgb8ToLinear;
+
+// Linear RGB to 8-bit sRGB packed in 32 bits (R in the low byte, then G and B), and back.
+inline uint32_t packSrgb8(const Eigen::Vector3f& linear) {
+  return linearToSrgb8(linear.x()) | (uint32_t(linearToSrgb8(linear.y())) << 8) |
+         (uint32_t(linearToSrgb8(linear.z())) << 16);
+}
+inline Eigen::Vector3f unpackSrgb8(uint32_t p) {
+  return {kSrgb8ToLinear[p & 255], kSrgb8ToLinear[(p >> 8) & 255], kSrgb8ToLinear[(p >> 16) & 255]};
+}
 
 }  // namespace paircast

@@ -136,8 +136,8 @@ struct RayCaster::Impl {
   // ShadeTriangle, since on a scan nearly every pixel hits a triangle of its own. The normal then
   // comes from Embree's hit.
   std::vector<std::array<uint32_t, 3>> corners;
-  std::array<float, 256> srgbToLinear{};
   const Mesh* mesh = nullptr;
+  bool largeMesh = false;  // at least kMediumQualityTriangles: medium BVH, incoherent small images
   // Fills the tables above from the mesh.
   void prepareShading(const Mesh& mesh);
   void renderTile(const PrimaryRays& P, const RenderOptions& options, const Lighting& light, int x0,
@@ -157,7 +157,6 @@ struct RayCaster::Impl {
 
 void RayCaster::Impl::prepareShading(const Mesh& m) {
   mesh = &m;
-  for (int i = 0; i < 256; ++i) srgbToLinear[i] = paircast::srgbToLinear(i / 255.0f);
   textures.reserve(m.textures.size());
   for (const Texture& t : m.textures) textures.emplace_back(t);
   bool textured = false, varying = false;
@@ -167,11 +166,8 @@ void RayCaster::Impl::prepareShading(const Mesh& m) {
     corners.resize(m.numTriangles());
     for (size_t t = 0; t < m.numTriangles(); ++t) {
       const Eigen::Vector3f& factor = m.materials[m.triangleMaterial[t]].baseColor;
-      for (int k = 0; k < 3; ++k) {
-        const Eigen::Vector3f c = factor.cwiseProduct(m.colors[m.triangles[t][k]]);
-        corners[t][k] = linearToSrgb8(c.x()) | (uint32_t(linearToSrgb8(c.y())) << 8) |
-                        (uint32_t(linearToSrgb8(c.z())) << 16);
-      }
+      for (int k = 0; k < 3; ++k)
+        corners[t][k] = packSrgb8(factor.cwiseProduct(m.colors[m.triangles[t][k]]));
     }
     return;
   }
@@ -220,9 +216,9 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
   // High quality (spatial splits) pays on small scenes, which render for long. On a 1.3M-triangle
   // scan it took 1.0 s against medium's 0.5 s, and the same 418 candidate views then rendered
   // as fast (10.0-10.3 s with either).
-  const RTCBuildQuality quality = mesh.numTriangles() >= kMediumQualityTriangles
-                                      ? RTC_BUILD_QUALITY_MEDIUM
-                                      : RTC_BUILD_QUALITY_HIGH;
+  impl_->largeMesh = mesh.numTriangles() >= kMediumQualityTriangles;
+  const RTCBuildQuality quality =
+      impl_->largeMesh ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH;
   rtcSetSceneBuildQuality(impl_->scene, quality);
   rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_NONE);
 
@@ -266,7 +262,7 @@ void RayCaster::renderDepth(const Camera& camera, ImageF& depth) const {
   const int W = camera.width, H = camera.height;
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
   RTCScene scene = impl_->scene;
-  const bool largeMesh = mesh_.numTriangles() >= kMediumQualityTriangles;
+  const bool largeMesh = impl_->largeMesh;
 #pragma omp parallel for schedule(dynamic, 4)
   for (int tile = 0; tile < tilesX * tilesY; ++tile) {
     RTCIntersectContext ctx = primaryContext(W, H, largeMesh);
@@ -310,7 +306,7 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
   const int W = frame.depth.width, H = frame.depth.height;
   const int rows = std::min(kTileH, H - y0), cols = std::min(kTileW, W - x0);
   const int ss = std::clamp(options.supersample, 1, 4);
-  RTCIntersectContext ctx = primaryContext(W, H, mesh->numTriangles() >= kMediumQualityTriangles);
+  RTCIntersectContext ctx = primaryContext(W, H, largeMesh);
   RTCRayHit8 rh;
   alignas(32) int valid[kPacket];
   Eigen::Vector3f colour[kTileH][kTileW];  // linear colour sums over the sub-samples
@@ -396,12 +392,8 @@ Eigen::Vector3f RayCaster::Impl::albedo(const RTCRayHit8& rh, int i, float cosVi
   const int prim = static_cast<int>(rh.hit.primID[i]);
   const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
   if (triangles.empty()) {
-    const auto decode = [&](uint32_t p) {
-      return Eigen::Vector3f(srgbToLinear[p & 255], srgbToLinear[(p >> 8) & 255],
-                             srgbToLinear[(p >> 16) & 255]);
-    };
     const std::array<uint32_t, 3>& c = corners[prim];
-    return w * decode(c[0]) + u * decode(c[1]) + v * decode(c[2]);
+    return w * unpackSrgb8(c[0]) + u * unpackSrgb8(c[1]) + v * unpackSrgb8(c[2]);
   }
   const ShadeTriangle& t = triangles[prim];
   if (t.colour == ShadeTriangle::kPerVertex) {
@@ -465,11 +457,14 @@ void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {
   }
 }
 
-double Frame::validFraction() const {
-  if (depth.data.empty()) return 0.0;
+double validFraction(const ImageF& depth) {
   size_t valid = 0;
   for (float d : depth.data) valid += d > 0.0f;
-  return static_cast<double>(valid) / depth.data.size();
+  return depth.data.empty() ? 0.0 : static_cast<double>(valid) / depth.data.size();
+}
+
+double Frame::validFraction() const {
+  return paircast::validFraction(depth);
 }
 
 }  // namespace paircast

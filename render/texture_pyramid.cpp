@@ -10,12 +10,6 @@
 namespace paircast {
 namespace {
 
-const std::array<float, 256> kSrgbToLinear = [] {
-  std::array<float, 256> t{};
-  for (int i = 0; i < 256; ++i) t[i] = srgbToLinear(i / 255.0f);
-  return t;
-}();
-
 // sRGB in 8.4 fixed point (what the filter below yields, 0..4080) to linear.
 const std::array<float, 4096> kSrgb12ToLinear = [] {
   std::array<float, 4096> t{};
@@ -29,15 +23,6 @@ uint64_t spread(uint32_t p) {
   return (p & 255) | (uint64_t((p >> 8) & 255) << 21) | (uint64_t((p >> 16) & 255) << 42);
 }
 
-Eigen::Vector3f decode(uint32_t p) {
-  return {kSrgbToLinear[p & 255], kSrgbToLinear[(p >> 8) & 255], kSrgbToLinear[(p >> 16) & 255]};
-}
-
-uint32_t encode(const Eigen::Vector3f& c) {
-  return linearToSrgb8(c.x()) | (uint32_t(linearToSrgb8(c.y())) << 8) |
-         (uint32_t(linearToSrgb8(c.z())) << 16);
-}
-
 // The next level of a w x h level: each side halved (to at least 1), each texel the mean of a
 // 2x2 block in linear light (1x2 or 2x1 where a side is already 1, wrapping on odd sides).
 std::vector<uint32_t> halve(const std::vector<uint32_t>& a, int w, int h) {
@@ -48,8 +33,9 @@ std::vector<uint32_t> halve(const std::vector<uint32_t>& a, int w, int h) {
     const uint32_t* r1 = a.data() + static_cast<size_t>((2 * y + 1) % h) * w;
     for (int x = 0; x < W; ++x) {
       const int x0 = 2 * x % w, x1 = (2 * x + 1) % w;
-      const Eigen::Vector3f sum = decode(r0[x0]) + decode(r0[x1]) + decode(r1[x0]) + decode(r1[x1]);
-      b[static_cast<size_t>(y) * W + x] = encode(0.25f * sum);
+      const Eigen::Vector3f sum =
+          unpackSrgb8(r0[x0]) + unpackSrgb8(r0[x1]) + unpackSrgb8(r1[x0]) + unpackSrgb8(r1[x1]);
+      b[static_cast<size_t>(y) * W + x] = packSrgb8(0.25f * sum);
     }
   }
   return b;
@@ -89,7 +75,7 @@ Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
   const Level& l = levels_.at(level);
   PAIRCAST_CHECK(x >= 0 && x < l.width && y >= 0 && y < l.height);
   const uint64_t p = l.texels[static_cast<size_t>(y) * l.width + x];
-  return decode((p & 255) | (((p >> 21) & 255) << 8) | (((p >> 42) & 255) << 16));
+  return unpackSrgb8((p & 255) | (((p >> 21) & 255) << 8) | (((p >> 42) & 255) << 16));
 }
 
 Eigen::Vector3f TexturePyramid::sample(float u, float v, float lod) const {
