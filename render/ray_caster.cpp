@@ -9,13 +9,14 @@
 #include <cmath>
 #include <mutex>
 
+#include "render/packet_shading.h"
 #include "render/texture_pyramid.h"
 #include "util/error.h"
 
 namespace paircast {
 namespace {
 
-constexpr int kPacket = 8;  // rays per rtcIntersect8 call: one row of a tile
+constexpr int kPacket = kLanes;  // rays per rtcIntersect8 call: one row of a tile
 constexpr int kTileW = 8;   // tile width in pixels (one packet)
 constexpr int kTileH = 8;   // tile height in pixels (packets per tile)
 // Meshes this large get a medium-quality BVH, smaller ones a high-quality one (see RayCaster).
@@ -78,11 +79,15 @@ inline void setupPacket(const PrimaryRays& P, int x0, int y, int width, float sx
 }
 
 // What shading needs besides the hit, fixed for one render.
-struct Lighting {
-  ShadingOptions options;
-  Eigen::Vector3f sunDir;  // unit, towards the sun
-  float sampleSize;        // width of one colour sample at z-depth 1: 1 / (fx * supersample)
-};
+PacketLight packetLight(const ShadingOptions& o, float sampleSize) {
+  const Eigen::Vector3f sun = o.sunDirection.normalized();
+  return {o.ambient,
+          o.headlight,
+          o.sun,
+          {sun.x(), sun.y(), sun.z()},
+          sampleSize,
+          {o.background.x(), o.background.y(), o.background.z()}};
+}
 
 // Neighbouring rays of a small image are far apart. Over a large mesh Embree traverses them
 // faster as incoherent (1.3M-triangle scan, one thread: 0.34 against 0.44 ms at 32x32, 2.75
@@ -102,31 +107,6 @@ inline RTCIntersectContext primaryContext(int width, int height, bool largeMesh)
 
 }  // namespace
 
-// What shading one hit needs of its triangle, in one cache line: a hit costs one load here
-// instead of five scattered ones (normal, material, vertex indices, three texture coordinates).
-struct alignas(64) ShadeTriangle {
-  enum Colour : int32_t {
-    kFlat,       // albedo below
-    kPerVertex,  // corner colours below, interpolated (untextured triangles)
-    kFromMesh,   // albedo below times the mesh's vertex colours (textured triangles with them)
-  };
-  Eigen::Vector3f normal;  // unit geometric normal (sign fixed per hit)
-  int32_t texture;         // index into RayCaster::Impl::textures, or -1
-  Colour colour;
-  struct Surface {
-    float albedo[3];                 // material factor x vertex colour (when uniform), linear
-    float uv0[2], duv1[2], duv2[2];  // texture coordinates: uv0 + u duv1 + v duv2
-    float texelsPerMetre;  // of the texture's level 0 over this triangle (mean of both axes)
-  };
-  struct Corners {
-    float rgb[3][3];  // material factor x each vertex's colour, linear
-  };
-  union {
-    Surface surface;  // kFlat, kFromMesh
-    Corners corners;  // kPerVertex
-  };
-};
-
 struct RayCaster::Impl {
   RTCScene scene = nullptr;
   std::vector<ShadeTriangle> triangles;  // [T], precomputed at build time; empty for scans
@@ -140,15 +120,15 @@ struct RayCaster::Impl {
   bool largeMesh = false;  // at least kMediumQualityTriangles: medium BVH, incoherent small images
   // Fills the tables above from the mesh.
   void prepareShading(const Mesh& mesh);
-  void renderTile(const PrimaryRays& P, const RenderOptions& options, const Lighting& light, int x0,
+  void renderTile(const PrimaryRays& P, const RenderOptions& options, const PacketLight& light, int x0,
                   int y0, Frame& frame) const;
   void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y, int cols,
                      Frame& frame) const;
-  Eigen::Vector3f shade(const RTCRayHit8& rh, int i, const Lighting& light) const;
+  void shadePacket(const RTCRayHit8& rh, const PacketLight& light, float (&rgb)[3][kPacket]) const;
+  void surfaces(const RTCRayHit8& rh, PacketShading& s) const;
+  const ShadeTriangle* commonFlatTriangle(const RTCRayHit8& rh) const;
+  void sampleTextures(PacketShading& s) const;
   Eigen::Vector3f unitNormal(const RTCRayHit8& rh, int i) const;
-  Eigen::Vector3f albedo(const RTCRayHit8& rh, int i, float cosView, const Lighting& light) const;
-  Eigen::Vector3f texture(const ShadeTriangle& t, float u, float v, float cos, float z,
-                          const Lighting& light) const;
   static ShadeTriangle shadeTriangle(const Mesh& m, size_t t);
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
@@ -291,8 +271,8 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
   }
   const PrimaryRays P(camera);
   const int ss = std::clamp(options.supersample, 1, 4);
-  const Lighting light{options.shading, options.shading.sunDirection.normalized(),
-                       static_cast<float>(1.0 / (camera.K(0, 0) * ss))};
+  const PacketLight light =
+      packetLight(options.shading, static_cast<float>(1.0 / (camera.K(0, 0) * ss)));
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
 #pragma omp parallel for schedule(dynamic, 2)
   for (int tile = 0; tile < tilesX * tilesY; ++tile)
@@ -302,38 +282,35 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
 // One 8x8 tile: the centre rays give the geometry maps (and the colour without supersampling);
 // each further sub-sample adds a packet per row.
 void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& options,
-                                 const Lighting& light, int x0, int y0, Frame& frame) const {
+                                 const PacketLight& light, int x0, int y0, Frame& frame) const {
   const int W = frame.depth.width, H = frame.depth.height;
   const int rows = std::min(kTileH, H - y0), cols = std::min(kTileW, W - x0);
   const int ss = std::clamp(options.supersample, 1, 4);
   RTCIntersectContext ctx = primaryContext(W, H, largeMesh);
-  RTCRayHit8 rh;
+  RTCRayHit8 rh[kTileH];
   alignas(32) int valid[kPacket];
-  Eigen::Vector3f colour[kTileH][kTileW];  // linear colour sums over the sub-samples
+  alignas(32) float colour[kTileH][3][kPacket];  // linear colour sums over the sub-samples
+  // All rows are cast before any is shaded: shading is a chain of dependent loads, and eight of
+  // them back to back overlap in the CPU where a cast between them would not.
   for (int r = 0; r < rows; ++r) {
-    setupPacket(P, x0, y0 + r, W, 0.5f, 0.5f, rh, valid);
-    rtcIntersect8(valid, scene, &ctx, &rh);
-    writeGeometry(rh, options, x0, y0 + r, cols, frame);
-    for (int i = 0; options.rgb && ss == 1 && i < cols; ++i) colour[r][i] = shade(rh, i, light);
+    setupPacket(P, x0, y0 + r, W, 0.5f, 0.5f, rh[r], valid);
+    rtcIntersect8(valid, scene, &ctx, &rh[r]);
+    writeGeometry(rh[r], options, x0, y0 + r, cols, frame);
   }
+  for (int r = 0; options.rgb && ss == 1 && r < rows; ++r) shadePacket(rh[r], light, colour[r]);
   if (!options.rgb) return;
   for (int sub = 0; ss > 1 && sub < ss * ss; ++sub) {
     for (int r = 0; r < rows; ++r) {
-      setupPacket(P, x0, y0 + r, W, (sub % ss + 0.5f) / ss, (sub / ss + 0.5f) / ss, rh, valid);
-      rtcIntersect8(valid, scene, &ctx, &rh);
-      for (int i = 0; i < cols; ++i) {
-        const Eigen::Vector3f c = shade(rh, i, light);
-        colour[r][i] = sub == 0 ? c : Eigen::Vector3f(colour[r][i] + c);
-      }
+      setupPacket(P, x0, y0 + r, W, (sub % ss + 0.5f) / ss, (sub / ss + 0.5f) / ss, rh[0], valid);
+      rtcIntersect8(valid, scene, &ctx, &rh[0]);
+      alignas(32) float c[3][kPacket];
+      shadePacket(rh[0], light, c);
+      for (int k = 0; k < 3; ++k)
+        for (int i = 0; i < kPacket; ++i) colour[r][k][i] = sub == 0 ? c[k][i] : colour[r][k][i] + c[k][i];
     }
   }
   const float inv = 1.0f / static_cast<float>(ss * ss);
-  for (int r = 0; r < rows; ++r) {
-    for (int i = 0; i < cols; ++i) {
-      uint8_t* px = frame.rgb.pixel(x0 + i, y0 + r);
-      for (int c = 0; c < 3; ++c) px[c] = linearToSrgb8(colour[r][i][c] * inv);
-    }
-  }
+  for (int r = 0; r < rows; ++r) srgbLanes(colour[r], inv, cols, frame.rgb.pixel(x0, y0 + r));
 }
 
 // Depth, and the normals and ids when asked, of the first `cols` rays of a packet on row y.
@@ -365,18 +342,98 @@ void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& o
   }
 }
 
-// Linear colour of ray i of a packet: albedo (material, vertex colours, texture) times ambient,
-// headlight and sun terms; the background on a miss.
-Eigen::Vector3f RayCaster::Impl::shade(const RTCRayHit8& rh, int i, const Lighting& light) const {
-  const ShadingOptions& sh = light.options;
-  if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) return sh.background;
-  const Eigen::Vector3f n = unitNormal(rh, i);
-  const Eigen::Vector3f d(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]);
-  const float nd = n.dot(d);  // the normal is turned towards the camera: -sign(nd) n
-  const float cosView = std::abs(nd) / d.norm();
-  const float sunCos = (nd > 0 ? -1.0f : 1.0f) * n.dot(light.sunDir);
-  return albedo(rh, i, cosView, light) *
-         (sh.ambient + sh.headlight * cosView + sh.sun * std::max(0.0f, sunCos));
+// Linear colours of a packet's rays: albedo (material, vertex colours, texture) times ambient,
+// headlight and sun terms; the background on a miss. In passes over the eight lanes: gather the
+// triangles' records, light, sample the textures, combine.
+void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light,
+                                  float (&rgb)[3][kPacket]) const {
+  // Over a scene of large triangles most packets lie inside one.
+  if (const ShadeTriangle* t = commonFlatTriangle(rh)) {
+    const TexturePyramid* texture = t->texture >= 0 ? &textures[t->texture] : nullptr;
+    const FlatPacket p{t,           texture,     rh.ray.dir_x, rh.ray.dir_y,
+                       rh.ray.dir_z, rh.ray.tfar, rh.hit.u,     rh.hit.v};
+    return shadeFlatPacket(p, light, rgb);
+  }
+  PacketShading s;
+  surfaces(rh, s);
+  lightLanes(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z, rh.ray.tfar, light, s);
+  sampleTextures(s);
+  combineLanes(s, light, rgb);
+}
+
+// Per lane, what the hit triangle gives: its normal, albedo, and texture and coordinates.
+void RayCaster::Impl::surfaces(const RTCRayHit8& rh, PacketShading& s) const {
+  for (int i = 0; i < kPacket; ++i) {
+    s.texture[i] = -1;
+    s.u[i] = s.v[i] = s.texelsPerMetre[i] = 0.0f;
+    s.n[0][i] = s.n[1][i] = s.albedo[0][i] = s.albedo[1][i] = s.albedo[2][i] = 0.0f;
+    s.n[2][i] = 1.0f;
+    if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+    s.hits |= 1u << i;
+    const int prim = static_cast<int>(rh.hit.primID[i]);
+    const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
+    Eigen::Vector3f a;
+    if (triangles.empty()) {  // a scan: corner colours, Embree's normal
+      const std::array<uint32_t, 3>& c = corners[prim];
+      a = w * unpackSrgb8(c[0]) + u * unpackSrgb8(c[1]) + v * unpackSrgb8(c[2]);
+      const Eigen::Vector3f n = unitNormal(rh, i);
+      for (int k = 0; k < 3; ++k) s.n[k][i] = n[k];
+    } else {
+      const ShadeTriangle& t = triangles[prim];
+      for (int k = 0; k < 3; ++k) s.n[k][i] = t.normal[k];
+      if (t.colour == ShadeTriangle::kPerVertex) {
+        using V = Eigen::Map<const Eigen::Vector3f>;
+        a = w * V(t.corners.rgb[0]) + u * V(t.corners.rgb[1]) + v * V(t.corners.rgb[2]);
+      } else {
+        const ShadeTriangle::Surface& f = t.surface;
+        a = Eigen::Map<const Eigen::Vector3f>(f.albedo);
+        if (t.colour == ShadeTriangle::kFromMesh) {
+          const Eigen::Vector3i& tri = mesh->triangles[prim];
+          a = a.cwiseProduct(w * mesh->colors[tri[0]] + u * mesh->colors[tri[1]] +
+                             v * mesh->colors[tri[2]]);
+        }
+        if (t.texture >= 0) {
+          s.texture[i] = t.texture;
+          s.u[i] = f.uv0[0] + u * f.duv1[0] + v * f.duv2[0];
+          s.v[i] = f.uv0[1] + u * f.duv1[1] + v * f.duv2[1];
+          s.texelsPerMetre[i] = f.texelsPerMetre;
+        }
+      }
+    }
+    for (int k = 0; k < 3; ++k) s.albedo[k][i] = a[k];
+  }
+}
+
+// The triangle every ray of the packet hit, when they all hit the same kFlat one; else null.
+// The triangle every ray of the packet hit, when they all hit the same kFlat one; else null.
+const ShadeTriangle* RayCaster::Impl::commonFlatTriangle(const RTCRayHit8& rh) const {
+  if (triangles.empty() || rh.hit.geomID[0] == RTC_INVALID_GEOMETRY_ID) return nullptr;
+  const unsigned prim = rh.hit.primID[0];
+  bool same = true;
+  for (int i = 1; i < kPacket; ++i)
+    same &= rh.hit.primID[i] == prim && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
+  const ShadeTriangle& t = triangles[prim];
+  return same && t.colour == ShadeTriangle::kFlat ? &t : nullptr;
+}
+
+// Each textured lane's texture colour, sampled for all lanes of one texture at once.
+void RayCaster::Impl::sampleTextures(PacketShading& s) const {
+  const int first = s.texture[0];
+  bool same = true;
+  for (int i = 1; i < kPacket; ++i) same &= s.texture[i] == first;
+  if (same) {  // the common case: one texture (or none) for all lanes
+    if (first >= 0) textures[first].sample8(s.u, s.v, s.lod, (1u << kPacket) - 1, s.texel);
+    return;
+  }
+  uint32_t todo = 0;
+  for (int i = 0; i < kPacket; ++i) todo |= static_cast<uint32_t>(s.texture[i] >= 0) << i;
+  while (todo) {
+    const int t = s.texture[__builtin_ctz(todo)];
+    uint32_t lanes = 0;
+    for (int i = 0; i < kPacket; ++i) lanes |= static_cast<uint32_t>(s.texture[i] == t) << i;
+    textures[t].sample8(s.u, s.v, s.lod, lanes, s.texel);
+    todo &= ~lanes;
+  }
 }
 
 // Unit geometric normal of ray i's triangle, either sign.
@@ -385,41 +442,6 @@ Eigen::Vector3f RayCaster::Impl::unitNormal(const RTCRayHit8& rh, int i) const {
   const Eigen::Vector3f ng(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]);
   const float norm = ng.norm();
   return norm > 0 ? Eigen::Vector3f(ng / norm) : Eigen::Vector3f::UnitZ();
-}
-
-Eigen::Vector3f RayCaster::Impl::albedo(const RTCRayHit8& rh, int i, float cosView,
-                                        const Lighting& light) const {
-  const int prim = static_cast<int>(rh.hit.primID[i]);
-  const float u = rh.hit.u[i], v = rh.hit.v[i], w = 1.0f - u - v;
-  if (triangles.empty()) {
-    const std::array<uint32_t, 3>& c = corners[prim];
-    return w * unpackSrgb8(c[0]) + u * unpackSrgb8(c[1]) + v * unpackSrgb8(c[2]);
-  }
-  const ShadeTriangle& t = triangles[prim];
-  if (t.colour == ShadeTriangle::kPerVertex) {
-    using V = Eigen::Map<const Eigen::Vector3f>;
-    return w * V(t.corners.rgb[0]) + u * V(t.corners.rgb[1]) + v * V(t.corners.rgb[2]);
-  }
-  Eigen::Vector3f a = Eigen::Map<const Eigen::Vector3f>(t.surface.albedo);
-  if (t.colour == ShadeTriangle::kFromMesh) {
-    const Eigen::Vector3i& tri = mesh->triangles[prim];
-    a = a.cwiseProduct(w * mesh->colors[tri[0]] + u * mesh->colors[tri[1]] +
-                       v * mesh->colors[tri[2]]);
-  }
-  if (t.texture >= 0) a = a.cwiseProduct(texture(t, u, v, cosView, rh.ray.tfar[i], light));
-  return a;
-}
-
-// The texture of t at barycentrics (u, v), seen at z-depth z and at cos to the surface normal.
-// The sample covers (z s)^2 / cos m^2 of the surface: the level of detail matches its texel
-// count by area.
-Eigen::Vector3f RayCaster::Impl::texture(const ShadeTriangle& t, float u, float v, float cos,
-                                         float z, const Lighting& light) const {
-  const ShadeTriangle::Surface& f = t.surface;
-  const float footprint = z * light.sampleSize / std::sqrt(std::max(cos, 1e-3f));
-  const float lod = TexturePyramid::lodFor(f.texelsPerMetre * footprint);
-  return textures[t.texture].sample(f.uv0[0] + u * f.duv1[0] + v * f.duv2[0],
-                                    f.uv0[1] + u * f.duv1[1] + v * f.duv2[1], lod);
 }
 
 void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {

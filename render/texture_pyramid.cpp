@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "util/error.h"
+#include "render/texture_kernel.h"
 
 namespace paircast {
 namespace {
@@ -16,12 +17,6 @@ const std::array<float, 4096> kSrgb12ToLinear = [] {
   for (int i = 0; i < 4096; ++i) t[i] = srgbToLinear(std::min(1.0f, i / (16.0f * 255.0f)));
   return t;
 }();
-
-// A texel with its channels 21 bits apart, so that a weighted sum of four with weights summing
-// to 256 fits in each channel's lane.
-uint64_t spread(uint32_t p) {
-  return (p & 255) | (uint64_t((p >> 8) & 255) << 21) | (uint64_t((p >> 16) & 255) << 42);
-}
 
 // The next level of a w x h level: each side halved (to at least 1), each texel the mean of a
 // 2x2 block in linear light (1x2 or 2x1 where a side is already 1, wrapping on odd sides).
@@ -40,6 +35,8 @@ std::vector<uint32_t> halve(const std::vector<uint32_t>& a, int w, int h) {
   }
   return b;
 }
+
+constexpr float kMaxFloat = 3.40282347e38f;
 
 // x - floor(x) for finite x; floats this large are whole numbers.
 float fract(float x) {
@@ -61,9 +58,14 @@ TexturePyramid::TexturePyramid(const Texture& t) {
   }
   int w = t.width, h = t.height;
   for (;;) {
-    Level level{w, h, std::vector<uint64_t>(packed.size())};
-    for (size_t i = 0; i < packed.size(); ++i) level.texels[i] = spread(packed[i]);
-    levels_.push_back(std::move(level));
+    width_.push_back(w);
+    height_.push_back(h);
+    offset_.push_back(static_cast<int32_t>(texels_.size()));
+    for (int y = 0; y < h; ++y) {  // each row, then its first texel again
+      const auto row = packed.begin() + static_cast<ptrdiff_t>(y) * w;
+      texels_.insert(texels_.end(), row, row + w);
+      texels_.push_back(*row);
+    }
     if (w == 1 && h == 1) break;
     packed = halve(packed, w, h);
     w = std::max(1, w / 2);
@@ -71,48 +73,60 @@ TexturePyramid::TexturePyramid(const Texture& t) {
   }
 }
 
+TexturePyramid::Arrays TexturePyramid::arrays() const {
+  return {texels_.data(), width_.data(), height_.data(), offset_.data(), levels() - 1,
+          kSrgb12ToLinear.data()};
+}
+
 Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
-  const Level& l = levels_.at(level);
-  PAIRCAST_CHECK(x >= 0 && x < l.width && y >= 0 && y < l.height);
-  const uint64_t p = l.texels[static_cast<size_t>(y) * l.width + x];
-  return unpackSrgb8((p & 255) | (((p >> 21) & 255) << 8) | (((p >> 42) & 255) << 16));
+  PAIRCAST_CHECK(level >= 0 && level < levels());
+  PAIRCAST_CHECK(x >= 0 && x < width_[level] && y >= 0 && y < height_[level]);
+  return unpackSrgb8(texels_[offset_[level] + static_cast<size_t>(y) * (width_[level] + 1) + x]);
 }
 
+
+void TexturePyramid::sample8(const float* u, const float* v, const float* lod, uint32_t lanes,
+                             float (*rgb)[8]) const {
+#ifdef PAIRCAST_HAVE_AVX2
+  if (cpuHasAvx2() && avx2::fitsTextureKernel(*this))
+    return avx2::sampleTexture(arrays(), u, v, lod, lanes, rgb);
+#endif
+  for (int i = 0; i < 8; ++i) {
+    if ((lanes >> i) & 1) {
+      const Eigen::Vector3f c = sample(u[i], v[i], lod[i]);
+      for (int k = 0; k < 3; ++k) rgb[k][i] = c[k];
+    }
+  }
+}
+
+// The level nearest to lod, and on it the four texels around (u, v) weighted in 1/16 of a
+// texel; the weights apply to the sRGB values, in integer lanes; the sum is decoded once.
+// Texel centres are at (i + 0.5) / W; row 0 is v = 1.
 Eigen::Vector3f TexturePyramid::sample(float u, float v, float lod) const {
-  if (!std::isfinite(u) || !std::isfinite(v)) return Eigen::Vector3f::Zero();
+  if (!(std::fabs(u) <= kMaxFloat && std::fabs(v) <= kMaxFloat)) return Eigen::Vector3f::Zero();
   const int level = std::clamp(static_cast<int>(std::min(lod, 64.0f) + 0.5f), 0, levels() - 1);
-  return bilinear(levels_[level], fract(u), fract(v));
-}
-
-// Texel centres are at (i + 0.5) / W; row 0 is v = 1. u and v are in [0, 1). The weights (in
-// 1/16 of a texel) apply to the sRGB values, in integer lanes; the sum is decoded once.
-Eigen::Vector3f TexturePyramid::bilinear(const Level& l, float u, float v) const {
-  const float x = u * l.width - 0.5f, y = (1.0f - v) * l.height - 0.5f;
+  const int w = width_[level], h = height_[level];
+  const float x = fract(u) * w - 0.5f, y = (1.0f - fract(v)) * h - 0.5f;
   // Positions in 1/16 texel, rounded to the nearest step; the shift floors (fx >= -8).
   const int fx = static_cast<int>((x + 1.0f) * 16.0f + 0.5f) - 16;
   const int fy = static_cast<int>((y + 1.0f) * 16.0f + 0.5f) - 16;
   const int ix = fx >> 4, iy = fy >> 4;
-  const uint64_t ax = fx & 15, ay = fy & 15;
-  const int x0 = ix < 0 ? l.width - 1 : ix, x1 = ix + 1 >= l.width ? 0 : ix + 1;
-  const int y0 = iy < 0 ? l.height - 1 : iy, y1 = iy + 1 >= l.height ? 0 : iy + 1;
-  const uint64_t* r0 = l.texels.data() + static_cast<size_t>(y0) * l.width;
-  const uint64_t* r1 = l.texels.data() + static_cast<size_t>(y1) * l.width;
-  const uint64_t sum = (16 - ay) * ((16 - ax) * r0[x0] + ax * r0[x1]) +
-                       ay * ((16 - ax) * r1[x0] + ax * r1[x1]);  // 255 * 256 per lane at most
-  constexpr uint64_t kLane = (1u << 21) - 1;
-  return {kSrgb12ToLinear[(sum & kLane) >> 4], kSrgb12ToLinear[((sum >> 21) & kLane) >> 4],
-          kSrgb12ToLinear[((sum >> 42) & kLane) >> 4]};
+  const uint32_t ax = fx & 15, ay = fy & 15;
+  const int x0 = ix < 0 ? w - 1 : ix, x1 = ix + 1 >= w ? 0 : ix + 1;
+  const int y0 = iy < 0 ? h - 1 : iy, y1 = iy + 1 >= h ? 0 : iy + 1;
+  const uint32_t* r0 = texels_.data() + offset_[level] + static_cast<size_t>(y0) * (w + 1);
+  const uint32_t* r1 = texels_.data() + offset_[level] + static_cast<size_t>(y1) * (w + 1);
+  const uint32_t w00 = (16 - ax) * (16 - ay), w01 = ax * (16 - ay), w10 = (16 - ax) * ay,
+                 w11 = ax * ay;
+  Eigen::Vector3f c;
+  for (int k = 0; k < 3; ++k) {
+    const int s = 8 * k;
+    const uint32_t sum = w00 * ((r0[x0] >> s) & 255) + w01 * ((r0[x1] >> s) & 255) +
+                         w10 * ((r1[x0] >> s) & 255) + w11 * ((r1[x1] >> s) & 255);
+    c[k] = kSrgb12ToLinear[sum >> 4];  // 255 * 256 >> 4 at most
+  }
+  return c;
 }
 
-float TexturePyramid::lodFor(float texelsPerPixel) {
-  if (!(texelsPerPixel > 1.0f)) return 0.0f;
-  if (!(texelsPerPixel < 1e30f)) return 100.0f;
-  // The float's exponent is floor(log2), its mantissa in [1, 2) the linear rest.
-  uint32_t bits;
-  std::memcpy(&bits, &texelsPerPixel, sizeof bits);
-  const int exponent = static_cast<int>((bits >> 23) & 255) - 127;
-  const float mantissa = 1.0f + static_cast<float>(bits & 0x7FFFFF) / 8388608.0f;
-  return static_cast<float>(exponent) + (mantissa - 1.0f);
-}
 
 }  // namespace paircast

@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <cstring>
 #include <vector>
 
 #include "render/mesh.h"
@@ -21,27 +22,50 @@ class TexturePyramid {
   // 2x2 texels in linear space. Throws paircast::Error on an empty or inconsistent texture.
   explicit TexturePyramid(const Texture& texture);
 
-  int levels() const { return static_cast<int>(levels_.size()); }
-  int width(int level) const { return levels_[level].width; }
-  int height(int level) const { return levels_[level].height; }
+  int levels() const { return static_cast<int>(width_.size()); }
+  int width(int level) const { return width_[level]; }
+  int height(int level) const { return height_[level]; }
   // Linear RGB of texel (x, y) of `level` (row 0 at the top, v = 1).
   Eigen::Vector3f texel(int level, int x, int y) const;
 
   // Linear RGB at texture coordinates (u, v) (wrapping; v = 0 at the bottom) at level of detail
   // `lod` (0 is level 0): bilinear on the nearest level. Zero for non-finite (u, v).
   Eigen::Vector3f sample(float u, float v, float lod) const;
+  // `sample` for the lanes i of eight whose bit is set in `lanes`: rgb[c][i] from (u[i], v[i])
+  // at lod[i]. Other lanes are left alone.
+  void sample8(const float* u, const float* v, const float* lod, uint32_t lanes,
+               float (*rgb)[8]) const;
 
-  // The level of detail for a sample `texelsPerPixel` texels of level 0 wide: log2 of it
-  // (piecewise linear between powers of two), 0 below one texel.
-  static float lodFor(float texelsPerPixel);
+  // The pyramid's arrays as SIMD kernels read them (render/texture_kernel.h).
+  struct Arrays {
+    const uint32_t* texels;  // see texels_ below
+    const int32_t *width, *height, *offset;
+    int top;              // the last level
+    const float* decode;  // sRGB in 8.4 fixed point (0..4080) to linear
+  };
+  Arrays arrays() const;
+
+  // The level of detail for a sample that covers `area` texels of level 0: log2 of its side, half
+  // of log2(area) (piecewise linear between powers of two), 0 below one texel. The area, since
+  // the renderer gets it without a square root.
+  static float lodForArea(float area) {
+    if (!(area > 1.0f)) return 0.0f;
+    if (!(area < 1e30f)) return 100.0f;
+    // The float's exponent is floor(log2), its mantissa in [1, 2) the linear rest.
+    uint32_t bits;
+    std::memcpy(&bits, &area, sizeof bits);
+    const int exponent = static_cast<int>((bits >> 23) & 255) - 127;
+    const float mantissa = 1.0f + static_cast<float>(bits & 0x7FFFFF) / 8388608.0f;
+    return 0.5f * (static_cast<float>(exponent) + (mantissa - 1.0f));
+  }
 
  private:
-  struct Level {
-    int width = 0, height = 0;
-    std::vector<uint64_t> texels;  // [H, W] 8-bit sRGB R, G, B at bits 0, 21, 42 (see bilinear)
-  };
-  Eigen::Vector3f bilinear(const Level& level, float u, float v) const;
-  std::vector<Level> levels_;
+  // All levels in one array (so that one gather with one base reads any level's texels): 8-bit
+  // sRGB, R in the low byte; level l is [height_[l], width_[l] + 1] from offset_[l], each row
+  // ending with a copy of its first texel, so that a texel and its right neighbour (wrapping)
+  // are one 64-bit load.
+  std::vector<uint32_t> texels_;
+  std::vector<int32_t> width_, height_, offset_;
 };
 
 }  // namespace paircast

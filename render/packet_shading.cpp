@@ -1,0 +1,234 @@
+#include "render/packet_shading.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "render/mesh.h"
+#include "render/texture_pyramid.h"
+#include "render/texture_kernel.h"
+
+namespace paircast {
+namespace {
+
+void flatTriangleLanes(const ShadeTriangle& t, const float* u, const float* v, PacketShading& s) {
+  const ShadeTriangle::Surface& f = t.surface;
+  const bool textured = t.texture >= 0;
+  for (int i = 0; i < kLanes; ++i) {
+    for (int k = 0; k < 3; ++k) {
+      s.n[k][i] = t.normal[k];
+      s.albedo[k][i] = f.albedo[k];
+    }
+    s.texture[i] = t.texture;
+    s.u[i] = textured ? f.uv0[0] + u[i] * f.duv1[0] + v[i] * f.duv2[0] : 0.0f;
+    s.v[i] = textured ? f.uv0[1] + u[i] * f.duv1[1] + v[i] * f.duv2[1] : 0.0f;
+    s.texelsPerMetre[i] = textured ? f.texelsPerMetre : 0.0f;
+  }
+  s.hits = (1u << kLanes) - 1;
+}
+
+void lightLanesScalar(const float* dirX, const float* dirY, const float* dirZ, const float* t,
+                      const PacketLight& light, PacketShading& s) {
+  const float* sd = light.sunDir;
+  for (int i = 0; i < kLanes; ++i) {
+    const float dx = dirX[i], dy = dirY[i], dz = dirZ[i];
+    const float nd = s.n[0][i] * dx + s.n[1][i] * dy + s.n[2][i] * dz;
+    const float cosView = std::fabs(nd) / std::sqrt(dx * dx + dy * dy + dz * dz);
+    const float ns = s.n[0][i] * sd[0] + s.n[1][i] * sd[1] + s.n[2][i] * sd[2];
+    const float sunCos = nd > 0 ? -ns : ns;  // the normal turned towards the camera
+    s.light[i] = light.ambient + light.headlight * cosView + light.sun * std::max(0.0f, sunCos);
+    const float side = s.texelsPerMetre[i] * (t[i] * light.sampleSize);
+    s.lod[i] = TexturePyramid::lodForArea(side * side / std::max(cosView, 1e-3f));
+  }
+}
+
+void combineLanesScalar(const PacketShading& s, const PacketLight& light,
+                        float (&rgb)[3][kLanes]) {
+  for (int c = 0; c < 3; ++c) {
+    for (int i = 0; i < kLanes; ++i) {
+      const bool hit = (s.hits >> i) & 1;
+      const float texel = s.texture[i] >= 0 ? s.texel[c][i] : 1.0f;
+      rgb[c][i] = hit ? s.albedo[c][i] * texel * s.light[i] : light.background[c];
+    }
+  }
+}
+
+void shadeFlatPacketScalar(const FlatPacket& p, const PacketLight& light,
+                           float (&rgb)[3][kLanes]) {
+  PacketShading s;
+  flatTriangleLanes(*p.triangle, p.u, p.v, s);
+  lightLanesScalar(p.dirX, p.dirY, p.dirZ, p.t, light, s);
+  if (p.texture) p.texture->sample8(s.u, s.v, s.lod, (1u << kLanes) - 1, s.texel);
+  combineLanesScalar(s, light, rgb);
+}
+
+void srgbLanesScalar(const float (&rgb)[3][kLanes], float scale, int count, uint8_t* out) {
+  for (int i = 0; i < count; ++i)
+    for (int c = 0; c < 3; ++c) out[3 * i + c] = linearToSrgb8(rgb[c][i] * scale);
+}
+
+#ifdef PAIRCAST_HAVE_AVX2
+// kLinearToSrgb8 widened to 32 bits, for gathers.
+const int32_t* linearToSrgb8Table() {
+  static const std::array<int32_t, 4097> table = [] {
+    std::array<int32_t, 4097> t{};
+    for (size_t i = 0; i < t.size(); ++i) t[i] = kLinearToSrgb8[i];
+    return t;
+  }();
+  return table.data();
+}
+
+// srgbLanesScalar in AVX2 lanes: linearToSrgb8's table index and its two bounds per lane.
+PAIRCAST_AVX2 void srgbLanesAvx2(const float (&rgb)[3][kLanes], float scale, int count,
+                                 uint8_t* out) {
+  const int32_t* table = linearToSrgb8Table();
+  __m256i packed = _mm256_setzero_si256();  // lane i: R | G << 8 | B << 16
+  for (int c = 0; c < 3; ++c) {
+    const __m256 x = _mm256_mul_ps(_mm256_loadu_ps(rgb[c]), _mm256_set1_ps(scale));
+    __m256i index = _mm256_cvttps_epi32(
+        _mm256_add_ps(_mm256_mul_ps(x, _mm256_set1_ps(4096.0f)), _mm256_set1_ps(0.5f)));
+    index = _mm256_min_epi32(_mm256_max_epi32(index, _mm256_setzero_si256()),
+                             _mm256_set1_epi32(4096));
+    const __m256i looked = _mm256_i32gather_epi32(table, index, 4);
+    const __m256 positive = _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_GT_OQ);  // else 0
+    const __m256 below = _mm256_cmp_ps(x, _mm256_set1_ps(1.0f), _CMP_LT_OQ);   // else 255
+    const __m256i v = _mm256_and_si256(
+        _mm256_blendv_epi8(_mm256_set1_epi32(255), looked, _mm256_castps_si256(below)),
+        _mm256_castps_si256(positive));
+    packed = _mm256_or_si256(packed, _mm256_sll_epi32(v, _mm_cvtsi32_si128(8 * c)));
+  }
+  if (count < kLanes) {
+    alignas(32) uint32_t p[kLanes];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(p), packed);
+    for (int i = 0; i < count; ++i)
+      for (int c = 0; c < 3; ++c) out[3 * i + c] = static_cast<uint8_t>(p[i] >> (8 * c));
+    return;
+  }
+  // Drop every fourth byte: 12 bytes of pixels in each half, stored as 24 contiguous bytes
+  // (16 + 8, never past them: the next pixels may belong to another thread's tile).
+  const __m256i drop = _mm256_setr_epi8(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1,
+                                        2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1);
+  const __m256i bytes = _mm256_shuffle_epi8(packed, drop);  // [12 B, 4 zero | 12 B, 4 zero]
+  // Lanes as 32-bit words: 0 1 2 (pixels 0-3), 4 5 6 (pixels 4-7): pack to words 0-5.
+  const __m256i words = _mm256_permutevar8x32_epi32(bytes, _mm256_setr_epi32(0, 1, 2, 4, 5, 6, 3, 7));
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm256_castsi256_si128(words));
+  _mm_storel_epi64(reinterpret_cast<__m128i*>(out + 16), _mm256_extracti128_si256(words, 1));
+}
+
+PAIRCAST_AVX2 inline __m256 dot(const __m256 (&a)[3], __m256 x, __m256 y, __m256 z) {
+  return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], x), _mm256_mul_ps(a[1], y)),
+                       _mm256_mul_ps(a[2], z));
+}
+
+// The light factor and level of detail of lightLanesScalar, for normals n.
+struct Lit {
+  __m256 light, lod;
+};
+PAIRCAST_AVX2 inline Lit lightAvx2(const __m256 (&n)[3], __m256 dx, __m256 dy, __m256 dz, __m256 t,
+                                   __m256 texelsPerMetre, const PacketLight& light) {
+  const __m256 nd = dot(n, dx, dy, dz);
+  const __m256 absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  const __m256 length = _mm256_sqrt_ps(_mm256_add_ps(
+      _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz)));
+  const __m256 cosView = _mm256_div_ps(_mm256_and_ps(nd, absMask), length);
+  const __m256 ns = dot(n, _mm256_set1_ps(light.sunDir[0]), _mm256_set1_ps(light.sunDir[1]),
+                        _mm256_set1_ps(light.sunDir[2]));
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 negated = _mm256_xor_ps(ns, _mm256_set1_ps(-0.0f));
+  const __m256 sunCos = _mm256_blendv_ps(ns, negated, _mm256_cmp_ps(nd, zero, _CMP_GT_OQ));
+  // std::max(a, b) is (a < b ? b : a), which is maxps(b, a), NaN included.
+  const __m256 lit = _mm256_add_ps(
+      _mm256_add_ps(_mm256_set1_ps(light.ambient),
+                    _mm256_mul_ps(_mm256_set1_ps(light.headlight), cosView)),
+      _mm256_mul_ps(_mm256_set1_ps(light.sun), _mm256_max_ps(sunCos, zero)));
+  const __m256 side = _mm256_mul_ps(texelsPerMetre, _mm256_mul_ps(t, _mm256_set1_ps(light.sampleSize)));
+  const __m256 area = _mm256_div_ps(_mm256_mul_ps(side, side),
+                                    _mm256_max_ps(_mm256_set1_ps(1e-3f), cosView));
+  return {lit, avx2::lodForArea(area)};
+}
+
+// lightLanesScalar in AVX2 lanes, operation for operation.
+PAIRCAST_AVX2 void lightLanesAvx2(const float* dirX, const float* dirY, const float* dirZ,
+                                  const float* t, const PacketLight& light, PacketShading& s) {
+  const __m256 n[3] = {_mm256_load_ps(s.n[0]), _mm256_load_ps(s.n[1]), _mm256_load_ps(s.n[2])};
+  const Lit lit = lightAvx2(n, _mm256_loadu_ps(dirX), _mm256_loadu_ps(dirY), _mm256_loadu_ps(dirZ),
+                            _mm256_loadu_ps(t), _mm256_load_ps(s.texelsPerMetre), light);
+  _mm256_store_ps(s.light, lit.light);
+  _mm256_store_ps(s.lod, lit.lod);
+}
+
+// shadeFlatPacketScalar in AVX2 lanes, all in registers.
+PAIRCAST_AVX2 void shadeFlatPacketAvx2(const FlatPacket& p, const PacketLight& light,
+                                       float (&rgb)[3][kLanes]) {
+  const ShadeTriangle& t = *p.triangle;
+  const ShadeTriangle::Surface& f = t.surface;
+  const __m256 n[3] = {_mm256_set1_ps(t.normal[0]), _mm256_set1_ps(t.normal[1]),
+                       _mm256_set1_ps(t.normal[2])};
+  const bool textured = p.texture != nullptr;
+  const Lit lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY),
+                            _mm256_loadu_ps(p.dirZ), _mm256_loadu_ps(p.t),
+                            _mm256_set1_ps(textured ? f.texelsPerMetre : 0.0f), light);
+  __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
+  if (textured) {
+    const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
+    __m256 uv[2];
+    for (int k = 0; k < 2; ++k)
+      uv[k] = _mm256_add_ps(
+          _mm256_add_ps(_mm256_set1_ps(f.uv0[k]), _mm256_mul_ps(bu, _mm256_set1_ps(f.duv1[k]))),
+          _mm256_mul_ps(bv, _mm256_set1_ps(f.duv2[k])));
+    avx2::sampleTexture(p.texture->arrays(), uv[0], uv[1], lit.lod, texel);
+  }
+  for (int c = 0; c < 3; ++c)
+    _mm256_storeu_ps(rgb[c], _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(f.albedo[c]), texel[c]),
+                                           lit.light));
+}
+
+PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& light,
+                                    float (&rgb)[3][kLanes]) {
+  const __m256i bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  const __m256 hit = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+      _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(s.hits)), bits), bits));
+  const __m256 lit = _mm256_load_ps(s.light);
+  const __m256 textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
+      _mm256_load_si256(reinterpret_cast<const __m256i*>(s.texture)), _mm256_set1_epi32(-1)));
+  for (int c = 0; c < 3; ++c) {
+    const __m256 texel = _mm256_blendv_ps(_mm256_set1_ps(1.0f), _mm256_load_ps(s.texel[c]), textured);
+    const __m256 colour = _mm256_mul_ps(_mm256_mul_ps(_mm256_load_ps(s.albedo[c]), texel), lit);
+    _mm256_storeu_ps(rgb[c], _mm256_blendv_ps(_mm256_set1_ps(light.background[c]), colour, hit));
+  }
+}
+#endif
+
+}  // namespace
+
+void shadeFlatPacket(const FlatPacket& p, const PacketLight& light, float (&rgb)[3][kLanes]) {
+#ifdef PAIRCAST_HAVE_AVX2
+  if (cpuHasAvx2() && (!p.texture || avx2::fitsTextureKernel(*p.texture)))
+    return shadeFlatPacketAvx2(p, light, rgb);
+#endif
+  shadeFlatPacketScalar(p, light, rgb);
+}
+
+void srgbLanes(const float (&rgb)[3][kLanes], float scale, int count, uint8_t* out) {
+#ifdef PAIRCAST_HAVE_AVX2
+  if (cpuHasAvx2()) return srgbLanesAvx2(rgb, scale, count, out);
+#endif
+  srgbLanesScalar(rgb, scale, count, out);
+}
+
+void lightLanes(const float* dirX, const float* dirY, const float* dirZ, const float* t,
+                const PacketLight& light, PacketShading& s) {
+#ifdef PAIRCAST_HAVE_AVX2
+  if (cpuHasAvx2()) return lightLanesAvx2(dirX, dirY, dirZ, t, light, s);
+#endif
+  lightLanesScalar(dirX, dirY, dirZ, t, light, s);
+}
+
+void combineLanes(const PacketShading& s, const PacketLight& light, float (&rgb)[3][kLanes]) {
+#ifdef PAIRCAST_HAVE_AVX2
+  if (cpuHasAvx2()) return combineLanesAvx2(s, light, rgb);
+#endif
+  combineLanesScalar(s, light, rgb);
+}
+
+}  // namespace paircast
