@@ -262,6 +262,10 @@ Eigen::Vector3f FloorMap::sample(Rng& rng) const {
   return p + da * axisA_ + db * axisB_;
 }
 
+// Rings of cells around p's, nearest first, until no farther ring can hold a nearer point: the
+// same answer as a scan of the whole (2 reach + 1)^2 square, ties to the point first in that
+// scan's order (cell row, column, then the cell's list), at a fraction of the cost (a candidate
+// view takes several snaps of radius 2 m over 0.1 m cells).
 std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double radius) const {
   if (points_.empty() || !p.allFinite()) return std::nullopt;
   const double a = p.dot(axisA_) - origin_.x(), b = p.dot(axisB_) - origin_.y();
@@ -270,12 +274,31 @@ std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double r
   const int reach = static_cast<int>(std::ceil(radius / cell_));
   float best = std::numeric_limits<float>::infinity();
   int bestIndex = -1;
-  for (int i = std::max(0, ci - reach); i <= std::min(nA_ - 1, ci + reach); ++i) {
-    for (int j = std::max(0, cj - reach); j <= std::min(nB_ - 1, cj + reach); ++j) {
-      for (int k : cellPoints_[static_cast<size_t>(i) * nB_ + j]) {
-        const float d = (points_[k] - p).squaredNorm();
-        if (d < best) best = d, bestIndex = k;
-      }
+  size_t bestOrder = 0;  // cell * (max list length) order, as the full scan meets points
+  const auto visit = [&](int i, int j) {
+    if (i < 0 || i >= nA_ || j < 0 || j >= nB_) return;
+    const size_t cell = static_cast<size_t>(i) * nB_ + j;
+    const std::vector<int>& list = cellPoints_[cell];
+    for (size_t pos = 0; pos < list.size(); ++pos) {
+      const float d = (points_[list[pos]] - p).squaredNorm();
+      const size_t order = cell * points_.size() + pos;
+      if (d < best || (d == best && order < bestOrder)) best = d, bestIndex = list[pos], bestOrder = order;
+    }
+  };
+  for (int r = 0; r <= reach; ++r) {
+    // Every cell of ring r is at least (r - 1) cells from p (p lies in cell (ci, cj)).
+    if (bestIndex >= 0 && (r - 1) * cell_ > std::sqrt(best) + 1e-4) break;
+    if (r == 0) {
+      visit(ci, cj);
+      continue;
+    }
+    for (int j = cj - r; j <= cj + r; ++j) {
+      visit(ci - r, j);
+      visit(ci + r, j);
+    }
+    for (int i = ci - r + 1; i <= ci + r - 1; ++i) {
+      visit(i, cj - r);
+      visit(i, cj + r);
     }
   }
   if (bestIndex < 0 || best > radius * radius) return std::nullopt;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <string>
 
 #include "util/error.h"
@@ -19,18 +20,28 @@ constexpr int kFrameScreenSide = 64;
 
 }  // namespace
 
+// The camera ray is affine in the pixel coordinates, so the sum of depth x ray over the pixels
+// is the ray at the depth-weighted mean pixel, times the depth sum: three sums, no per-pixel ray.
 Eigen::Vector3d meanWorldPoint(const Camera& camera, const ImageF& depth) {
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  double sumD = 0, sumDU = 0, sumDV = 0;
   size_t n = 0;
   for (int v = 0; v < depth.height; ++v) {
+    const float* row = depth.data.data() + static_cast<size_t>(v) * depth.width;
+    double rowD = 0, rowDU = 0;
+    size_t rowN = 0;
     for (int u = 0; u < depth.width; ++u) {
-      const float d = depth.data[static_cast<size_t>(v) * depth.width + u];
-      if (d <= 0.0f) continue;
-      sum += d * camera.rayCamera(u + 0.5, v + 0.5);
-      ++n;
+      const double d = row[u] > 0.0f ? row[u] : 0.0;
+      rowD += d;
+      rowDU += d * (u + 0.5);
+      rowN += row[u] > 0.0f;
     }
+    sumD += rowD;
+    sumDU += rowDU;
+    sumDV += rowD * (v + 0.5);
+    n += rowN;
   }
   PAIRCAST_CHECK(n > 0);
+  const Eigen::Vector3d sum = sumD * camera.rayCamera(sumDU / sumD, sumDV / sumD);
   return camera.R_cam2world * (sum / static_cast<double>(n)) + camera.t_cam2world;
 }
 
@@ -78,10 +89,30 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
   validatePairOptions(options);
   options_.screenResolution = screenResolution(options);
-  const int S = options_.screenResolution;
-  if (S > 0) screens_.push_back({Camera::fromHfov(S, S, options.hfov), options.screenCovisMargin});
-  if (S > 0 && 4 * (2 * S) <= options.resolution)
-    screens_.push_back({Camera::fromHfov(2 * S, 2 * S, options.hfov), options.screenFineMargin});
+  screens_ = screenStages(options_);
+  // A reference is judged on its valid pixels: up to 32x32 measures them well enough.
+  while (referenceStages_ < screens_.size() &&
+         (referenceStages_ == 0 || screens_[referenceStages_ - 1].intrinsics.width < 32))
+    ++referenceStages_;
+}
+
+// Sides S, 2S, 4S, ... while at most a quarter of the output's; margins from screenCovisMargin
+// to screenFineMargin in geometric steps.
+std::vector<PairGenerator::ScreenStage> PairGenerator::screenStages(const PairOptions& o) {
+  std::vector<int> sides;
+  for (int side = o.screenResolution; side > 0 && (sides.empty() || 4 * side <= o.resolution);
+       side *= 2)
+    sides.push_back(side);
+  std::vector<ScreenStage> stages;
+  for (size_t k = 0; k < sides.size(); ++k) {
+    const double t = sides.size() > 1 ? static_cast<double>(k) / (sides.size() - 1) : 0.0;
+    const double margin = o.screenFineMargin > 0 && o.screenCovisMargin > 0
+                              ? o.screenCovisMargin *
+                                    std::pow(o.screenFineMargin / o.screenCovisMargin, t)
+                              : (1 - t) * o.screenCovisMargin + t * o.screenFineMargin;
+    stages.push_back({Camera::fromHfov(sides[k], sides[k], o.hfov), margin});
+  }
+  return stages;
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
@@ -153,8 +184,7 @@ bool PairGenerator::inBand(double covis) const {
 // Screens v coarse to fine and says whether it cannot pass; counts it, and audits the verdict
 // when asked.
 bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
-  // A reference is judged on its valid pixels, which the first stage measures well enough.
-  const size_t stages = ref ? screens_.size() : std::min<size_t>(1, screens_.size());
+  const size_t stages = ref ? screens_.size() : referenceStages_;
   bool out = ref && outOfFrame(*ref, v, s);
   for (size_t stage = 0; stage < stages && !out; ++stage) out = failsStage(stage, ref, v, s);
   if (!out) return false;

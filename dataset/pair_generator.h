@@ -21,7 +21,7 @@ namespace paircast {
 constexpr int kMaxViews = 99;
 
 constexpr int kAutoScreen = -1;
-constexpr int kAutoScreenDivisor = 8;
+constexpr int kAutoScreenDivisor = 16;
 constexpr int kMinAutoScreen = 16;
 
 struct PairOptions {
@@ -40,13 +40,14 @@ struct PairOptions {
   bool covisMasks = false;        // fill PairSample::covisMask
   // Screening: each view is first rendered as a screenResolution^2 depth map, and only views whose
   // valid fraction and covis there come within the margins of passing go on to full resolution.
-  // 0 turns it off; kAutoScreen picks resolution / 8 (at least 16), and off below 64 pixels.
-  // docs/dataset.md has the measurements behind the defaults.
-  // A view that passes is screened again at twice the resolution, with the tighter
-  // screenFineMargin, when that is still at most a quarter of the output's side.
+  // 0 turns it off; kAutoScreen picks resolution / 16 (at least 16), and off below 64 pixels.
+  // A view that passes is screened again at twice the resolution, and so on while that is at most
+  // a quarter of the output's side (256: 16, 32, 64). The first stage allows screenCovisMargin,
+  // the last screenFineMargin, those between the geometric steps from one to the other (256:
+  // 0.4, 0.155, 0.06). docs/dataset.md has the measurements behind the defaults.
   int screenResolution = kAutoScreen;
-  double screenCovisMargin = 0.15;
-  double screenFineMargin = 0.08;
+  double screenCovisMargin = 0.4;
+  double screenFineMargin = 0.06;
   // Before any rendering, a candidate is turned down when the share of the reference's pixels
   // (every resolution/64-th) inside its frame, an upper bound of covis, is below minCovis by more
   // than this.
@@ -120,6 +121,7 @@ class PairGenerator {
     Camera intrinsics;
     double covisMargin;
   };
+  static std::vector<ScreenStage> screenStages(const PairOptions& o);
   bool screenedOut(const View* ref, View& v, PairSample& s) const;
   bool outOfFrame(const View& ref, const View& v, PairSample& s) const;
   bool failsStage(size_t stage, const View* ref, View& v, PairSample& s) const;
@@ -135,6 +137,7 @@ class PairGenerator {
   PairOptions options_;
   Camera intrinsics_;
   std::vector<ScreenStage> screens_;  // coarse to fine; empty without screening
+  size_t referenceStages_ = 0;         // the stages a reference goes through (valid depth only)
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

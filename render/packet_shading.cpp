@@ -183,6 +183,85 @@ PAIRCAST_AVX2 void shadeFlatPacketAvx2(const FlatPacket& p, const PacketLight& l
                                            lit.light));
 }
 
+// Rows r[0..7] of 8 floats to columns: out[k] holds element k of every row.
+PAIRCAST_AVX2 inline void transpose8(const __m256 (&r)[8], __m256 (&out)[8]) {
+  __m256 t[8], u[8];
+  for (int k = 0; k < 4; ++k) {
+    t[2 * k] = _mm256_unpacklo_ps(r[2 * k], r[2 * k + 1]);
+    t[2 * k + 1] = _mm256_unpackhi_ps(r[2 * k], r[2 * k + 1]);
+  }
+  for (int k = 0; k < 2; ++k) {
+    u[4 * k] = _mm256_shuffle_ps(t[4 * k], t[4 * k + 2], 0x44);
+    u[4 * k + 1] = _mm256_shuffle_ps(t[4 * k], t[4 * k + 2], 0xEE);
+    u[4 * k + 2] = _mm256_shuffle_ps(t[4 * k + 1], t[4 * k + 3], 0x44);
+    u[4 * k + 3] = _mm256_shuffle_ps(t[4 * k + 1], t[4 * k + 3], 0xEE);
+  }
+  for (int k = 0; k < 4; ++k) {
+    out[k] = _mm256_permute2f128_ps(u[k], u[k + 4], 0x20);
+    out[k + 4] = _mm256_permute2f128_ps(u[k], u[k + 4], 0x31);
+  }
+}
+
+PAIRCAST_AVX2 __m256 laneMask(uint32_t bits) {
+  const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+  return _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+      _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(bits)), bit), bit));
+}
+
+// The scalar passes' results for packets over several kFlat triangles: each lane's 64-byte
+// record as two vectors, transposed to one vector per field.
+PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& light,
+                                      float (&rgb)[3][kLanes]) {
+  static_assert(sizeof(ShadeTriangle) == 16 * sizeof(float));
+  __m256 rows[2][8];
+  for (int i = 0; i < kLanes; ++i) {
+    const auto* r = reinterpret_cast<const float*>(p.triangles + ((p.hits >> i) & 1 ? p.prim[i] : 0));
+    rows[0][i] = _mm256_load_ps(r);
+    rows[1][i] = _mm256_load_ps(r + 8);
+  }
+  // Fields: normal x y z, texture, colour, albedo r g b | uv0, duv1, duv2 (x y each), density.
+  __m256 f[8], g[8];
+  transpose8(rows[0], f);
+  transpose8(rows[1], g);
+  const __m256 hit = laneMask(p.hits);
+  const __m256i colour = _mm256_and_si256(_mm256_castps_si256(f[4]), _mm256_castps_si256(hit));
+  if (!_mm256_testz_si256(colour, colour)) return false;  // some lane is not kFlat (0)
+  const __m256i texture = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(f[3]),
+                                                            _mm256_castps_si256(hit)),
+                                          _mm256_andnot_si256(_mm256_castps_si256(hit),
+                                                              _mm256_set1_epi32(-1)));
+  const __m256 textured =
+      _mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1)));
+  const __m256 n[3] = {f[0], f[1], f[2]};
+  const Lit lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY),
+                            _mm256_loadu_ps(p.dirZ), _mm256_loadu_ps(p.t),
+                            _mm256_and_ps(g[6], textured), light);
+  __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
+  int todo = _mm256_movemask_ps(textured);
+  if (todo) {
+    const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
+    const __m256 tu = _mm256_add_ps(_mm256_add_ps(g[0], _mm256_mul_ps(bu, g[2])), _mm256_mul_ps(bv, g[4]));
+    const __m256 tv = _mm256_add_ps(_mm256_add_ps(g[1], _mm256_mul_ps(bu, g[3])), _mm256_mul_ps(bv, g[5]));
+    alignas(32) int32_t ids[kLanes];
+    _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
+    while (todo) {  // a texture at a time, usually one
+      const int id = ids[__builtin_ctz(static_cast<unsigned>(todo))];
+      const TexturePyramid& pyramid = p.textures[id];
+      if (!avx2::fitsTextureKernel(pyramid)) return false;
+      const __m256 lanes = _mm256_castsi256_ps(_mm256_cmpeq_epi32(texture, _mm256_set1_epi32(id)));
+      __m256 c[3];
+      avx2::sampleTexture(pyramid.arrays(), tu, tv, lit.lod, c);
+      for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], lanes);
+      todo &= ~_mm256_movemask_ps(lanes);
+    }
+  }
+  for (int c = 0; c < 3; ++c) {
+    const __m256 colour = _mm256_mul_ps(_mm256_mul_ps(f[5 + c], texel[c]), lit.light);
+    _mm256_storeu_ps(rgb[c], _mm256_blendv_ps(_mm256_set1_ps(light.background[c]), colour, hit));
+  }
+  return true;
+}
+
 PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& light,
                                     float (&rgb)[3][kLanes]) {
   const __m256i bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
@@ -207,6 +286,13 @@ void shadeFlatPacket(const FlatPacket& p, const PacketLight& light, float (&rgb)
     return shadeFlatPacketAvx2(p, light, rgb);
 #endif
   shadeFlatPacketScalar(p, light, rgb);
+}
+
+bool shadeFlatLanes(const FlatLanes& p, const PacketLight& light, float (&rgb)[3][kLanes]) {
+#ifdef PAIRCAST_HAVE_AVX2
+  if (cpuHasAvx2()) return shadeFlatLanesAvx2(p, light, rgb);
+#endif
+  return false;
 }
 
 void srgbLanes(const float (&rgb)[3][kLanes], float scale, int count, uint8_t* out) {

@@ -71,6 +71,22 @@ struct FlatPacket {
 // with the lanes kept in registers.
 void shadeFlatPacket(const FlatPacket& p, const PacketLight& light, float (&rgb)[3][kLanes]);
 
+// A packet whose rays hit kFlat triangles, several of them, or nothing.
+struct FlatLanes {
+  const ShadeTriangle* triangles;   // the renderer's records, by primitive id
+  const TexturePyramid* textures;   // the renderer's textures, by ShadeTriangle::texture
+  const uint32_t* prim;             // each ray's primitive id
+  uint32_t hits;                    // bit i: ray i hit
+  const float *dirX, *dirY, *dirZ;  // the rays' directions
+  const float* t;                   // their hit distances (z-depths)
+  const float *u, *v;               // the hits' barycentrics
+};
+
+// rgb[c][i] of such a packet in SIMD lanes, the records transposed from memory; the background
+// on the lanes that missed. False (and rgb untouched) where it has no SIMD kernel or a lane hit a
+// triangle that is not kFlat: then the passes below do it.
+bool shadeFlatLanes(const FlatLanes& p, const PacketLight& light, float (&rgb)[3][kLanes]);
+
 // Each lane's light factor: ambient + headlight * cos(view) + sun * max(0, cos(sun)), the normal
 // turned towards the camera; and its texture level of detail: the sample covers (z s)^2 / cos
 // m^2 of the surface (z the z-depth, here `t` with the renderer's unnormalised directions), and

@@ -354,6 +354,14 @@ void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light
                        rh.ray.dir_z, rh.ray.tfar, rh.hit.u,     rh.hit.v};
     return shadeFlatPacket(p, light, rgb);
   }
+  if (!triangles.empty()) {  // several triangles: SIMD when they are all flat ones
+    uint32_t hits = 0;
+    for (int i = 0; i < kPacket; ++i)
+      hits |= static_cast<uint32_t>(rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) << i;
+    const FlatLanes p{triangles.data(), textures.data(), rh.hit.primID, hits, rh.ray.dir_x,
+                      rh.ray.dir_y,     rh.ray.dir_z,    rh.ray.tfar,   rh.hit.u, rh.hit.v};
+    if (shadeFlatLanes(p, light, rgb)) return;
+  }
   PacketShading s;
   surfaces(rh, s);
   lightLanes(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z, rh.ray.tfar, light, s);

@@ -85,14 +85,16 @@ int main(int argc, char** argv) {
                  "Views per sample (CroCo's views_count): view 1 and views-1 others, each with "
                  "covis in the band with view 1");
   app.add_option("--screen-resolution", cfg.pair.screenResolution,
-                 "Screen candidates on depth at this resolution first (0: off; default: an "
-                 "eighth of --resolution, at least 16, off below 64)")
+                 "Screen candidates on depth at this resolution first, then at twice it while at "
+                 "most a quarter of --resolution (0: off; default: a sixteenth of --resolution, "
+                 "at least 16, off below 64)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--screen-margin", cfg.pair.screenCovisMargin,
-                 "Screening keeps candidates whose low-resolution covis is within this of the band")
+                 "The first screening stage keeps candidates whose low-resolution covis is within "
+                 "this of the band")
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--screen-fine-margin", cfg.pair.screenFineMargin,
-                 "The same margin for the second screening stage, at twice the resolution")
+                 "The same margin for the last screening stage (stages between: geometric steps)")
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
                  "Before rendering, turn down candidates whose share of the reference inside their "

@@ -58,13 +58,13 @@ TEST(TexturePyramid, FullSizeMatchesTheTextureAtTexelCentres) {
 }
 
 TEST(TexturePyramid, LevelOfDetailIsLog2OfTheFootprint) {
-  EXPECT_EQ(TexturePyramid::lodFor(0.3f), 0.0f);
-  EXPECT_EQ(TexturePyramid::lodFor(1.0f), 0.0f);
-  EXPECT_FLOAT_EQ(TexturePyramid::lodFor(4.0f), 2.0f);
-  EXPECT_FLOAT_EQ(TexturePyramid::lodFor(6.0f), 2.5f);  // linear between powers of two
-  EXPECT_FLOAT_EQ(TexturePyramid::lodFor(1024.0f), 10.0f);
-  EXPECT_EQ(TexturePyramid::lodFor(NAN), 0.0f);
-  EXPECT_GE(TexturePyramid::lodFor(INFINITY), 30.0f);
+  EXPECT_EQ(TexturePyramid::lodForArea(0.3f), 0.0f);
+  EXPECT_EQ(TexturePyramid::lodForArea(1.0f), 0.0f);
+  EXPECT_FLOAT_EQ(TexturePyramid::lodForArea(16.0f), 2.0f);
+  EXPECT_FLOAT_EQ(TexturePyramid::lodForArea(24.0f), 2.25f);  // linear between powers of two
+  EXPECT_FLOAT_EQ(TexturePyramid::lodForArea(1024.0f * 1024.0f), 10.0f);
+  EXPECT_EQ(TexturePyramid::lodForArea(NAN), 0.0f);
+  EXPECT_GE(TexturePyramid::lodForArea(INFINITY), 30.0f);
 }
 
 // A far plane tiled with a one-texel checkerboard: each pixel covers many texels. Sampling the
