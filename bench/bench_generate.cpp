@@ -206,9 +206,9 @@ int main(int argc, char** argv) {
   Screen screen;
   app.add_option("--screen-resolution", screen.resolution,
                  "Screening resolution (default: automatic)");
-  app.add_option("--screen-margin", screen.margin, "Screening's covis margin");
+  app.add_option("--screen-margin", screen.margin, "Covis margin of a 32x32 screening estimate");
   app.add_option("--screen-fine-margin", screen.fineMargin,
-                 "Covis margin of the second screening stage");
+                 "Covis margin of a 64x64 screening estimate");
   app.add_option("--screen-frame-margin", screen.frameMargin,
                  "Margin of the in-frame bound checked before rendering (--min-covis: off)");
   app.add_option("--audit-pairs", auditPairs,

@@ -50,6 +50,22 @@ int screenResolution(const PairOptions& o) {
   return o.resolution >= 64 ? std::max(kMinAutoScreen, o.resolution / kAutoScreenDivisor) : 0;
 }
 
+// The margin at `side`: screenCovisMargin at 32, screenFineMargin at 64, and the same ratio per
+// doubling beyond (a margin of 0 applies as given).
+double stageMargin(int side, const PairOptions& o) {
+  const double m32 = o.screenCovisMargin, m64 = o.screenFineMargin;
+  if (m32 <= 0 || m64 <= 0) return side < 64 ? m32 : m64;
+  return std::min(1.0, m32 * std::pow(m64 / m32, std::log2(side / 32.0)));
+}
+
+std::vector<ScreenStageSpec> screenStages(const PairOptions& o) {
+  std::vector<ScreenStageSpec> stages;
+  for (int side = screenResolution(o); side > 0 && (stages.empty() || 4 * side <= o.resolution);
+       side *= 2)
+    stages.push_back({side, stageMargin(side, o)});
+  return stages;
+}
+
 void validatePairOptions(const PairOptions& o) {
   if (!(o.minCovis >= 0 && o.maxCovis <= 1 && o.minCovis <= o.maxCovis))
     throw Error("the covis band must satisfy 0 <= --min-covis <= --max-covis <= 1");
@@ -89,30 +105,12 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
   validatePairOptions(options);
   options_.screenResolution = screenResolution(options);
-  screens_ = screenStages(options_);
+  for (const ScreenStageSpec& stage : screenStages(options_))
+    screens_.push_back({Camera::fromHfov(stage.side, stage.side, options.hfov), stage.margin});
   // A reference is judged on its valid pixels: up to 32x32 measures them well enough.
   while (referenceStages_ < screens_.size() &&
          (referenceStages_ == 0 || screens_[referenceStages_ - 1].intrinsics.width < 32))
     ++referenceStages_;
-}
-
-// Sides S, 2S, 4S, ... while at most a quarter of the output's; margins from screenCovisMargin
-// to screenFineMargin in geometric steps.
-std::vector<PairGenerator::ScreenStage> PairGenerator::screenStages(const PairOptions& o) {
-  std::vector<int> sides;
-  for (int side = o.screenResolution; side > 0 && (sides.empty() || 4 * side <= o.resolution);
-       side *= 2)
-    sides.push_back(side);
-  std::vector<ScreenStage> stages;
-  for (size_t k = 0; k < sides.size(); ++k) {
-    const double t = sides.size() > 1 ? static_cast<double>(k) / (sides.size() - 1) : 0.0;
-    const double margin = o.screenFineMargin > 0 && o.screenCovisMargin > 0
-                              ? o.screenCovisMargin *
-                                    std::pow(o.screenFineMargin / o.screenCovisMargin, t)
-                              : (1 - t) * o.screenCovisMargin + t * o.screenFineMargin;
-    stages.push_back({Camera::fromHfov(sides[k], sides[k], o.hfov), margin});
-  }
-  return stages;
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,

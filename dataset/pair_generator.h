@@ -42,11 +42,11 @@ struct PairOptions {
   // valid fraction and covis there come within the margins of passing go on to full resolution.
   // 0 turns it off; kAutoScreen picks resolution / 16 (at least 16), and off below 64 pixels.
   // A view that passes is screened again at twice the resolution, and so on while that is at most
-  // a quarter of the output's side (256: 16, 32, 64). The first stage allows screenCovisMargin,
-  // the last screenFineMargin, those between the geometric steps from one to the other (256:
-  // 0.4, 0.155, 0.06). docs/dataset.md has the measurements behind the defaults.
+  // a quarter of the output's side (256: 16, 32, 64). A 32x32 estimate may fall screenCovisMargin
+  // outside the band, a 64x64 one screenFineMargin, other sides the same ratio per doubling (16:
+  // 0.375, 128: 0.024). docs/dataset.md has the measurements behind the defaults.
   int screenResolution = kAutoScreen;
-  double screenCovisMargin = 0.4;
+  double screenCovisMargin = 0.15;
   double screenFineMargin = 0.06;
   // Before any rendering, a candidate is turned down when the share of the reference's pixels
   // (every resolution/64-th) inside its frame, an upper bound of covis, is below minCovis by more
@@ -65,6 +65,16 @@ struct PairOptions {
 void validatePairOptions(const PairOptions& options);
 // The screening resolution in use (kAutoScreen resolved), 0 when off.
 int screenResolution(const PairOptions& options);
+
+// One screening stage: the side of its depth maps and how far outside the band its covis
+// estimate may fall.
+struct ScreenStageSpec {
+  int side;
+  double margin;
+};
+// The stages `options` give, coarse to fine (empty when screening is off): sides S, 2S, 4S, ...
+// while at most a quarter of the output's, each with its side's margin (PairOptions).
+std::vector<ScreenStageSpec> screenStages(const PairOptions& options);
 
 // Views are numbered from 0 here (view 0 is CroCo's view 1, the reference).
 struct PairSample {
@@ -121,7 +131,6 @@ class PairGenerator {
     Camera intrinsics;
     double covisMargin;
   };
-  static std::vector<ScreenStage> screenStages(const PairOptions& o);
   bool screenedOut(const View* ref, View& v, PairSample& s) const;
   bool outOfFrame(const View& ref, const View& v, PairSample& s) const;
   bool failsStage(size_t stage, const View* ref, View& v, PairSample& s) const;

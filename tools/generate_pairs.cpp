@@ -90,11 +90,12 @@ int main(int argc, char** argv) {
                  "at least 16, off below 64)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--screen-margin", cfg.pair.screenCovisMargin,
-                 "The first screening stage keeps candidates whose low-resolution covis is within "
-                 "this of the band")
+                 "Screening keeps candidates whose 32x32 covis estimate is within this of the band "
+                 "(other sides: see --screen-fine-margin)")
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--screen-fine-margin", cfg.pair.screenFineMargin,
-                 "The same margin for the last screening stage (stages between: geometric steps)")
+                 "The same margin for a 64x64 estimate; other sides take the same ratio per "
+                 "doubling (16x16: margin^2 / fine margin)")
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
                  "Before rendering, turn down candidates whose share of the reference inside their "

@@ -228,6 +228,36 @@ TEST(FloorMap, SnapReturnsTheNearestWalkablePoint) {
   EXPECT_FALSE(floor.snap({50.0f, 0.0f, 50.0f}).has_value());
 }
 
+TEST(FloorMap, SnapAgreesWithABruteForceSearch) {
+  // snap searches rings of cells nearest first; its answer must be the nearest walkable point
+  // within the radius, as a scan of every point finds it, for points on, near and off the map.
+  const Scene scene = loadBoxes(testing::roomBoxes(), false, "snap_brute");
+  RayCaster caster(scene.mesh);
+  FloorMap floor(scene, caster);
+  ASSERT_GT(floor.size(), 100u);
+  Rng rng(17);
+  int found = 0, missing = 0;
+  for (int k = 0; k < 3000; ++k) {
+    const Eigen::Vector3f p(static_cast<float>(rng.uniform(-6, 6)),
+                            static_cast<float>(rng.uniform(-0.5, 2)),
+                            static_cast<float>(rng.uniform(-6, 6)));
+    const double radius = k % 3 == 0 ? 0.35 : 2.0;
+    float best = std::numeric_limits<float>::infinity();
+    for (const Eigen::Vector3f& q : floor.points()) best = std::min(best, (q - p).squaredNorm());
+    const auto snapped = floor.snap(p, radius);
+    if (best > radius * radius) {
+      EXPECT_FALSE(snapped.has_value()) << p.transpose();
+      ++missing;
+      continue;
+    }
+    ASSERT_TRUE(snapped.has_value()) << p.transpose();
+    EXPECT_EQ((*snapped - p).squaredNorm(), best) << p.transpose();
+    ++found;
+  }
+  EXPECT_GT(found, 600);
+  EXPECT_GT(missing, 300);
+}
+
 TEST(ViewpointSampler, SceneWithoutFloorIsAnErrorNamingIt) {
   const Scene wall = loadBoxes({{{0, 0, 0}, {0.1f, 3, 4}}}, false, "wall");
   RayCaster caster(wall.mesh);

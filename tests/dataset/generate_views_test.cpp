@@ -9,6 +9,7 @@
 
 #include "covis/covisibility.h"
 #include "dataset/generate_job.h"
+#include "dataset/pair_generator.h"
 #include "dataset/shard.h"
 #include "dataset/test_scenes.h"
 #include "test_files.h"
@@ -17,6 +18,7 @@
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
+#include "util/random.h"
 
 namespace paircast {
 namespace {
@@ -121,6 +123,59 @@ TEST(Screening, KeepsCrocosCovisDistribution) {
   EXPECT_GT(ksStatistic(plain, shifted), critical);
 }
 
+TEST(Screening, StagesDoubleUpToAQuarterOfTheOutputWithMarginsBySide) {
+  PairOptions o;  // 256: auto 16, then 32 and 64
+  const std::vector<ScreenStageSpec> s = screenStages(o);
+  ASSERT_EQ(s.size(), 3u);
+  EXPECT_EQ(s[0].side, 16);
+  EXPECT_EQ(s[1].side, 32);
+  EXPECT_EQ(s[2].side, 64);
+  // 32 and 64 take the two margins; 16 the same ratio once more: m32^2 / m64.
+  EXPECT_DOUBLE_EQ(s[1].margin, o.screenCovisMargin);
+  EXPECT_NEAR(s[2].margin, o.screenFineMargin, 1e-12);
+  EXPECT_NEAR(s[0].margin, o.screenCovisMargin * o.screenCovisMargin / o.screenFineMargin, 1e-12);
+  o.resolution = 224;  // CroCo's: 16 and 32 (4 x 64 > 224), the last at the 32x32 margin
+  ASSERT_EQ(screenStages(o).size(), 2u);
+  EXPECT_DOUBLE_EQ(screenStages(o).back().margin, o.screenCovisMargin);
+  o.resolution = 512;  // 32, 64, 128
+  EXPECT_EQ(screenStages(o).front().side, 32);
+  EXPECT_EQ(screenStages(o).back().side, 128);
+  EXPECT_LT(screenStages(o).back().margin, o.screenFineMargin);
+  o.screenResolution = 48;  // at 512: 48 and 96
+  EXPECT_EQ(screenStages(o).size(), 2u);
+  o.resolution = 128;
+  o.screenResolution = 24;
+  o.screenCovisMargin = 0.0;  // a zero margin applies as given, no division by zero
+  ASSERT_EQ(screenStages(o).size(), 1u);
+  EXPECT_EQ(screenStages(o)[0].margin, 0.0);
+  o.screenResolution = 0;
+  EXPECT_TRUE(screenStages(o).empty());
+  o.screenResolution = kAutoScreen;
+  o.resolution = 48;  // off below 64
+  EXPECT_TRUE(screenStages(o).empty());
+}
+
+TEST(Screening, MeanWorldPointIsThePerPixelMean) {
+  // meanWorldPoint sums three numbers per pixel; the definition sums a back-projected point.
+  Camera cam = Camera::fromHfov(37, 29, 70);
+  cam.lookAt({0.3, 1.2, -0.4}, {2, 0.5, 3}, {0, 1, 0});
+  ImageF depth(37, 29, 1, 0.0f);
+  Rng rng(3);
+  for (float& d : depth.data) d = rng.uniform(0, 1) < 0.3 ? 0.0f : rng.uniform(0.5, 9);
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  int n = 0;
+  for (int v = 0; v < depth.height; ++v) {
+    for (int u = 0; u < depth.width; ++u) {
+      const float d = depth.data[static_cast<size_t>(v) * depth.width + u];
+      if (d <= 0) continue;
+      sum += cam.R_cam2world * (d * cam.rayCamera(u + 0.5, v + 0.5)) + cam.t_cam2world;
+      ++n;
+    }
+  }
+  EXPECT_LT((meanWorldPoint(cam, depth) - sum / n).norm(), 1e-9);
+  EXPECT_THROW(meanWorldPoint(cam, ImageF(37, 29, 1, 0.0f)), std::exception);  // no valid pixel
+}
+
 TEST(Screening, AuditChangesNoOutputAndCountsFalseRejections) {
   const Room room("screen_audit");
   PairOptions o;
@@ -139,9 +194,9 @@ TEST(Screening, AuditChangesNoOutputAndCountsFalseRejections) {
 TEST(Screening, FineStageTurnsDownMoreWithTheSameOutput) {
   const Room room("screen_fine");
   PairOptions o;
-  o.resolution = 128;
+  o.resolution = 256;
   o.keepDepth = false;
-  o.screenResolution = 16;   // then 32
+  o.screenResolution = 32;   // then 64
   o.screenFineMargin = 1.0;  // passes everything: one stage in effect
   o.auditScreening = true;
   size_t coarse = 0, fine = 0, coarseMisses = 0, fineMisses = 0;
