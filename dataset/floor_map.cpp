@@ -282,7 +282,8 @@ std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double r
     for (size_t pos = 0; pos < list.size(); ++pos) {
       const float d = (points_[list[pos]] - p).squaredNorm();
       const size_t order = cell * points_.size() + pos;
-      if (d < best || (d == best && order < bestOrder)) best = d, bestIndex = list[pos], bestOrder = order;
+      if (d < best || (d == best && order < bestOrder))
+        best = d, bestIndex = list[pos], bestOrder = order;
     }
   };
   for (int r = 0; r <= reach; ++r) {

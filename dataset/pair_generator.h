@@ -146,7 +146,7 @@ class PairGenerator {
   PairOptions options_;
   Camera intrinsics_;
   std::vector<ScreenStage> screens_;  // coarse to fine; empty without screening
-  size_t referenceStages_ = 0;         // the stages a reference goes through (valid depth only)
+  size_t referenceStages_ = 0;        // the stages a reference goes through (valid depth only)
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

@@ -5,8 +5,9 @@
 #include <cmath>
 
 #include "render/mesh.h"
-#include "render/texture_pyramid.h"
 #include "render/texture_kernel.h"
+#include "render/texture_pyramid.h"
+#include "util/error.h"
 
 namespace paircast {
 namespace {
@@ -42,8 +43,7 @@ void lightLanesScalar(const float* dirX, const float* dirY, const float* dirZ, c
   }
 }
 
-void combineLanesScalar(const PacketShading& s, const PacketLight& light,
-                        float (&rgb)[3][kLanes]) {
+void combineLanesScalar(const PacketShading& s, const PacketLight& light, float (&rgb)[3][kLanes]) {
   for (int c = 0; c < 3; ++c) {
     for (int i = 0; i < kLanes; ++i) {
       const bool hit = (s.hits >> i) & 1;
@@ -53,8 +53,7 @@ void combineLanesScalar(const PacketShading& s, const PacketLight& light,
   }
 }
 
-void shadeFlatPacketScalar(const FlatPacket& p, const PacketLight& light,
-                           float (&rgb)[3][kLanes]) {
+void shadeFlatPacketScalar(const FlatPacket& p, const PacketLight& light, float (&rgb)[3][kLanes]) {
   PacketShading s;
   flatTriangleLanes(*p.triangle, p.u, p.v, s);
   lightLanesScalar(p.dirX, p.dirY, p.dirZ, p.t, light, s);
@@ -87,11 +86,11 @@ PAIRCAST_AVX2 void srgbLanesAvx2(const float (&rgb)[3][kLanes], float scale, int
     const __m256 x = _mm256_mul_ps(_mm256_loadu_ps(rgb[c]), _mm256_set1_ps(scale));
     __m256i index = _mm256_cvttps_epi32(
         _mm256_add_ps(_mm256_mul_ps(x, _mm256_set1_ps(4096.0f)), _mm256_set1_ps(0.5f)));
-    index = _mm256_min_epi32(_mm256_max_epi32(index, _mm256_setzero_si256()),
-                             _mm256_set1_epi32(4096));
+    index =
+        _mm256_min_epi32(_mm256_max_epi32(index, _mm256_setzero_si256()), _mm256_set1_epi32(4096));
     const __m256i looked = _mm256_i32gather_epi32(table, index, 4);
     const __m256 positive = _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_GT_OQ);  // else 0
-    const __m256 below = _mm256_cmp_ps(x, _mm256_set1_ps(1.0f), _CMP_LT_OQ);   // else 255
+    const __m256 below = _mm256_cmp_ps(x, _mm256_set1_ps(1.0f), _CMP_LT_OQ);    // else 255
     const __m256i v = _mm256_and_si256(
         _mm256_blendv_epi8(_mm256_set1_epi32(255), looked, _mm256_castps_si256(below)),
         _mm256_castps_si256(positive));
@@ -106,11 +105,12 @@ PAIRCAST_AVX2 void srgbLanesAvx2(const float (&rgb)[3][kLanes], float scale, int
   }
   // Drop every fourth byte: 12 bytes of pixels in each half, stored as 24 contiguous bytes
   // (16 + 8, never past them: the next pixels may belong to another thread's tile).
-  const __m256i drop = _mm256_setr_epi8(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1,
-                                        2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1);
+  const __m256i drop = _mm256_setr_epi8(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0,
+                                        1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1);
   const __m256i bytes = _mm256_shuffle_epi8(packed, drop);  // [12 B, 4 zero | 12 B, 4 zero]
   // Lanes as 32-bit words: 0 1 2 (pixels 0-3), 4 5 6 (pixels 4-7): pack to words 0-5.
-  const __m256i words = _mm256_permutevar8x32_epi32(bytes, _mm256_setr_epi32(0, 1, 2, 4, 5, 6, 3, 7));
+  const __m256i words =
+      _mm256_permutevar8x32_epi32(bytes, _mm256_setr_epi32(0, 1, 2, 4, 5, 6, 3, 7));
   _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm256_castsi256_si128(words));
   _mm_storel_epi64(reinterpret_cast<__m128i*>(out + 16), _mm256_extracti128_si256(words, 1));
 }
@@ -137,13 +137,14 @@ PAIRCAST_AVX2 inline Lit lightAvx2(const __m256 (&n)[3], __m256 dx, __m256 dy, _
   const __m256 negated = _mm256_xor_ps(ns, _mm256_set1_ps(-0.0f));
   const __m256 sunCos = _mm256_blendv_ps(ns, negated, _mm256_cmp_ps(nd, zero, _CMP_GT_OQ));
   // std::max(a, b) is (a < b ? b : a), which is maxps(b, a), NaN included.
-  const __m256 lit = _mm256_add_ps(
-      _mm256_add_ps(_mm256_set1_ps(light.ambient),
-                    _mm256_mul_ps(_mm256_set1_ps(light.headlight), cosView)),
-      _mm256_mul_ps(_mm256_set1_ps(light.sun), _mm256_max_ps(sunCos, zero)));
-  const __m256 side = _mm256_mul_ps(texelsPerMetre, _mm256_mul_ps(t, _mm256_set1_ps(light.sampleSize)));
-  const __m256 area = _mm256_div_ps(_mm256_mul_ps(side, side),
-                                    _mm256_max_ps(_mm256_set1_ps(1e-3f), cosView));
+  const __m256 lit =
+      _mm256_add_ps(_mm256_add_ps(_mm256_set1_ps(light.ambient),
+                                  _mm256_mul_ps(_mm256_set1_ps(light.headlight), cosView)),
+                    _mm256_mul_ps(_mm256_set1_ps(light.sun), _mm256_max_ps(sunCos, zero)));
+  const __m256 side =
+      _mm256_mul_ps(texelsPerMetre, _mm256_mul_ps(t, _mm256_set1_ps(light.sampleSize)));
+  const __m256 area =
+      _mm256_div_ps(_mm256_mul_ps(side, side), _mm256_max_ps(_mm256_set1_ps(1e-3f), cosView));
   return {lit, avx2::lodForArea(area)};
 }
 
@@ -157,30 +158,39 @@ PAIRCAST_AVX2 void lightLanesAvx2(const float* dirX, const float* dirY, const fl
   _mm256_store_ps(s.lod, lit.lod);
 }
 
-// shadeFlatPacketScalar in AVX2 lanes, all in registers.
-PAIRCAST_AVX2 void shadeFlatPacketAvx2(const FlatPacket& p, const PacketLight& light,
-                                       float (&rgb)[3][kLanes]) {
-  const ShadeTriangle& t = *p.triangle;
-  const ShadeTriangle::Surface& f = t.surface;
-  const __m256 n[3] = {_mm256_set1_ps(t.normal[0]), _mm256_set1_ps(t.normal[1]),
-                       _mm256_set1_ps(t.normal[2])};
-  const bool textured = p.texture != nullptr;
-  const Lit lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY),
-                            _mm256_loadu_ps(p.dirZ), _mm256_loadu_ps(p.t),
-                            _mm256_set1_ps(textured ? f.texelsPerMetre : 0.0f), light);
-  __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
-  if (textured) {
-    const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
+// shadeFlatPacketScalar in AVX2 lanes, for n packets in two phases: light and texture reads for
+// all, then the filters and colours. A packet's texels come from memory (level 2 cache, often):
+// the reads of several packets under way at once take little longer than one packet's.
+PAIRCAST_AVX2 void shadeFlatPacketsAvx2(const FlatPacket* p, int n, const PacketLight& light,
+                                        float (*rgb)[3][kLanes]) {
+  Lit lit[kMaxFlatPackets];
+  avx2::TexelRows texels[kMaxFlatPackets];
+  for (int k = 0; k < n; ++k) {
+    const ShadeTriangle& t = *p[k].triangle;
+    const ShadeTriangle::Surface& f = t.surface;
+    const __m256 normal[3] = {_mm256_set1_ps(t.normal[0]), _mm256_set1_ps(t.normal[1]),
+                              _mm256_set1_ps(t.normal[2])};
+    const bool textured = p[k].texture != nullptr;
+    lit[k] = lightAvx2(normal, _mm256_loadu_ps(p[k].dirX), _mm256_loadu_ps(p[k].dirY),
+                       _mm256_loadu_ps(p[k].dirZ), _mm256_loadu_ps(p[k].t),
+                       _mm256_set1_ps(textured ? f.texelsPerMetre : 0.0f), light);
+    if (!textured) continue;
+    const __m256 bu = _mm256_loadu_ps(p[k].u), bv = _mm256_loadu_ps(p[k].v);
     __m256 uv[2];
-    for (int k = 0; k < 2; ++k)
-      uv[k] = _mm256_add_ps(
-          _mm256_add_ps(_mm256_set1_ps(f.uv0[k]), _mm256_mul_ps(bu, _mm256_set1_ps(f.duv1[k]))),
-          _mm256_mul_ps(bv, _mm256_set1_ps(f.duv2[k])));
-    avx2::sampleTexture(p.texture->arrays(), uv[0], uv[1], lit.lod, texel);
+    for (int c = 0; c < 2; ++c)
+      uv[c] = _mm256_add_ps(
+          _mm256_add_ps(_mm256_set1_ps(f.uv0[c]), _mm256_mul_ps(bu, _mm256_set1_ps(f.duv1[c]))),
+          _mm256_mul_ps(bv, _mm256_set1_ps(f.duv2[c])));
+    texels[k] = avx2::texelRows(p[k].texture->arrays(), uv[0], uv[1], lit[k].lod);
   }
-  for (int c = 0; c < 3; ++c)
-    _mm256_storeu_ps(rgb[c], _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(f.albedo[c]), texel[c]),
-                                           lit.light));
+  for (int k = 0; k < n; ++k) {
+    __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
+    if (p[k].texture) avx2::filterTexels(p[k].texture->arrays(), texels[k], texel);
+    const float* albedo = p[k].triangle->surface.albedo;
+    for (int c = 0; c < 3; ++c)
+      _mm256_storeu_ps(rgb[k][c], _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(albedo[c]), texel[c]),
+                                                lit[k].light));
+  }
 }
 
 // Rows r[0..7] of 8 floats to columns: out[k] holds element k of every row.
@@ -204,8 +214,8 @@ PAIRCAST_AVX2 inline void transpose8(const __m256 (&r)[8], __m256 (&out)[8]) {
 
 PAIRCAST_AVX2 __m256 laneMask(uint32_t bits) {
   const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-  return _mm256_castsi256_ps(_mm256_cmpeq_epi32(
-      _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(bits)), bit), bit));
+  return _mm256_castsi256_ps(
+      _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(static_cast<int>(bits)), bit), bit));
 }
 
 // The scalar passes' results for packets over several kFlat triangles: each lane's 64-byte
@@ -215,7 +225,8 @@ PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& lig
   static_assert(sizeof(ShadeTriangle) == 16 * sizeof(float));
   __m256 rows[2][8];
   for (int i = 0; i < kLanes; ++i) {
-    const auto* r = reinterpret_cast<const float*>(p.triangles + ((p.hits >> i) & 1 ? p.prim[i] : 0));
+    const auto* r =
+        reinterpret_cast<const float*>(p.triangles + ((p.hits >> i) & 1 ? p.prim[i] : 0));
     rows[0][i] = _mm256_load_ps(r);
     rows[1][i] = _mm256_load_ps(r + 8);
   }
@@ -226,22 +237,22 @@ PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& lig
   const __m256 hit = laneMask(p.hits);
   const __m256i colour = _mm256_and_si256(_mm256_castps_si256(f[4]), _mm256_castps_si256(hit));
   if (!_mm256_testz_si256(colour, colour)) return false;  // some lane is not kFlat (0)
-  const __m256i texture = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(f[3]),
-                                                            _mm256_castps_si256(hit)),
-                                          _mm256_andnot_si256(_mm256_castps_si256(hit),
-                                                              _mm256_set1_epi32(-1)));
-  const __m256 textured =
-      _mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1)));
+  const __m256i texture =
+      _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(f[3]), _mm256_castps_si256(hit)),
+                      _mm256_andnot_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(-1)));
+  const __m256 textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1)));
   const __m256 n[3] = {f[0], f[1], f[2]};
-  const Lit lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY),
-                            _mm256_loadu_ps(p.dirZ), _mm256_loadu_ps(p.t),
-                            _mm256_and_ps(g[6], textured), light);
+  const Lit lit =
+      lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
+                _mm256_loadu_ps(p.t), _mm256_and_ps(g[6], textured), light);
   __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
   int todo = _mm256_movemask_ps(textured);
   if (todo) {
     const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
-    const __m256 tu = _mm256_add_ps(_mm256_add_ps(g[0], _mm256_mul_ps(bu, g[2])), _mm256_mul_ps(bv, g[4]));
-    const __m256 tv = _mm256_add_ps(_mm256_add_ps(g[1], _mm256_mul_ps(bu, g[3])), _mm256_mul_ps(bv, g[5]));
+    const __m256 tu =
+        _mm256_add_ps(_mm256_add_ps(g[0], _mm256_mul_ps(bu, g[2])), _mm256_mul_ps(bv, g[4]));
+    const __m256 tv =
+        _mm256_add_ps(_mm256_add_ps(g[1], _mm256_mul_ps(bu, g[3])), _mm256_mul_ps(bv, g[5]));
     alignas(32) int32_t ids[kLanes];
     _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
     while (todo) {  // a texture at a time, usually one
@@ -271,7 +282,8 @@ PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& l
   const __m256 textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
       _mm256_load_si256(reinterpret_cast<const __m256i*>(s.texture)), _mm256_set1_epi32(-1)));
   for (int c = 0; c < 3; ++c) {
-    const __m256 texel = _mm256_blendv_ps(_mm256_set1_ps(1.0f), _mm256_load_ps(s.texel[c]), textured);
+    const __m256 texel =
+        _mm256_blendv_ps(_mm256_set1_ps(1.0f), _mm256_load_ps(s.texel[c]), textured);
     const __m256 colour = _mm256_mul_ps(_mm256_mul_ps(_mm256_load_ps(s.albedo[c]), texel), lit);
     _mm256_storeu_ps(rgb[c], _mm256_blendv_ps(_mm256_set1_ps(light.background[c]), colour, hit));
   }
@@ -280,12 +292,16 @@ PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& l
 
 }  // namespace
 
-void shadeFlatPacket(const FlatPacket& p, const PacketLight& light, float (&rgb)[3][kLanes]) {
+void shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
+                      float (*rgb)[3][kLanes]) {
+  PAIRCAST_CHECK(n >= 0 && n <= kMaxFlatPackets);
 #ifdef PAIRCAST_HAVE_AVX2
-  if (cpuHasAvx2() && (!p.texture || avx2::fitsTextureKernel(*p.texture)))
-    return shadeFlatPacketAvx2(p, light, rgb);
+  bool fits = cpuHasAvx2();
+  for (int k = 0; k < n && fits; ++k)
+    fits = !p[k].texture || avx2::fitsTextureKernel(*p[k].texture);
+  if (fits) return shadeFlatPacketsAvx2(p, n, light, rgb);
 #endif
-  shadeFlatPacketScalar(p, light, rgb);
+  for (int k = 0; k < n; ++k) shadeFlatPacketScalar(p[k], light, rgb[k]);
 }
 
 bool shadeFlatLanes(const FlatLanes& p, const PacketLight& light, float (&rgb)[3][kLanes]) {

@@ -36,18 +36,17 @@ struct alignas(64) ShadeTriangle {
   };
 };
 
-
 // A packet's shading inputs and intermediate values, lane by lane.
 struct PacketShading {
-  alignas(32) float n[3][kLanes];       // unit geometric normal, either sign
-  alignas(32) float albedo[3][kLanes];  // linear: material and vertex colours, not the texture
-  alignas(32) float u[kLanes], v[kLanes];      // texture coordinates (textured lanes)
-  alignas(32) float texelsPerMetre[kLanes];    // of the texture's level 0; 0 untextured
-  alignas(32) float lod[kLanes];               // texture level of detail (lightLanes)
-  alignas(32) float light[kLanes];             // ambient + headlight + sun factor (lightLanes)
-  alignas(32) float texel[3][kLanes];          // linear texture colour (textured lanes only)
-  alignas(32) int32_t texture[kLanes];         // texture index, -1 for none and on misses
-  uint32_t hits = 0;                           // bit i: ray i hit
+  alignas(32) float n[3][kLanes];            // unit geometric normal, either sign
+  alignas(32) float albedo[3][kLanes];       // linear: material and vertex colours, not the texture
+  alignas(32) float u[kLanes], v[kLanes];    // texture coordinates (textured lanes)
+  alignas(32) float texelsPerMetre[kLanes];  // of the texture's level 0; 0 untextured
+  alignas(32) float lod[kLanes];             // texture level of detail (lightLanes)
+  alignas(32) float light[kLanes];           // ambient + headlight + sun factor (lightLanes)
+  alignas(32) float texel[3][kLanes];        // linear texture colour (textured lanes only)
+  alignas(32) int32_t texture[kLanes];       // texture index, -1 for none and on misses
+  uint32_t hits = 0;                         // bit i: ray i hit
 };
 
 // What lighting needs, fixed for one render.
@@ -67,9 +66,11 @@ struct FlatPacket {
   const float *u, *v;               // the hits' barycentrics
 };
 
-// rgb[c][i] of such a packet: the passes below (lightLanes, the texture, combineLanes) in one,
-// with the lanes kept in registers.
-void shadeFlatPacket(const FlatPacket& p, const PacketLight& light, float (&rgb)[3][kLanes]);
+// rgb[k][c][i] of n <= kMaxFlatPackets such packets: the passes below (lightLanes, the texture,
+// combineLanes) in one, with the lanes kept in registers.
+constexpr int kMaxFlatPackets = 8;
+void shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
+                      float (*rgb)[3][kLanes]);
 
 // A packet whose rays hit kFlat triangles, several of them, or nothing.
 struct FlatLanes {

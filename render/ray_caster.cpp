@@ -7,7 +7,9 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <mutex>
+#include <optional>
 
 #include "render/packet_shading.h"
 #include "render/texture_pyramid.h"
@@ -17,8 +19,8 @@ namespace paircast {
 namespace {
 
 constexpr int kPacket = kLanes;  // rays per rtcIntersect8 call: one row of a tile
-constexpr int kTileW = 8;   // tile width in pixels (one packet)
-constexpr int kTileH = 8;   // tile height in pixels (packets per tile)
+constexpr int kTileW = 8;        // tile width in pixels (one packet)
+constexpr int kTileH = 8;        // tile height in pixels (packets per tile)
 // Meshes this large get a medium-quality BVH, smaller ones a high-quality one (see RayCaster).
 constexpr size_t kMediumQualityTriangles = 500'000;
 
@@ -81,12 +83,9 @@ inline void setupPacket(const PrimaryRays& P, int x0, int y, int width, float sx
 // What shading needs besides the hit, fixed for one render.
 PacketLight packetLight(const ShadingOptions& o, float sampleSize) {
   const Eigen::Vector3f sun = o.sunDirection.normalized();
-  return {o.ambient,
-          o.headlight,
-          o.sun,
-          {sun.x(), sun.y(), sun.z()},
-          sampleSize,
-          {o.background.x(), o.background.y(), o.background.z()}};
+  return {o.ambient,  o.headlight,
+          o.sun,      {sun.x(), sun.y(), sun.z()},
+          sampleSize, {o.background.x(), o.background.y(), o.background.z()}};
 }
 
 // Neighbouring rays of a small image are far apart. Over a large mesh Embree traverses them
@@ -120,11 +119,14 @@ struct RayCaster::Impl {
   bool largeMesh = false;  // at least kMediumQualityTriangles: medium BVH, incoherent small images
   // Fills the tables above from the mesh.
   void prepareShading(const Mesh& mesh);
-  void renderTile(const PrimaryRays& P, const RenderOptions& options, const PacketLight& light, int x0,
-                  int y0, Frame& frame) const;
+  void renderTile(const PrimaryRays& P, const RenderOptions& options, const PacketLight& light,
+                  int x0, int y0, Frame& frame) const;
   void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y, int cols,
                      Frame& frame) const;
+  void shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
+                 float (*rgb)[3][kPacket]) const;
   void shadePacket(const RTCRayHit8& rh, const PacketLight& light, float (&rgb)[3][kPacket]) const;
+  std::optional<FlatPacket> flatPacket(const RTCRayHit8& rh) const;
   void surfaces(const RTCRayHit8& rh, PacketShading& s) const;
   const ShadeTriangle* commonFlatTriangle(const RTCRayHit8& rh) const;
   void sampleTextures(PacketShading& s) const;
@@ -297,7 +299,7 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
     rtcIntersect8(valid, scene, &ctx, &rh[r]);
     writeGeometry(rh[r], options, x0, y0 + r, cols, frame);
   }
-  for (int r = 0; options.rgb && ss == 1 && r < rows; ++r) shadePacket(rh[r], light, colour[r]);
+  if (options.rgb && ss == 1) shadeRows(rh, rows, light, colour);
   if (!options.rgb) return;
   for (int sub = 0; ss > 1 && sub < ss * ss; ++sub) {
     for (int r = 0; r < rows; ++r) {
@@ -306,7 +308,8 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
       alignas(32) float c[3][kPacket];
       shadePacket(rh[0], light, c);
       for (int k = 0; k < 3; ++k)
-        for (int i = 0; i < kPacket; ++i) colour[r][k][i] = sub == 0 ? c[k][i] : colour[r][k][i] + c[k][i];
+        for (int i = 0; i < kPacket; ++i)
+          colour[r][k][i] = sub == 0 ? c[k][i] : colour[r][k][i] + c[k][i];
     }
   }
   const float inv = 1.0f / static_cast<float>(ss * ss);
@@ -342,23 +345,46 @@ void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& o
   }
 }
 
+// Linear colours of a tile's rows: those inside one flat triangle (over a scene of large triangles,
+// most) together, the others one by one.
+void RayCaster::Impl::shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
+                                float (*rgb)[3][kPacket]) const {
+  FlatPacket flat[kTileH] = {};
+  int flatRow[kTileH], n = 0;
+  for (int r = 0; r < rows; ++r) {
+    if (const std::optional<FlatPacket> p = flatPacket(rh[r])) {
+      flat[n] = *p;
+      flatRow[n++] = r;
+    } else {
+      shadePacket(rh[r], light, rgb[r]);
+    }
+  }
+  float flatRgb[kTileH][3][kPacket];
+  shadeFlatPackets(flat, n, light, flatRgb);
+  for (int k = 0; k < n; ++k) std::memcpy(rgb[flatRow[k]], flatRgb[k], sizeof flatRgb[k]);
+}
+
+// The packet as a FlatPacket when all its rays hit one flat triangle.
+std::optional<FlatPacket> RayCaster::Impl::flatPacket(const RTCRayHit8& rh) const {
+  const ShadeTriangle* t = commonFlatTriangle(rh);
+  if (!t) return std::nullopt;
+  const TexturePyramid* texture = t->texture >= 0 ? &textures[t->texture] : nullptr;
+  return FlatPacket{t,           texture,  rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z,
+                    rh.ray.tfar, rh.hit.u, rh.hit.v};
+}
+
 // Linear colours of a packet's rays: albedo (material, vertex colours, texture) times ambient,
 // headlight and sun terms; the background on a miss. In passes over the eight lanes: gather the
 // triangles' records, light, sample the textures, combine.
 void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light,
                                   float (&rgb)[3][kPacket]) const {
-  // Over a scene of large triangles most packets lie inside one.
-  if (const ShadeTriangle* t = commonFlatTriangle(rh)) {
-    const TexturePyramid* texture = t->texture >= 0 ? &textures[t->texture] : nullptr;
-    const FlatPacket p{t,           texture,     rh.ray.dir_x, rh.ray.dir_y,
-                       rh.ray.dir_z, rh.ray.tfar, rh.hit.u,     rh.hit.v};
-    return shadeFlatPacket(p, light, rgb);
-  }
+  if (const std::optional<FlatPacket> p = flatPacket(rh))
+    return shadeFlatPackets(&*p, 1, light, &rgb);
   if (!triangles.empty()) {  // several triangles: SIMD when they are all flat ones
     uint32_t hits = 0;
     for (int i = 0; i < kPacket; ++i)
       hits |= static_cast<uint32_t>(rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) << i;
-    const FlatLanes p{triangles.data(), textures.data(), rh.hit.primID, hits, rh.ray.dir_x,
+    const FlatLanes p{triangles.data(), textures.data(), rh.hit.primID, hits,     rh.ray.dir_x,
                       rh.ray.dir_y,     rh.ray.dir_z,    rh.ray.tfar,   rh.hit.u, rh.hit.v};
     if (shadeFlatLanes(p, light, rgb)) return;
   }

@@ -24,9 +24,9 @@ PAIRCAST_AVX2 inline __m256 fract8(__m256 x) {
 // TexturePyramid::lodForArea in eight lanes.
 PAIRCAST_AVX2 inline __m256 lodForArea(__m256 texels) {
   const __m256i bits = _mm256_castps_si256(texels);
-  const __m256 exponent = _mm256_cvtepi32_ps(_mm256_sub_epi32(
-      _mm256_and_si256(_mm256_srli_epi32(bits, 23), _mm256_set1_epi32(255)),
-      _mm256_set1_epi32(127)));
+  const __m256 exponent = _mm256_cvtepi32_ps(
+      _mm256_sub_epi32(_mm256_and_si256(_mm256_srli_epi32(bits, 23), _mm256_set1_epi32(255)),
+                       _mm256_set1_epi32(127)));
   const __m256 one = _mm256_set1_ps(1.0f);
   const __m256 mantissa = _mm256_add_ps(
       one, _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_and_si256(bits, _mm256_set1_epi32(0x7FFFFF))),
@@ -38,34 +38,42 @@ PAIRCAST_AVX2 inline __m256 lodForArea(__m256 texels) {
   return _mm256_and_ps(_mm256_blendv_ps(_mm256_set1_ps(100.0f), lod, finite), above);
 }
 
-// TexturePyramid::sample in eight lanes: linear RGB at (u, v), level of detail lod. Level sizes,
-// texel pairs and the decode are gathers.
-PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, __m256 U, __m256 V,
-                                        __m256 lod, __m256 (&rgb)[3]) {
+// What TexturePyramid::sample reads, in eight lanes: the texel pairs of both rows (gathered) and
+// their weights. Apart from filterTexels so that two packets' gathers can be under way at once.
+struct TexelRows {
+  __m256i row0[2], row1[2];  // lanes 0-3 and 4-7: each lane's texel and its right neighbour
+  __m256i weight0, weight1;  // (w00, w01) and (w10, w11) as 16-bit pairs
+  __m256 finite;             // lanes with finite (u, v)
+};
+
+PAIRCAST_AVX2 inline TexelRows texelRows(const TexturePyramid::Arrays& a, __m256 U, __m256 V,
+                                         __m256 lod) {
+  TexelRows t;
   constexpr float kMaxFloat = 3.40282347e38f;
   const __m256 absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
   const __m256 maxFloat = _mm256_set1_ps(kMaxFloat);
-  const __m256 finite =
-      _mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(U, absMask), maxFloat, _CMP_LE_OQ),
-                    _mm256_cmp_ps(_mm256_and_ps(V, absMask), maxFloat, _CMP_LE_OQ));
+  t.finite = _mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(U, absMask), maxFloat, _CMP_LE_OQ),
+                           _mm256_cmp_ps(_mm256_and_ps(V, absMask), maxFloat, _CMP_LE_OQ));
   // std::min(lod, 64) is (64 < lod ? 64 : lod), which is minps(64, lod), NaN included.
-  __m256i level = _mm256_cvttps_epi32(_mm256_add_ps(
-      _mm256_min_ps(_mm256_set1_ps(64.0f), lod), _mm256_set1_ps(0.5f)));
-  level = _mm256_min_epi32(_mm256_max_epi32(level, _mm256_setzero_si256()), _mm256_set1_epi32(a.top));
+  __m256i level = _mm256_cvttps_epi32(
+      _mm256_add_ps(_mm256_min_ps(_mm256_set1_ps(64.0f), lod), _mm256_set1_ps(0.5f)));
+  level =
+      _mm256_min_epi32(_mm256_max_epi32(level, _mm256_setzero_si256()), _mm256_set1_epi32(a.top));
   // Most packets sample one level: then its sizes are broadcast, not gathered.
   const int first = _mm256_cvtsi256_si32(level);
   const bool oneLevel =
       _mm256_movemask_epi8(_mm256_cmpeq_epi32(level, _mm256_set1_epi32(first))) == -1;
-  const __m256i w = oneLevel ? _mm256_set1_epi32(a.width[first])
-                             : _mm256_i32gather_epi32(a.width, level, 4);
-  const __m256i h = oneLevel ? _mm256_set1_epi32(a.height[first])
-                             : _mm256_i32gather_epi32(a.height, level, 4);
-  const __m256i offset = oneLevel ? _mm256_set1_epi32(a.offset[first])
-                                  : _mm256_i32gather_epi32(a.offset, level, 4);
-  const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f), sixteen = _mm256_set1_ps(16.0f);
+  const __m256i w =
+      oneLevel ? _mm256_set1_epi32(a.width[first]) : _mm256_i32gather_epi32(a.width, level, 4);
+  const __m256i h =
+      oneLevel ? _mm256_set1_epi32(a.height[first]) : _mm256_i32gather_epi32(a.height, level, 4);
+  const __m256i offset =
+      oneLevel ? _mm256_set1_epi32(a.offset[first]) : _mm256_i32gather_epi32(a.offset, level, 4);
+  const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f),
+               sixteen = _mm256_set1_ps(16.0f);
   const __m256 x = _mm256_sub_ps(_mm256_mul_ps(fract8(U), _mm256_cvtepi32_ps(w)), half);
-  const __m256 y = _mm256_sub_ps(
-      _mm256_mul_ps(_mm256_sub_ps(one, fract8(V)), _mm256_cvtepi32_ps(h)), half);
+  const __m256 y =
+      _mm256_sub_ps(_mm256_mul_ps(_mm256_sub_ps(one, fract8(V)), _mm256_cvtepi32_ps(h)), half);
   const __m256i k16 = _mm256_set1_epi32(16), k15 = _mm256_set1_epi32(15), k1 = _mm256_set1_epi32(1);
   const __m256i fx = _mm256_sub_epi32(
       _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(_mm256_add_ps(x, one), sixteen), half)), k16);
@@ -78,8 +86,8 @@ PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, __m256 
   // a copy of their first texel); y0 = iy < 0 ? h - 1 : iy, y1 = iy + 1 < h ? iy + 1 : 0.
   const __m256i x0 = _mm256_blendv_epi8(ix, _mm256_sub_epi32(w, k1), _mm256_cmpgt_epi32(zero, ix));
   const __m256i y0 = _mm256_blendv_epi8(iy, _mm256_sub_epi32(h, k1), _mm256_cmpgt_epi32(zero, iy));
-  const __m256i y1 = _mm256_and_si256(_mm256_add_epi32(iy, k1),
-                                      _mm256_cmpgt_epi32(h, _mm256_add_epi32(iy, k1)));
+  const __m256i y1 =
+      _mm256_and_si256(_mm256_add_epi32(iy, k1), _mm256_cmpgt_epi32(h, _mm256_add_epi32(iy, k1)));
   // y * (w + 1) as a multiply-add of 16-bit pairs (y, 0) . (w + 1, 0): half the latency of a
   // 32-bit multiply; levels are narrower than 2^15 (fitsTextureKernel).
   const __m256i stride = _mm256_add_epi32(w, k1);
@@ -87,32 +95,40 @@ PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, __m256 
   const __m256i at1 = _mm256_add_epi32(_mm256_add_epi32(offset, _mm256_madd_epi16(y1, stride)), x0);
   // Each lane's two texels of a row as one 64-bit load: four lanes a gather.
   const auto* pairs = reinterpret_cast<const long long*>(a.texels);
-  const __m256i row0[2] = {_mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(at0), 4),
-                           _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(at0, 1), 4)};
-  const __m256i row1[2] = {_mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(at1), 4),
-                           _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(at1, 1), 4)};
+  t.row0[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(at0), 4);
+  t.row0[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(at0, 1), 4);
+  t.row1[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(at1), 4);
+  t.row1[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(at1, 1), 4);
   // The weights as 16-bit pairs, (w00, w01) for row 0 and (w10, w11) for row 1, at most 256 each:
   // one multiply-add of 16-bit pairs then weighs a channel of both texels of a row.
   const __m256i xPair = _mm256_or_si256(_mm256_sub_epi32(k16, ax), _mm256_slli_epi32(ax, 16));
   const __m256i by = _mm256_sub_epi32(k16, ay);
-  const __m256i weight0 = _mm256_mullo_epi16(xPair, _mm256_or_si256(by, _mm256_slli_epi32(by, 16)));
-  const __m256i weight1 = _mm256_mullo_epi16(xPair, _mm256_or_si256(ay, _mm256_slli_epi32(ay, 16)));
+  t.weight0 = _mm256_mullo_epi16(xPair, _mm256_or_si256(by, _mm256_slli_epi32(by, 16)));
+  t.weight1 = _mm256_mullo_epi16(xPair, _mm256_or_si256(ay, _mm256_slli_epi32(ay, 16)));
+  return t;
+}
+
+// The bilinear filter of texelRows' texels and their decode to linear RGB (0 where (u, v) was
+// not finite).
+PAIRCAST_AVX2 inline void filterTexels(const TexturePyramid::Arrays& a, const TexelRows& t,
+                                       __m256 (&rgb)[3]) {
   // Per half (lanes 0-3, 4-7): each lane's weights twice, for its R and G pairs.
   const __m256i twice[2] = {_mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3),
                             _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7)};
   // Bytes of a pair (R G B x | R' G' B' x') to the 16-bit pairs (R, R') (G, G'), and (B, B') 0.
-  const __m256i toRG = _mm256_setr_epi8(0, -1, 4, -1, 1, -1, 5, -1, 8, -1, 12, -1, 9, -1, 13, -1,
-                                        0, -1, 4, -1, 1, -1, 5, -1, 8, -1, 12, -1, 9, -1, 13, -1);
-  const __m256i toB = _mm256_setr_epi8(2, -1, 6, -1, -1, -1, -1, -1, 10, -1, 14, -1, -1, -1, -1, -1,
-                                       2, -1, 6, -1, -1, -1, -1, -1, 10, -1, 14, -1, -1, -1, -1, -1);
+  const __m256i toRG = _mm256_setr_epi8(0, -1, 4, -1, 1, -1, 5, -1, 8, -1, 12, -1, 9, -1, 13, -1, 0,
+                                        -1, 4, -1, 1, -1, 5, -1, 8, -1, 12, -1, 9, -1, 13, -1);
+  const __m256i toB =
+      _mm256_setr_epi8(2, -1, 6, -1, -1, -1, -1, -1, 10, -1, 14, -1, -1, -1, -1, -1, 2, -1, 6, -1,
+                       -1, -1, -1, -1, 10, -1, 14, -1, -1, -1, -1, -1);
   __m256i rg[2], b[2];  // rg: R G of lanes 0, 1 | 2, 3 (or 4-7); b: B 0 of the same
   for (int part = 0; part < 2; ++part) {
-    const __m256i w0 = _mm256_permutevar8x32_epi32(weight0, twice[part]);
-    const __m256i w1 = _mm256_permutevar8x32_epi32(weight1, twice[part]);
-    rg[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(row0[part], toRG), w0),
-                                _mm256_madd_epi16(_mm256_shuffle_epi8(row1[part], toRG), w1));
-    b[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(row0[part], toB), w0),
-                               _mm256_madd_epi16(_mm256_shuffle_epi8(row1[part], toB), w1));
+    const __m256i w0 = _mm256_permutevar8x32_epi32(t.weight0, twice[part]);
+    const __m256i w1 = _mm256_permutevar8x32_epi32(t.weight1, twice[part]);
+    rg[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(t.row0[part], toRG), w0),
+                                _mm256_madd_epi16(_mm256_shuffle_epi8(t.row1[part], toRG), w1));
+    b[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(t.row0[part], toB), w0),
+                               _mm256_madd_epi16(_mm256_shuffle_epi8(t.row1[part], toB), w1));
   }
   // Decode (255 * 256 >> 4 at most), then back to one vector per channel.
   const float* table = a.decode;
@@ -123,9 +139,16 @@ PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, __m256 
   const __m256i unzip = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
   const __m256 low = _mm256_permutevar8x32_ps(lowRG, unzip);    // R0-3 G0-3
   const __m256 high = _mm256_permutevar8x32_ps(highRG, unzip);  // R4-7 G4-7
-  rgb[0] = _mm256_and_ps(_mm256_permute2f128_ps(low, high, 0x20), finite);
-  rgb[1] = _mm256_and_ps(_mm256_permute2f128_ps(low, high, 0x31), finite);
-  rgb[2] = _mm256_and_ps(_mm256_permutevar8x32_ps(blue, unzip), finite);
+  rgb[0] = _mm256_and_ps(_mm256_permute2f128_ps(low, high, 0x20), t.finite);
+  rgb[1] = _mm256_and_ps(_mm256_permute2f128_ps(low, high, 0x31), t.finite);
+  rgb[2] = _mm256_and_ps(_mm256_permutevar8x32_ps(blue, unzip), t.finite);
+}
+
+// TexturePyramid::sample in eight lanes: linear RGB at (u, v), level of detail lod. Level sizes,
+// texel pairs and the decode are gathers.
+PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, __m256 U, __m256 V,
+                                        __m256 lod, __m256 (&rgb)[3]) {
+  filterTexels(a, texelRows(a, U, V, lod), rgb);
 }
 
 // The same, from and to memory, for the lanes whose bit is set in `lanes`.
@@ -135,8 +158,8 @@ PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, const f
   __m256 c[3];
   sampleTexture(a, _mm256_loadu_ps(u), _mm256_loadu_ps(v), _mm256_loadu_ps(lod), c);
   const __m256i bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-  const __m256i store = _mm256_cmpeq_epi32(
-      _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(lanes)), bits), bits);
+  const __m256i store =
+      _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(static_cast<int>(lanes)), bits), bits);
   for (int k = 0; k < 3; ++k) {
     // A masked store is not forwarded to a later load: a full one is.
     if (lanes == 255)

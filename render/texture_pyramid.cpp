@@ -5,8 +5,8 @@
 #include <cmath>
 #include <cstring>
 
-#include "util/error.h"
 #include "render/texture_kernel.h"
+#include "util/error.h"
 
 namespace paircast {
 namespace {
@@ -74,8 +74,8 @@ TexturePyramid::TexturePyramid(const Texture& t) {
 }
 
 TexturePyramid::Arrays TexturePyramid::arrays() const {
-  return {texels_.data(), width_.data(), height_.data(), offset_.data(), levels() - 1,
-          kSrgb12ToLinear.data()};
+  return {texels_.data(), width_.data(), height_.data(),
+          offset_.data(), levels() - 1,  kSrgb12ToLinear.data()};
 }
 
 Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
@@ -83,7 +83,6 @@ Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
   PAIRCAST_CHECK(x >= 0 && x < width_[level] && y >= 0 && y < height_[level]);
   return unpackSrgb8(texels_[offset_[level] + static_cast<size_t>(y) * (width_[level] + 1) + x]);
 }
-
 
 void TexturePyramid::sample8(const float* u, const float* v, const float* lod, uint32_t lanes,
                              float (*rgb)[8]) const {
@@ -127,6 +126,5 @@ Eigen::Vector3f TexturePyramid::sample(float u, float v, float lod) const {
   }
   return c;
 }
-
 
 }  // namespace paircast

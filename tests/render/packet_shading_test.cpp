@@ -26,7 +26,9 @@ auto scalarThenSimd(F f) {
   return std::make_pair(scalar, simd);
 }
 
-bool haveSimd() { return cpuHasAvx2(); }
+bool haveSimd() {
+  return cpuHasAvx2();
+}
 
 TEST(PacketShading, SimdRendersTheSameBytesAsScalarOnTexturedScenes) {
   if (!haveSimd()) GTEST_SKIP() << "no AVX2 on this CPU: only the scalar code runs";
