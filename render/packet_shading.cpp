@@ -162,7 +162,7 @@ PAIRCAST_AVX2 void lightLanesAvx2(const float* dirX, const float* dirY, const fl
 // all, then the filters and colours. A packet's texels come from memory (level 2 cache, often):
 // the reads of several packets under way at once take little longer than one packet's.
 PAIRCAST_AVX2 void shadeFlatPacketsAvx2(const FlatPacket* p, int n, const PacketLight& light,
-                                        float (*rgb)[3][kLanes]) {
+                                        LaneColours* const* rgb) {
   Lit lit[kMaxFlatPackets];
   avx2::TexelRows texels[kMaxFlatPackets];
   for (int k = 0; k < n; ++k) {
@@ -188,8 +188,9 @@ PAIRCAST_AVX2 void shadeFlatPacketsAvx2(const FlatPacket* p, int n, const Packet
     if (p[k].texture) avx2::filterTexels(p[k].texture->arrays(), texels[k], texel);
     const float* albedo = p[k].triangle->surface.albedo;
     for (int c = 0; c < 3; ++c)
-      _mm256_storeu_ps(rgb[k][c], _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(albedo[c]), texel[c]),
-                                                lit[k].light));
+      _mm256_storeu_ps(
+          (*rgb[k])[c],
+          _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(albedo[c]), texel[c]), lit[k].light));
   }
 }
 
@@ -293,7 +294,7 @@ PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& l
 }  // namespace
 
 void shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
-                      float (*rgb)[3][kLanes]) {
+                      LaneColours* const* rgb) {
   PAIRCAST_CHECK(n >= 0 && n <= kMaxFlatPackets);
 #ifdef PAIRCAST_HAVE_AVX2
   bool fits = cpuHasAvx2();
@@ -301,7 +302,7 @@ void shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
     fits = !p[k].texture || avx2::fitsTextureKernel(*p[k].texture);
   if (fits) return shadeFlatPacketsAvx2(p, n, light, rgb);
 #endif
-  for (int k = 0; k < n; ++k) shadeFlatPacketScalar(p[k], light, rgb[k]);
+  for (int k = 0; k < n; ++k) shadeFlatPacketScalar(p[k], light, *rgb[k]);
 }
 
 bool shadeFlatLanes(const FlatLanes& p, const PacketLight& light, float (&rgb)[3][kLanes]) {

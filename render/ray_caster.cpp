@@ -350,18 +350,17 @@ void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& o
 void RayCaster::Impl::shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
                                 float (*rgb)[3][kPacket]) const {
   FlatPacket flat[kTileH] = {};
-  int flatRow[kTileH], n = 0;
+  LaneColours* out[kTileH];
+  int n = 0;
   for (int r = 0; r < rows; ++r) {
     if (const std::optional<FlatPacket> p = flatPacket(rh[r])) {
       flat[n] = *p;
-      flatRow[n++] = r;
+      out[n++] = &rgb[r];
     } else {
       shadePacket(rh[r], light, rgb[r]);
     }
   }
-  float flatRgb[kTileH][3][kPacket];
-  shadeFlatPackets(flat, n, light, flatRgb);
-  for (int k = 0; k < n; ++k) std::memcpy(rgb[flatRow[k]], flatRgb[k], sizeof flatRgb[k]);
+  shadeFlatPackets(flat, n, light, out);
 }
 
 // The packet as a FlatPacket when all its rays hit one flat triangle.
@@ -378,8 +377,10 @@ std::optional<FlatPacket> RayCaster::Impl::flatPacket(const RTCRayHit8& rh) cons
 // triangles' records, light, sample the textures, combine.
 void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light,
                                   float (&rgb)[3][kPacket]) const {
-  if (const std::optional<FlatPacket> p = flatPacket(rh))
-    return shadeFlatPackets(&*p, 1, light, &rgb);
+  if (const std::optional<FlatPacket> p = flatPacket(rh)) {
+    LaneColours* out = &rgb;
+    return shadeFlatPackets(&*p, 1, light, &out);
+  }
   if (!triangles.empty()) {  // several triangles: SIMD when they are all flat ones
     uint32_t hits = 0;
     for (int i = 0; i < kPacket; ++i)

@@ -47,7 +47,7 @@ float fract(float x) {
 
 }  // namespace
 
-TexturePyramid::TexturePyramid(const Texture& t) {
+TexturePyramid::TexturePyramid(const Texture& t) : decode_(kSrgb12ToLinear.data()) {
   if (t.width <= 0 || t.height <= 0 || (t.channels != 3 && t.channels != 4) ||
       t.texels.size() != static_cast<size_t>(t.width) * t.height * t.channels)
     throw Error("texture '" + t.name + "' has inconsistent size");
@@ -71,11 +71,6 @@ TexturePyramid::TexturePyramid(const Texture& t) {
     w = std::max(1, w / 2);
     h = std::max(1, h / 2);
   }
-}
-
-TexturePyramid::Arrays TexturePyramid::arrays() const {
-  return {texels_.data(), width_.data(), height_.data(),
-          offset_.data(), levels() - 1,  kSrgb12ToLinear.data()};
 }
 
 Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {

@@ -43,7 +43,9 @@ class TexturePyramid {
     int top;              // the last level
     const float* decode;  // sRGB in 8.4 fixed point (0..4080) to linear
   };
-  Arrays arrays() const;
+  Arrays arrays() const {
+    return {texels_.data(), width_.data(), height_.data(), offset_.data(), levels() - 1, decode_};
+  }
 
   // The level of detail for a sample that covers `area` texels of level 0: log2 of its side, half
   // of log2(area) (piecewise linear between powers of two), 0 below one texel. The area, since
@@ -66,6 +68,7 @@ class TexturePyramid {
   // are one 64-bit load.
   std::vector<uint32_t> texels_;
   std::vector<int32_t> width_, height_, offset_;
+  const float* decode_;  // the decode table (Arrays::decode)
 };
 
 }  // namespace paircast
