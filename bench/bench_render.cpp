@@ -76,7 +76,7 @@ struct EmbreeBound {
     const Eigen::Vector3f o = c.t_cam2world.cast<float>();
     const int W = c.width, H = c.height, tilesX = (W + 7) / 8, tilesY = (H + 7) / 8;
     double sum = 0;
-#pragma omp parallel for schedule(dynamic, 4) reduction(+ : sum)
+#pragma omp parallel for schedule(dynamic, tilesX) reduction(+ : sum)  // as RayCaster
     for (int tile = 0; tile < tilesX * tilesY; ++tile) {
       RTCIntersectContext ctx;
       rtcInitIntersectContext(&ctx);

@@ -245,7 +245,9 @@ void RayCaster::renderDepth(const Camera& camera, ImageF& depth) const {
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
   RTCScene scene = impl_->scene;
   const bool largeMesh = impl_->largeMesh;
-#pragma omp parallel for schedule(dynamic, 4)
+  // A row of tiles at a time: threads on neighbouring tiles of one row would write the same cache
+  // lines of the output (false sharing).
+#pragma omp parallel for schedule(dynamic, tilesX)
   for (int tile = 0; tile < tilesX * tilesY; ++tile) {
     RTCIntersectContext ctx = primaryContext(W, H, largeMesh);
     RTCRayHit8 rh;
@@ -276,7 +278,7 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
   const PacketLight light =
       packetLight(options.shading, static_cast<float>(1.0 / (camera.K(0, 0) * ss)));
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
-#pragma omp parallel for schedule(dynamic, 2)
+#pragma omp parallel for schedule(dynamic, tilesX)  // rows of tiles, as renderDepth
   for (int tile = 0; tile < tilesX * tilesY; ++tile)
     impl_->renderTile(P, options, light, (tile % tilesX) * kTileW, (tile / tilesX) * kTileH, frame);
 }
