@@ -375,8 +375,9 @@ std::optional<FlatPacket> RayCaster::Impl::flatPacket(const RTCRayHit8& rh) cons
 }
 
 // Linear colours of a packet's rays: albedo (material, vertex colours, texture) times ambient,
-// headlight and sun terms; the background on a miss. In passes over the eight lanes: gather the
-// triangles' records, light, sample the textures, combine.
+// headlight and sun terms; the background on a miss. One flat triangle: one fused pass; several
+// flat ones: their records transposed into lanes; anything else (vertex colours, scans): passes
+// over the eight lanes that gather the records, light, sample the textures, combine.
 void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light,
                                   float (&rgb)[3][kPacket]) const {
   if (const std::optional<FlatPacket> p = flatPacket(rh)) {
