@@ -171,6 +171,8 @@ class GenerateRun {
   void loadScene(SceneJob& job);
   void worker();
   Result makeItem(const Item& item);
+  // Adds an attempt's generation times, and encode and write seconds, to the time split.
+  void addTimes(const PairSample& spent, double encode, double write);
   void fail();
   // The writer, on the calling thread.
   void writeInOrder();
@@ -378,17 +380,20 @@ Result GenerateRun::makeItem(const Item& item) {
   Result r;
   r.done = true;
   if (!job.error.empty()) return r;
-  std::vector<float> tried;
-  std::optional<PairSample> sample = job.generator->generate(cfg_.seed, item.index, &tried);
-  candidates_ += tried.size();
+  PairSample spent;  // what the attempt cost, with or without a sample
+  std::optional<PairSample> sample = job.generator->generate(cfg_.seed, item.index, &spent);
+  candidates_ += spent.candidateCovis.size();
+  screened_ += spent.screened;
+  falseRejections_ += spent.falseRejections;
+  addTimes(spent, 0.0, 0.0);
   if (!sample) {
     ++failedPairs_;
-    r.record = {
-        {"failed", true}, {"scene", job.name}, {"index", item.index}, {"candidate_covis", tried}};
+    r.record = {{"failed", true},
+                {"scene", job.name},
+                {"index", item.index},
+                {"candidate_covis", spent.candidateCovis}};
     return r;
   }
-  screened_ += sample->screened;
-  falseRejections_ += sample->falseRejections;
   auto t0 = Clock::now();
   EncodedPair enc = encodePair(*sample, cfg_.saveDepth, cfg_.jpegQuality);
   enc.record["candidate_covis"] = sample->candidateCovis;
@@ -400,20 +405,22 @@ Result GenerateRun::makeItem(const Item& item) {
     makeDirs((fs::path(cfg_.out) / job.name).string());
     writeCrocoSample(crocoStem(job, item.index), enc, sample->camera);
   }
-  {
-    std::lock_guard<std::mutex> lock(timeMu_);
-    tRender_ += sample->renderSeconds;
-    tScreen_ += sample->screenSeconds;
-    tSampling_ += std::max(0.0, sample->totalSeconds - sample->renderSeconds -
-                                    sample->screenSeconds - sample->covisSeconds);
-    tCovis_ += sample->covisSeconds;
-    tEncode_ += encode;
-    tWrite_ += since(t0);
-  }
+  addTimes(PairSample{}, encode, since(t0));
   ++accepted_;
   r.record = enc.record;
   if (item.forShard) r.pair = std::move(enc);
   return r;
+}
+
+void GenerateRun::addTimes(const PairSample& spent, double encode, double write) {
+  std::lock_guard<std::mutex> lock(timeMu_);
+  tRender_ += spent.renderSeconds;
+  tScreen_ += spent.screenSeconds;
+  tSampling_ += std::max(
+      0.0, spent.totalSeconds - spent.renderSeconds - spent.screenSeconds - spent.covisSeconds);
+  tCovis_ += spent.covisSeconds;
+  tEncode_ += encode;
+  tWrite_ += write;
 }
 
 // Takes results in item order: journal first, then the shard, so that every sample of a

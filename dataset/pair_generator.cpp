@@ -114,16 +114,17 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
-                                                  std::vector<float>* candidates) const {
+                                                  PairSample* attempt) const {
   const auto start = Clock::now();
   Rng rng(mixSeed(seed, scene_.name, index));
   PairSample s;
   s.scene = scene_.name;
   s.index = index;
   s.seed = seed;
+  std::optional<PairSample> found;
   std::vector<View> views;
   views.reserve(options_.views);
-  for (int ref = 0; ref < options_.maxReferences; ++ref) {
+  for (int ref = 0; ref < options_.maxReferences && !found; ++ref) {
     views.clear();
     std::optional<View> first = referenceView(rng, s);
     if (!first) continue;
@@ -136,12 +137,20 @@ std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
     }
     if (static_cast<int>(views.size()) < options_.views) continue;
     finish(views, s);
-    if (candidates) *candidates = s.candidateCovis;
-    s.totalSeconds = since(start);
-    return s;
+    found = std::move(s);
   }
-  if (candidates) *candidates = s.candidateCovis;
-  return std::nullopt;
+  PairSample& spent = found ? *found : s;
+  spent.totalSeconds = since(start);
+  if (attempt) {
+    attempt->candidateCovis = spent.candidateCovis;
+    attempt->screened = spent.screened;
+    attempt->falseRejections = spent.falseRejections;
+    attempt->renderSeconds = spent.renderSeconds;
+    attempt->screenSeconds = spent.screenSeconds;
+    attempt->covisSeconds = spent.covisSeconds;
+    attempt->totalSeconds = spent.totalSeconds;
+  }
+  return found;
 }
 
 std::optional<PairGenerator::View> PairGenerator::referenceView(Rng& rng, PairSample& s) const {

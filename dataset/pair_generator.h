@@ -113,10 +113,11 @@ class PairGenerator {
   PairGenerator(const Scene& scene, const RayCaster& caster, const ViewpointSampler& sampler,
                 const PairOptions& options);
 
-  // The sample of `index`, or nullopt when none was found within the attempt limits
-  // (`candidates`, when given, still receives the covis of every candidate tried).
+  // The sample of `index`, or nullopt when none was found within the attempt limits.
+  // `attempt`, when given, receives what the call spent either way, without views: the covis of
+  // every candidate tried, the screening counts and the times.
   std::optional<PairSample> generate(uint64_t seed, uint64_t index,
-                                     std::vector<float>* candidates = nullptr) const;
+                                     PairSample* attempt = nullptr) const;
 
   const PairOptions& options() const { return options_; }
 

@@ -176,6 +176,34 @@ TEST(Screening, MeanWorldPointIsThePerPixelMean) {
   EXPECT_THROW(meanWorldPoint(cam, ImageF(37, 29, 1, 0.0f)), std::exception);  // no valid pixel
 }
 
+TEST(Screening, AnIndexWithoutASampleStillReportsWhatItSpent) {
+  // A band no pair reaches: the index ends without a sample, yet it rendered, screened and
+  // sampled poses; the job adds that to its time split and screening counts.
+  const Room room("no_sample_spent");
+  PairOptions o;
+  o.resolution = 128;
+  o.minCovis = 0.999;
+  o.maxAttempts = 10;
+  o.maxReferences = 2;
+  const PairGenerator gen(room.scene, room.caster, room.sampler, o);
+  PairSample spent;
+  EXPECT_FALSE(gen.generate(3, 0, &spent).has_value());
+  EXPECT_GT(spent.candidateCovis.size(), 0u);
+  EXPECT_GT(spent.screened, 0u);
+  EXPECT_GT(spent.screenSeconds, 0.0);
+  EXPECT_GE(spent.totalSeconds, spent.renderSeconds + spent.screenSeconds + spent.covisSeconds);
+  EXPECT_TRUE(spent.rgb.empty());
+  // With a sample, `spent` holds the sample's own figures.
+  o.minCovis = 0.5;
+  const PairGenerator ok(room.scene, room.caster, room.sampler, o);
+  const std::optional<PairSample> sample = ok.generate(3, 0, &spent);
+  ASSERT_TRUE(sample.has_value());
+  EXPECT_EQ(spent.candidateCovis, sample->candidateCovis);
+  EXPECT_EQ(spent.screened, sample->screened);
+  EXPECT_EQ(spent.renderSeconds, sample->renderSeconds);
+  EXPECT_EQ(spent.totalSeconds, sample->totalSeconds);
+}
+
 TEST(Screening, AuditChangesNoOutputAndCountsFalseRejections) {
   const Room room("screen_audit");
   PairOptions o;
