@@ -271,8 +271,8 @@ int main(int argc, char** argv) {
           "%-22s %9zu tris  load %.2f s  build %.2f s  %.0f MB\n"
           "    %7.1f pairs/s  limit %6.1f pairs/s  efficiency %.2f  unscreened %6.1f pairs/s "
           "(x%.2f)  acceptance %4.1f%%\n"
-          "    screening turned down %.0f views (of %.0f candidates and their references; "
-          "%.0f indices without a sample), false rejections %.4f (%.0f of %.0f)\n    "
+          "    screening turned down %.0f views, references and candidates (%.0f candidates "
+          "tried; %.0f indices without a sample), false rejections %.4f (%.0f of %.0f)\n    "
           "RGB+depth / depth-only render %.2fx (%.2f / %.2f ms; depth at 1/4 size %.3f ms)\n"
           "    time: render %4.1f%%  screen %4.1f%%  sampling %4.1f%%  covis %4.1f%%  encode "
           "%4.1f%%  write %4.1f%%\n",
