@@ -5,20 +5,11 @@
 
 #include "covis/unproject.h"
 #include "util/error.h"
+#include "util/simd.h"
 
 // With GCC or Clang on x86-64 the kernel is also compiled for AVX-512 and AVX2 (16 and 8 lanes
-// against SSE2's 4, and hardware gathers); the loader picks the clone the CPU runs. Measured side
-// by side on 256x256 pairs: docs/covis.md. -DPAIRCAST_COVIS_CLONES= turns the clones off.
-#ifndef PAIRCAST_COVIS_CLONES
-#if defined(__x86_64__) && defined(__has_attribute)
-#if __has_attribute(target_clones)
-#define PAIRCAST_COVIS_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
-#endif
-#endif
-#endif
-#ifndef PAIRCAST_COVIS_CLONES
-#define PAIRCAST_COVIS_CLONES
-#endif
+// against SSE2's 4, and hardware gathers): PAIRCAST_CLONES in util/simd.h. Measured side by side
+// on 256x256 pairs: docs/covis.md.
 
 namespace paircast {
 namespace {
@@ -34,10 +25,9 @@ constexpr int kChunk = 256;
 // coordinates of j.
 // Without j's depth (depthJ null: a Wj x Hj frame), the depth test is left out and the count is
 // of pixels inside j's frame and in front of it.
-PAIRCAST_COVIS_CLONES VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI,
-                                                      const ImageF* depthJ, int Wj, int Hj,
-                                                      float absTol, float relTol, int stride,
-                                                      uint8_t* mask) {
+PAIRCAST_CLONES VisibleCount countVisibleKernel(const PixelDepthMap& m, const ImageF& depthI,
+                                                const ImageF* depthJ, int Wj, int Hj, float absTol,
+                                                float relTol, int stride, uint8_t* mask) {
   const int Wi = depthI.width, Hi = depthI.height;
   const float maxX = static_cast<float>(Wj), maxY = static_cast<float>(Hj);
   const float lastX = maxX - 1.0f, lastY = maxY - 1.0f;

@@ -385,8 +385,8 @@ Result GenerateRun::makeItem(const Item& item) {
   candidates_ += spent.candidateCovis.size();
   screened_ += spent.screened;
   falseRejections_ += spent.falseRejections;
-  addTimes(spent, 0.0, 0.0);
   if (!sample) {
+    addTimes(spent, 0.0, 0.0);
     ++failedPairs_;
     r.record = {{"failed", true},
                 {"scene", job.name},
@@ -405,7 +405,7 @@ Result GenerateRun::makeItem(const Item& item) {
     makeDirs((fs::path(cfg_.out) / job.name).string());
     writeCrocoSample(crocoStem(job, item.index), enc, sample->camera);
   }
-  addTimes(PairSample{}, encode, since(t0));
+  addTimes(spent, encode, since(t0));
   ++accepted_;
   r.record = enc.record;
   if (item.forShard) r.pair = std::move(enc);

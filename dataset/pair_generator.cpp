@@ -107,10 +107,11 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
   options_.screenResolution = screenResolution(options);
   for (const ScreenStageSpec& stage : screenStages(options_))
     screens_.push_back({Camera::fromHfov(stage.side, stage.side, options.hfov), stage.margin});
-  // A reference is judged on its valid pixels: up to 32x32 measures them well enough.
-  while (referenceStages_ < screens_.size() &&
-         (referenceStages_ == 0 || screens_[referenceStages_ - 1].intrinsics.width < 32))
+  // A reference is judged on its valid pixels: the stages up to the first of 32x32 or more.
+  for (const ScreenStage& stage : screens_) {
     ++referenceStages_;
+    if (stage.intrinsics.width >= 32) break;
+  }
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,

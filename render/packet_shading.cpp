@@ -12,22 +12,6 @@
 namespace paircast {
 namespace {
 
-void flatTriangleLanes(const ShadeTriangle& t, const float* u, const float* v, PacketShading& s) {
-  const ShadeTriangle::Surface& f = t.surface;
-  const bool textured = t.texture >= 0;
-  for (int i = 0; i < kLanes; ++i) {
-    for (int k = 0; k < 3; ++k) {
-      s.n[k][i] = t.normal[k];
-      s.albedo[k][i] = f.albedo[k];
-    }
-    s.texture[i] = t.texture;
-    s.u[i] = textured ? f.uv0[0] + u[i] * f.duv1[0] + v[i] * f.duv2[0] : 0.0f;
-    s.v[i] = textured ? f.uv0[1] + u[i] * f.duv1[1] + v[i] * f.duv2[1] : 0.0f;
-    s.texelsPerMetre[i] = textured ? f.texelsPerMetre : 0.0f;
-  }
-  s.hits = (1u << kLanes) - 1;
-}
-
 void lightLanesScalar(const float* dirX, const float* dirY, const float* dirZ, const float* t,
                       const PacketLight& light, PacketShading& s) {
   const float* sd = light.sunDir;
@@ -51,14 +35,6 @@ void combineLanesScalar(const PacketShading& s, const PacketLight& light, float 
       rgb[c][i] = hit ? s.albedo[c][i] * texel * s.light[i] : light.background[c];
     }
   }
-}
-
-void shadeFlatPacketScalar(const FlatPacket& p, const PacketLight& light, float (&rgb)[3][kLanes]) {
-  PacketShading s;
-  flatTriangleLanes(*p.triangle, p.u, p.v, s);
-  lightLanesScalar(p.dirX, p.dirY, p.dirZ, p.t, light, s);
-  if (p.texture) p.texture->sample8(s.u, s.v, s.lod, (1u << kLanes) - 1, s.texel);
-  combineLanesScalar(s, light, rgb);
 }
 
 void srgbLanesScalar(const float (&rgb)[3][kLanes], float scale, int count, uint8_t* out) {
@@ -120,6 +96,11 @@ PAIRCAST_AVX2 inline __m256 dot(const __m256 (&a)[3], __m256 x, __m256 y, __m256
                        _mm256_mul_ps(a[2], z));
 }
 
+// a + u b + v c, as surfaces() interpolates texture coordinates.
+PAIRCAST_AVX2 inline __m256 interpolate(__m256 a, __m256 b, __m256 c, __m256 u, __m256 v) {
+  return _mm256_add_ps(_mm256_add_ps(a, _mm256_mul_ps(u, b)), _mm256_mul_ps(v, c));
+}
+
 // The light factor and level of detail of lightLanesScalar, for normals n.
 struct Lit {
   __m256 light, lod;
@@ -158,9 +139,10 @@ PAIRCAST_AVX2 void lightLanesAvx2(const float* dirX, const float* dirY, const fl
   _mm256_store_ps(s.lod, lit.lod);
 }
 
-// shadeFlatPacketScalar in AVX2 lanes, for n packets in two phases: light and texture reads for
-// all, then the filters and colours. A packet's texels come from memory (level 2 cache, often):
-// the reads of several packets under way at once take little longer than one packet's.
+// The scalar passes' results for n packets inside flat triangles, in two phases: light and
+// texture reads for all, then the filters and colours. A packet's texels come from memory (level 2
+// cache, often): the reads of several packets under way at once take little longer than one
+// packet's.
 PAIRCAST_AVX2 void shadeFlatPacketsAvx2(const FlatPacket* p, int n, const PacketLight& light,
                                         LaneColours* const* rgb) {
   Lit lit[kMaxFlatPackets];
@@ -178,9 +160,8 @@ PAIRCAST_AVX2 void shadeFlatPacketsAvx2(const FlatPacket* p, int n, const Packet
     const __m256 bu = _mm256_loadu_ps(p[k].u), bv = _mm256_loadu_ps(p[k].v);
     __m256 uv[2];
     for (int c = 0; c < 2; ++c)
-      uv[c] = _mm256_add_ps(
-          _mm256_add_ps(_mm256_set1_ps(f.uv0[c]), _mm256_mul_ps(bu, _mm256_set1_ps(f.duv1[c]))),
-          _mm256_mul_ps(bv, _mm256_set1_ps(f.duv2[c])));
+      uv[c] = interpolate(_mm256_set1_ps(f.uv0[c]), _mm256_set1_ps(f.duv1[c]),
+                          _mm256_set1_ps(f.duv2[c]), bu, bv);
     texels[k] = avx2::texelRows(p[k].texture->arrays(), uv[0], uv[1], lit[k].lod);
   }
   for (int k = 0; k < n; ++k) {
@@ -213,12 +194,6 @@ PAIRCAST_AVX2 inline void transpose8(const __m256 (&r)[8], __m256 (&out)[8]) {
   }
 }
 
-PAIRCAST_AVX2 __m256 laneMask(uint32_t bits) {
-  const __m256i bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-  return _mm256_castsi256_ps(
-      _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(static_cast<int>(bits)), bit), bit));
-}
-
 // The scalar passes' results for packets over several kFlat triangles: each lane's 64-byte
 // record as two vectors, transposed to one vector per field.
 PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& light,
@@ -235,7 +210,7 @@ PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& lig
   __m256 f[8], g[8];
   transpose8(rows[0], f);
   transpose8(rows[1], g);
-  const __m256 hit = laneMask(p.hits);
+  const __m256 hit = _mm256_castsi256_ps(avx2::laneMask(p.hits));
   const __m256i colour = _mm256_and_si256(_mm256_castps_si256(f[4]), _mm256_castps_si256(hit));
   if (!_mm256_testz_si256(colour, colour)) return false;  // some lane is not kFlat (0)
   const __m256i texture =
@@ -250,10 +225,8 @@ PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& lig
   int todo = _mm256_movemask_ps(textured);
   if (todo) {
     const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
-    const __m256 tu =
-        _mm256_add_ps(_mm256_add_ps(g[0], _mm256_mul_ps(bu, g[2])), _mm256_mul_ps(bv, g[4]));
-    const __m256 tv =
-        _mm256_add_ps(_mm256_add_ps(g[1], _mm256_mul_ps(bu, g[3])), _mm256_mul_ps(bv, g[5]));
+    const __m256 tu = interpolate(g[0], g[2], g[4], bu, bv);
+    const __m256 tv = interpolate(g[1], g[3], g[5], bu, bv);
     alignas(32) int32_t ids[kLanes];
     _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
     while (todo) {  // a texture at a time, usually one
@@ -276,9 +249,7 @@ PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& lig
 
 PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& light,
                                     float (&rgb)[3][kLanes]) {
-  const __m256i bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-  const __m256 hit = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
-      _mm256_and_si256(_mm256_set1_epi32(static_cast<int>(s.hits)), bits), bits));
+  const __m256 hit = _mm256_castsi256_ps(avx2::laneMask(s.hits));
   const __m256 lit = _mm256_load_ps(s.light);
   const __m256 textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(
       _mm256_load_si256(reinterpret_cast<const __m256i*>(s.texture)), _mm256_set1_epi32(-1)));
@@ -293,16 +264,19 @@ PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& l
 
 }  // namespace
 
-void shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
+bool shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
                       LaneColours* const* rgb) {
   PAIRCAST_CHECK(n >= 0 && n <= kMaxFlatPackets);
 #ifdef PAIRCAST_HAVE_AVX2
   bool fits = cpuHasAvx2();
   for (int k = 0; k < n && fits; ++k)
     fits = !p[k].texture || avx2::fitsTextureKernel(*p[k].texture);
-  if (fits) return shadeFlatPacketsAvx2(p, n, light, rgb);
+  if (fits) {
+    shadeFlatPacketsAvx2(p, n, light, rgb);
+    return true;
+  }
 #endif
-  for (int k = 0; k < n; ++k) shadeFlatPacketScalar(p[k], light, *rgb[k]);
+  return false;
 }
 
 bool shadeFlatLanes(const FlatLanes& p, const PacketLight& light, float (&rgb)[3][kLanes]) {

@@ -66,11 +66,12 @@ struct FlatPacket {
   const float *u, *v;               // the hits' barycentrics
 };
 
-// (*rgb[k])[c][i] of n <= kMaxFlatPackets such packets: the passes below (lightLanes, the
-// texture, combineLanes) in one, with the lanes kept in registers.
+// (*rgb[k])[c][i] of n <= kMaxFlatPackets such packets, as the passes below (lightLanes, the
+// texture, combineLanes) give them, in one SIMD pass with the lanes in registers. False (and rgb
+// untouched) where there is no SIMD kernel: then the passes do it.
 constexpr int kMaxFlatPackets = 8;
 using LaneColours = float[3][kLanes];
-void shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
+bool shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
                       LaneColours* const* rgb);
 
 // A packet whose rays hit kFlat triangles, several of them, or nothing.

@@ -126,6 +126,8 @@ struct RayCaster::Impl {
   void shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
                  float (*rgb)[3][kPacket]) const;
   void shadePacket(const RTCRayHit8& rh, const PacketLight& light, float (&rgb)[3][kPacket]) const;
+  void shadeInPasses(const RTCRayHit8& rh, const PacketLight& light,
+                     float (&rgb)[3][kPacket]) const;
   std::optional<FlatPacket> flatPacket(const RTCRayHit8& rh) const;
   void surfaces(const RTCRayHit8& rh, PacketShading& s) const;
   const ShadeTriangle* commonFlatTriangle(const RTCRayHit8& rh) const;
@@ -352,17 +354,19 @@ void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& o
 void RayCaster::Impl::shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
                                 float (*rgb)[3][kPacket]) const {
   FlatPacket flat[kTileH] = {};
-  LaneColours* out[kTileH];
-  int n = 0;
+  LaneColours* out[kTileH] = {};
+  int flatRow[kTileH], n = 0;
   for (int r = 0; r < rows; ++r) {
     if (const std::optional<FlatPacket> p = flatPacket(rh[r])) {
       flat[n] = *p;
+      flatRow[n] = r;
       out[n++] = &rgb[r];
     } else {
       shadePacket(rh[r], light, rgb[r]);
     }
   }
-  shadeFlatPackets(flat, n, light, out);
+  if (shadeFlatPackets(flat, n, light, out)) return;
+  for (int k = 0; k < n; ++k) shadeInPasses(rh[flatRow[k]], light, rgb[flatRow[k]]);
 }
 
 // The packet as a FlatPacket when all its rays hit one flat triangle.
@@ -380,10 +384,10 @@ std::optional<FlatPacket> RayCaster::Impl::flatPacket(const RTCRayHit8& rh) cons
 // over the eight lanes that gather the records, light, sample the textures, combine.
 void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light,
                                   float (&rgb)[3][kPacket]) const {
-  if (const std::optional<FlatPacket> p = flatPacket(rh)) {
-    LaneColours* out = &rgb;
-    return shadeFlatPackets(&*p, 1, light, &out);
-  }
+  LaneColours* out = &rgb;
+  if (const std::optional<FlatPacket> p = flatPacket(rh);
+      p && shadeFlatPackets(&*p, 1, light, &out))
+    return;
   if (!triangles.empty()) {  // several triangles: SIMD when they are all flat ones
     uint32_t hits = 0;
     for (int i = 0; i < kPacket; ++i)
@@ -392,6 +396,12 @@ void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light
                       rh.ray.dir_y,     rh.ray.dir_z,    rh.ray.tfar,   rh.hit.u, rh.hit.v};
     if (shadeFlatLanes(p, light, rgb)) return;
   }
+  shadeInPasses(rh, light, rgb);
+}
+
+// shadePacket as passes over the eight lanes (the scalar code the SIMD paths match).
+void RayCaster::Impl::shadeInPasses(const RTCRayHit8& rh, const PacketLight& light,
+                                    float (&rgb)[3][kPacket]) const {
   PacketShading s;
   surfaces(rh, s);
   lightLanes(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z, rh.ray.tfar, light, s);
@@ -442,7 +452,6 @@ void RayCaster::Impl::surfaces(const RTCRayHit8& rh, PacketShading& s) const {
   }
 }
 
-// The triangle every ray of the packet hit, when they all hit the same kFlat one; else null.
 // The triangle every ray of the packet hit, when they all hit the same kFlat one; else null.
 const ShadeTriangle* RayCaster::Impl::commonFlatTriangle(const RTCRayHit8& rh) const {
   if (triangles.empty() || rh.hit.geomID[0] == RTC_INVALID_GEOMETRY_ID) return nullptr;

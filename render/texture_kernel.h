@@ -157,9 +157,7 @@ PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, const f
                                         float (*rgb)[8]) {
   __m256 c[3];
   sampleTexture(a, _mm256_loadu_ps(u), _mm256_loadu_ps(v), _mm256_loadu_ps(lod), c);
-  const __m256i bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-  const __m256i store =
-      _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(static_cast<int>(lanes)), bits), bits);
+  const __m256i store = laneMask(lanes);
   for (int k = 0; k < 3; ++k) {
     // A masked store is not forwarded to a later load: a full one is.
     if (lanes == 255)

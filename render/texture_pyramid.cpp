@@ -11,13 +11,6 @@
 namespace paircast {
 namespace {
 
-// sRGB in 8.4 fixed point (what the filter below yields, 0..4080) to linear.
-const std::array<float, 4096> kSrgb12ToLinear = [] {
-  std::array<float, 4096> t{};
-  for (int i = 0; i < 4096; ++i) t[i] = srgbToLinear(std::min(1.0f, i / (16.0f * 255.0f)));
-  return t;
-}();
-
 // The next level of a w x h level: each side halved (to at least 1), each texel the mean of a
 // 2x2 block in linear light (1x2 or 2x1 where a side is already 1, wrapping on odd sides).
 std::vector<uint32_t> halve(const std::vector<uint32_t>& a, int w, int h) {
@@ -47,7 +40,14 @@ float fract(float x) {
 
 }  // namespace
 
-TexturePyramid::TexturePyramid(const Texture& t) : decode_(kSrgb12ToLinear.data()) {
+// sRGB in 8.4 fixed point (what the bilinear filter yields, 0..4080) to linear.
+const std::array<float, 4096> TexturePyramid::kDecode = [] {
+  std::array<float, 4096> t{};
+  for (int i = 0; i < 4096; ++i) t[i] = srgbToLinear(std::min(1.0f, i / (16.0f * 255.0f)));
+  return t;
+}();
+
+TexturePyramid::TexturePyramid(const Texture& t) {
   if (t.width <= 0 || t.height <= 0 || (t.channels != 3 && t.channels != 4) ||
       t.texels.size() != static_cast<size_t>(t.width) * t.height * t.channels)
     throw Error("texture '" + t.name + "' has inconsistent size");
@@ -117,7 +117,7 @@ Eigen::Vector3f TexturePyramid::sample(float u, float v, float lod) const {
     const int s = 8 * k;
     const uint32_t sum = w00 * ((r0[x0] >> s) & 255) + w01 * ((r0[x1] >> s) & 255) +
                          w10 * ((r1[x0] >> s) & 255) + w11 * ((r1[x1] >> s) & 255);
-    c[k] = kSrgb12ToLinear[sum >> 4];  // 255 * 256 >> 4 at most
+    c[k] = kDecode[sum >> 4];  // 255 * 256 >> 4 at most
   }
   return c;
 }

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <cstdint>
 #include <cstring>
 #include <vector>
@@ -44,7 +45,8 @@ class TexturePyramid {
     const float* decode;  // sRGB in 8.4 fixed point (0..4080) to linear
   };
   Arrays arrays() const {
-    return {texels_.data(), width_.data(), height_.data(), offset_.data(), levels() - 1, decode_};
+    return {texels_.data(), width_.data(), height_.data(),
+            offset_.data(), levels() - 1,  kDecode.data()};
   }
 
   // The level of detail for a sample that covers `area` texels of level 0: log2 of its side, half
@@ -68,7 +70,7 @@ class TexturePyramid {
   // are one 64-bit load.
   std::vector<uint32_t> texels_;
   std::vector<int32_t> width_, height_, offset_;
-  const float* decode_;  // the decode table (Arrays::decode)
+  static const std::array<float, 4096> kDecode;  // Arrays::decode
 };
 
 }  // namespace paircast
