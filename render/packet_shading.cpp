@@ -23,7 +23,7 @@ void lightLanesScalar(const float* dirX, const float* dirY, const float* dirZ, c
     const float sunCos = nd > 0 ? -ns : ns;  // the normal turned towards the camera
     s.light[i] = light.ambient + light.headlight * cosView + light.sun * std::max(0.0f, sunCos);
     const float side = s.texelsPerMetre[i] * (t[i] * light.sampleSize);
-    s.lod[i] = TexturePyramid::lodForArea(side * side / std::max(cosView, 1e-3f));
+    s.level[i] = TexturePyramid::levelForArea(side * side / std::max(cosView, 1e-3f));
   }
 }
 
@@ -53,13 +53,13 @@ const int32_t* linearToSrgb8Table() {
   return table.data();
 }
 
-// srgbLanesScalar in AVX2 lanes: linearToSrgb8's table index and its two bounds per lane.
-PAIRCAST_AVX2 void srgbLanesAvx2(const float (&rgb)[3][kLanes], float scale, int count,
-                                 uint8_t* out) {
+// srgbLanesScalar in AVX2 lanes, from registers: linearToSrgb8's table index and its two bounds
+// per lane.
+PAIRCAST_AVX2 void srgbPixels(const __m256 (&rgb)[3], float scale, int count, uint8_t* out) {
   const int32_t* table = linearToSrgb8Table();
   __m256i packed = _mm256_setzero_si256();  // lane i: R | G << 8 | B << 16
   for (int c = 0; c < 3; ++c) {
-    const __m256 x = _mm256_mul_ps(_mm256_loadu_ps(rgb[c]), _mm256_set1_ps(scale));
+    const __m256 x = _mm256_mul_ps(rgb[c], _mm256_set1_ps(scale));
     __m256i index = _mm256_cvttps_epi32(
         _mm256_add_ps(_mm256_mul_ps(x, _mm256_set1_ps(4096.0f)), _mm256_set1_ps(0.5f)));
     index =
@@ -91,6 +91,12 @@ PAIRCAST_AVX2 void srgbLanesAvx2(const float (&rgb)[3][kLanes], float scale, int
   _mm_storel_epi64(reinterpret_cast<__m128i*>(out + 16), _mm256_extracti128_si256(words, 1));
 }
 
+PAIRCAST_AVX2 void srgbLanesAvx2(const float (&rgb)[3][kLanes], float scale, int count,
+                                 uint8_t* out) {
+  const __m256 c[3] = {_mm256_loadu_ps(rgb[0]), _mm256_loadu_ps(rgb[1]), _mm256_loadu_ps(rgb[2])};
+  srgbPixels(c, scale, count, out);
+}
+
 PAIRCAST_AVX2 inline __m256 dot(const __m256 (&a)[3], __m256 x, __m256 y, __m256 z) {
   return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(a[0], x), _mm256_mul_ps(a[1], y)),
                        _mm256_mul_ps(a[2], z));
@@ -101,9 +107,10 @@ PAIRCAST_AVX2 inline __m256 interpolate(__m256 a, __m256 b, __m256 c, __m256 u, 
   return _mm256_add_ps(_mm256_add_ps(a, _mm256_mul_ps(u, b)), _mm256_mul_ps(v, c));
 }
 
-// The light factor and level of detail of lightLanesScalar, for normals n.
+// The light factor and texture level of lightLanesScalar, for normals n.
 struct Lit {
-  __m256 light, lod;
+  __m256 light;
+  __m256i level;
 };
 PAIRCAST_AVX2 inline Lit lightAvx2(const __m256 (&n)[3], __m256 dx, __m256 dy, __m256 dz, __m256 t,
                                    __m256 texelsPerMetre, const PacketLight& light) {
@@ -126,7 +133,7 @@ PAIRCAST_AVX2 inline Lit lightAvx2(const __m256 (&n)[3], __m256 dx, __m256 dy, _
       _mm256_mul_ps(texelsPerMetre, _mm256_mul_ps(t, _mm256_set1_ps(light.sampleSize)));
   const __m256 area =
       _mm256_div_ps(_mm256_mul_ps(side, side), _mm256_max_ps(_mm256_set1_ps(1e-3f), cosView));
-  return {lit, avx2::lodForArea(area)};
+  return {lit, avx2::levelForArea(area)};
 }
 
 // lightLanesScalar in AVX2 lanes, operation for operation.
@@ -136,43 +143,7 @@ PAIRCAST_AVX2 void lightLanesAvx2(const float* dirX, const float* dirY, const fl
   const Lit lit = lightAvx2(n, _mm256_loadu_ps(dirX), _mm256_loadu_ps(dirY), _mm256_loadu_ps(dirZ),
                             _mm256_loadu_ps(t), _mm256_load_ps(s.texelsPerMetre), light);
   _mm256_store_ps(s.light, lit.light);
-  _mm256_store_ps(s.lod, lit.lod);
-}
-
-// The scalar passes' results for n packets inside flat triangles, in two phases: light and
-// texture reads for all, then the filters and colours. A packet's texels come from memory (level 2
-// cache, often): the reads of several packets under way at once take little longer than one
-// packet's.
-PAIRCAST_AVX2 void shadeFlatPacketsAvx2(const FlatPacket* p, int n, const PacketLight& light,
-                                        LaneColours* const* rgb) {
-  Lit lit[kMaxFlatPackets];
-  avx2::TexelRows texels[kMaxFlatPackets];
-  for (int k = 0; k < n; ++k) {
-    const ShadeTriangle& t = *p[k].triangle;
-    const ShadeTriangle::Surface& f = t.surface;
-    const __m256 normal[3] = {_mm256_set1_ps(t.normal[0]), _mm256_set1_ps(t.normal[1]),
-                              _mm256_set1_ps(t.normal[2])};
-    const bool textured = p[k].texture != nullptr;
-    lit[k] = lightAvx2(normal, _mm256_loadu_ps(p[k].dirX), _mm256_loadu_ps(p[k].dirY),
-                       _mm256_loadu_ps(p[k].dirZ), _mm256_loadu_ps(p[k].t),
-                       _mm256_set1_ps(textured ? f.texelsPerMetre : 0.0f), light);
-    if (!textured) continue;
-    const __m256 bu = _mm256_loadu_ps(p[k].u), bv = _mm256_loadu_ps(p[k].v);
-    __m256 uv[2];
-    for (int c = 0; c < 2; ++c)
-      uv[c] = interpolate(_mm256_set1_ps(f.uv0[c]), _mm256_set1_ps(f.duv1[c]),
-                          _mm256_set1_ps(f.duv2[c]), bu, bv);
-    texels[k] = avx2::texelRows(p[k].texture->arrays(), uv[0], uv[1], lit[k].lod);
-  }
-  for (int k = 0; k < n; ++k) {
-    __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
-    if (p[k].texture) avx2::filterTexels(p[k].texture->arrays(), texels[k], texel);
-    const float* albedo = p[k].triangle->surface.albedo;
-    for (int c = 0; c < 3; ++c)
-      _mm256_storeu_ps(
-          (*rgb[k])[c],
-          _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(albedo[c]), texel[c]), lit[k].light));
-  }
+  _mm256_store_si256(reinterpret_cast<__m256i*>(s.level), lit.level);
 }
 
 // Rows r[0..7] of 8 floats to columns: out[k] holds element k of every row.
@@ -194,57 +165,189 @@ PAIRCAST_AVX2 inline void transpose8(const __m256 (&r)[8], __m256 (&out)[8]) {
   }
 }
 
-// The scalar passes' results for packets over several kFlat triangles: each lane's 64-byte
-// record as two vectors, transposed to one vector per field.
-PAIRCAST_AVX2 bool shadeFlatLanesAvx2(const FlatLanes& p, const PacketLight& light,
-                                      float (&rgb)[3][kLanes]) {
+// Each lane's ShadeTriangle, one vector per field. f: normal x y z, texture, colour, albedo r g b;
+// g: uv0, duv1, duv2 (x y each), texelsPerMetre, padding.
+struct Records {
+  __m256 f[8], g[8];
+};
+
+// When the lanes that hit share one triangle (most packets), its record broadcast, and the
+// triangle returned; else each lane's 64-byte record as two vectors, transposed, and null. Lanes
+// that missed read triangle 0.
+PAIRCAST_AVX2 inline const ShadeTriangle* loadRecords(const ShadeScene& scene, const RayLanes& p,
+                                                      __m256 hit, uint32_t hits, Records& r) {
   static_assert(sizeof(ShadeTriangle) == 16 * sizeof(float));
+  alignas(32) uint32_t prim[kLanes];
+  const __m256i ids = _mm256_and_si256(
+      _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p.prim)), _mm256_castps_si256(hit));
+  _mm256_store_si256(reinterpret_cast<__m256i*>(prim), ids);
+  const uint32_t first = hits ? prim[__builtin_ctz(hits)] : 0;
+  const __m256i same = _mm256_cmpeq_epi32(ids, _mm256_set1_epi32(static_cast<int>(first)));
+  if (((_mm256_movemask_ps(_mm256_castsi256_ps(same)) | ~hits) & 0xFF) == 0xFF) {
+    const auto* record = reinterpret_cast<const float*>(scene.triangles + first);
+    for (int k = 0; k < 8; ++k) {
+      r.f[k] = _mm256_broadcast_ss(record + k);
+      r.g[k] = _mm256_broadcast_ss(record + 8 + k);
+    }
+    return scene.triangles + first;
+  }
   __m256 rows[2][8];
   for (int i = 0; i < kLanes; ++i) {
-    const auto* r =
-        reinterpret_cast<const float*>(p.triangles + ((p.hits >> i) & 1 ? p.prim[i] : 0));
-    rows[0][i] = _mm256_load_ps(r);
-    rows[1][i] = _mm256_load_ps(r + 8);
+    const auto* record = reinterpret_cast<const float*>(scene.triangles + prim[i]);
+    rows[0][i] = _mm256_load_ps(record);
+    rows[1][i] = _mm256_load_ps(record + 8);
   }
-  // Fields: normal x y z, texture, colour, albedo r g b | uv0, duv1, duv2 (x y each), density.
-  __m256 f[8], g[8];
-  transpose8(rows[0], f);
-  transpose8(rows[1], g);
-  const __m256 hit = _mm256_castsi256_ps(avx2::laneMask(p.hits));
-  const __m256i colour = _mm256_and_si256(_mm256_castps_si256(f[4]), _mm256_castps_si256(hit));
-  if (!_mm256_testz_si256(colour, colour)) return false;  // some lane is not kFlat (0)
-  const __m256i texture =
-      _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(f[3]), _mm256_castps_si256(hit)),
-                      _mm256_andnot_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(-1)));
-  const __m256 textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1)));
-  const __m256 n[3] = {f[0], f[1], f[2]};
-  const Lit lit =
-      lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
-                _mm256_loadu_ps(p.t), _mm256_and_ps(g[6], textured), light);
-  __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
-  int todo = _mm256_movemask_ps(textured);
-  if (todo) {
-    const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
-    const __m256 tu = interpolate(g[0], g[2], g[4], bu, bv);
-    const __m256 tv = interpolate(g[1], g[3], g[5], bu, bv);
-    alignas(32) int32_t ids[kLanes];
-    _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
-    while (todo) {  // a texture at a time, usually one
-      const int id = ids[__builtin_ctz(static_cast<unsigned>(todo))];
-      const TexturePyramid& pyramid = p.textures[id];
-      if (!avx2::fitsTextureKernel(pyramid)) return false;
-      const __m256 lanes = _mm256_castsi256_ps(_mm256_cmpeq_epi32(texture, _mm256_set1_epi32(id)));
-      __m256 c[3];
-      avx2::sampleTexture(pyramid.arrays(), tu, tv, lit.lod, c);
-      for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], lanes);
-      todo &= ~_mm256_movemask_ps(lanes);
-    }
-  }
+  transpose8(rows[0], r.f);
+  transpose8(rows[1], r.g);
+  return nullptr;
+}
+
+// What the first phase leaves for the second: light, albedo, and the texel reads of the packet's
+// one texture.
+struct Prepared {
+  Lit lit;
+  avx2::TexelAddresses texels;
+  __m256 albedo[3], hit, textured;
+  const TexturePyramid* texture;  // of all textured lanes, or null for none
+};
+
+// albedo * texel * light where a lane hit, the background elsewhere.
+PAIRCAST_AVX2 inline void colours(const __m256 (&albedo)[3], const __m256 (&texel)[3], __m256 lit,
+                                  __m256 hit, const PacketLight& light, __m256 (&rgb)[3]) {
   for (int c = 0; c < 3; ++c) {
-    const __m256 colour = _mm256_mul_ps(_mm256_mul_ps(f[5 + c], texel[c]), lit.light);
-    _mm256_storeu_ps(rgb[c], _mm256_blendv_ps(_mm256_set1_ps(light.background[c]), colour, hit));
+    const __m256 colour = _mm256_mul_ps(_mm256_mul_ps(albedo[c], texel[c]), lit);
+    rgb[c] = _mm256_blendv_ps(_mm256_set1_ps(light.background[c]), colour, hit);
+  }
+}
+
+// A packet's colours to where the caller wants them: linear, or as sRGB pixels.
+PAIRCAST_AVX2 inline void put(const __m256 (&rgb)[3], const PacketOut& out) {
+  if (out.srgb) return srgbPixels(rgb, 1.0f, out.count, out.srgb);
+  for (int c = 0; c < 3; ++c) _mm256_storeu_ps((*out.linear)[c], rgb[c]);
+}
+
+// The texels of lanes over several textures, a texture at a time; false where one does not fit
+// the kernel.
+PAIRCAST_AVX2 bool sampleTextures(const ShadeScene& scene, const Records& r, const RayLanes& p,
+                                  __m256i texture, __m256i level, int todo,
+                                  __m256 (&texel)[3]) {
+  const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
+  const __m256 tu = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
+  const __m256 tv = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
+  alignas(32) int32_t ids[kLanes];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
+  while (todo) {
+    const int id = ids[__builtin_ctz(static_cast<unsigned>(todo))];
+    const TexturePyramid& pyramid = scene.textures[id];
+    if (!avx2::fitsTextureKernel(pyramid)) return false;
+    const __m256 lanes = _mm256_castsi256_ps(_mm256_cmpeq_epi32(texture, _mm256_set1_epi32(id)));
+    __m256 c[3];
+    avx2::sampleTexture(pyramid.arrays(), tu, tv, level, c);
+    for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], lanes);
+    todo &= ~_mm256_movemask_ps(lanes);
   }
   return true;
+}
+
+enum class Phase { kPrepared, kDone, kDeclined };
+
+// Each lane's texture index (-1 for none and on misses) when the lanes hit several triangles, and
+// in `one` the index of all textured lanes: -1 for none, kSeveral for several.
+constexpr int kSeveral = -2;
+PAIRCAST_AVX2 inline __m256i laneTextures(const Records& r, __m256 hit, int& one) {
+  const __m256i texture =
+      _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), _mm256_castps_si256(hit)),
+                      _mm256_andnot_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(-1)));
+  const int textured =
+      _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1))));
+  one = -1;
+  if (!textured) return texture;
+  alignas(32) int32_t ids[kLanes];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
+  one = ids[__builtin_ctz(static_cast<unsigned>(textured))];
+  const __m256i lanes = _mm256_cmpeq_epi32(texture, _mm256_set1_epi32(one));
+  if (_mm256_movemask_ps(_mm256_castsi256_ps(lanes)) != textured) one = kSeveral;
+  return texture;
+}
+
+// The first phase of a packet: its records, light, and its texture's texel addresses. A packet
+// over several textures (rare: the seams between materials) is shaded here at once (kDone); one
+// that hits a triangle that is not kFlat, or a texture too large for the kernel, is declined.
+PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const PacketLight& light,
+                            Prepared& q, const PacketOut& out) {
+  const __m256i miss = _mm256_cmpeq_epi32(
+      _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p.geomID)), _mm256_set1_epi32(-1));
+  q.hit = _mm256_castsi256_ps(_mm256_xor_si256(miss, _mm256_set1_epi32(-1)));
+  const auto hits = static_cast<uint32_t>(_mm256_movemask_ps(q.hit));
+  Records r;
+  const ShadeTriangle* triangle = loadRecords(scene, p, q.hit, hits, r);
+  int id = -1;  // the texture of all textured lanes
+  __m256i texture = _mm256_set1_epi32(-1);
+  if (triangle) {  // one triangle: its colour and texture hold for all lanes
+    if (hits && triangle->colour != ShadeTriangle::kFlat) return Phase::kDeclined;
+    id = hits ? triangle->texture : -1;
+    q.textured = id >= 0 ? q.hit : _mm256_setzero_ps();
+  } else {
+    const __m256i colour =
+        _mm256_and_si256(_mm256_castps_si256(r.f[4]), _mm256_castps_si256(q.hit));
+    if (!_mm256_testz_si256(colour, colour)) return Phase::kDeclined;  // a lane is not kFlat (0)
+    texture = laneTextures(r, q.hit, id);
+    q.textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1)));
+  }
+  q.texture = nullptr;
+  for (int c = 0; c < 3; ++c) q.albedo[c] = r.f[5 + c];
+  const __m256 n[3] = {r.f[0], r.f[1], r.f[2]};
+  q.lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
+                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], q.textured), light);
+  if (id == -1) return Phase::kPrepared;
+  if (id == kSeveral) {
+    __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
+    const int todo = _mm256_movemask_ps(q.textured);
+    if (!sampleTextures(scene, r, p, texture, q.lit.level, todo, texel)) return Phase::kDeclined;
+    __m256 rgb[3];
+    colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
+    put(rgb, out);
+    return Phase::kDone;
+  }
+  q.texture = &scene.textures[id];
+  if (!avx2::fitsTextureKernel(*q.texture)) return Phase::kDeclined;
+  const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
+  const __m256 tu = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
+  const __m256 tv = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
+  q.texels = avx2::texelAddresses(q.texture->arrays(), tu, tv, q.lit.level);
+  return Phase::kPrepared;
+}
+
+// The second phase: filter the texels, and the colours.
+PAIRCAST_AVX2 void finish(const Prepared& q, const PacketLight& light, __m256 (&rgb)[3]) {
+  __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
+  if (q.texture) {
+    __m256 c[3];
+    const TexturePyramid::Arrays a = q.texture->arrays();
+    avx2::filterTexels(a, avx2::texelRows(a, q.texels), c);
+    for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], q.textured);
+  }
+  colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
+}
+
+// The scalar passes' results for n packets, in two phases: light and texture reads for all, then
+// the filters and colours. A packet's texels come from memory (level 2 cache, often): the reads
+// of several packets under way at once take little longer than one packet's.
+PAIRCAST_AVX2 uint32_t shadeFlatPacketsAvx2(const ShadeScene& scene, const RayLanes* p, int n,
+                                            const PacketLight& light, const PacketOut* out) {
+  Prepared q[kMaxPackets];
+  uint32_t prepared = 0, done = 0;
+  for (int k = 0; k < n; ++k) {
+    const Phase phase = prepare(scene, p[k], light, q[k], out[k]);
+    prepared |= static_cast<uint32_t>(phase == Phase::kPrepared) << k;
+    done |= static_cast<uint32_t>(phase != Phase::kDeclined) << k;
+  }
+  __m256 rgb[kMaxPackets][3];
+  for (int k = 0; k < n; ++k)
+    if ((prepared >> k) & 1) finish(q[k], light, rgb[k]);
+  for (int k = 0; k < n; ++k)
+    if ((prepared >> k) & 1) put(rgb[k], out[k]);
+  return done;
 }
 
 PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& light,
@@ -264,26 +367,13 @@ PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& l
 
 }  // namespace
 
-bool shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
-                      LaneColours* const* rgb) {
-  PAIRCAST_CHECK(n >= 0 && n <= kMaxFlatPackets);
+uint32_t shadeFlatPackets(const ShadeScene& scene, const RayLanes* p, int n,
+                          const PacketLight& light, const PacketOut* out) {
+  PAIRCAST_CHECK(n >= 0 && n <= kMaxPackets);
 #ifdef PAIRCAST_HAVE_AVX2
-  bool fits = cpuHasAvx2();
-  for (int k = 0; k < n && fits; ++k)
-    fits = !p[k].texture || avx2::fitsTextureKernel(*p[k].texture);
-  if (fits) {
-    shadeFlatPacketsAvx2(p, n, light, rgb);
-    return true;
-  }
+  if (cpuHasAvx2()) return shadeFlatPacketsAvx2(scene, p, n, light, out);
 #endif
-  return false;
-}
-
-bool shadeFlatLanes(const FlatLanes& p, const PacketLight& light, float (&rgb)[3][kLanes]) {
-#ifdef PAIRCAST_HAVE_AVX2
-  if (cpuHasAvx2()) return shadeFlatLanesAvx2(p, light, rgb);
-#endif
-  return false;
+  return 0;
 }
 
 void srgbLanes(const float (&rgb)[3][kLanes], float scale, int count, uint8_t* out) {

@@ -42,7 +42,7 @@ struct PacketShading {
   alignas(32) float albedo[3][kLanes];       // linear: material and vertex colours, not the texture
   alignas(32) float u[kLanes], v[kLanes];    // texture coordinates (textured lanes)
   alignas(32) float texelsPerMetre[kLanes];  // of the texture's level 0; 0 untextured
-  alignas(32) float lod[kLanes];             // texture level of detail (lightLanes)
+  alignas(32) int32_t level[kLanes];         // texture pyramid level (lightLanes)
   alignas(32) float light[kLanes];           // ambient + headlight + sun factor (lightLanes)
   alignas(32) float texel[3][kLanes];        // linear texture colour (textured lanes only)
   alignas(32) int32_t texture[kLanes];       // texture index, -1 for none and on misses
@@ -57,43 +57,44 @@ struct PacketLight {
   float background[3];            // linear colour of a miss
 };
 
-// A packet whose rays all hit one kFlat triangle: the common case on scenes of large triangles.
-struct FlatPacket {
-  const ShadeTriangle* triangle;
-  const TexturePyramid* texture;    // the triangle's texture, or null
-  const float *dirX, *dirY, *dirZ;  // the rays' directions
-  const float* t;                   // their hit distances (z-depths)
-  const float *u, *v;               // the hits' barycentrics
+// What shading reads of the renderer's scene.
+struct ShadeScene {
+  const ShadeTriangle* triangles;  // by primitive id
+  const TexturePyramid* textures;  // by ShadeTriangle::texture
 };
 
-// (*rgb[k])[c][i] of n <= kMaxFlatPackets such packets, as the passes below (lightLanes, the
-// texture, combineLanes) give them, in one SIMD pass with the lanes in registers. False (and rgb
-// untouched) where there is no SIMD kernel: then the passes do it.
-constexpr int kMaxFlatPackets = 8;
-using LaneColours = float[3][kLanes];
-bool shadeFlatPackets(const FlatPacket* p, int n, const PacketLight& light,
-                      LaneColours* const* rgb);
-
-// A packet whose rays hit kFlat triangles, several of them, or nothing.
-struct FlatLanes {
-  const ShadeTriangle* triangles;   // the renderer's records, by primitive id
-  const TexturePyramid* textures;   // the renderer's textures, by ShadeTriangle::texture
+// A packet of eight rays as cast: which hit, what, and where.
+struct RayLanes {
+  const uint32_t* geomID;           // each ray's geometry id: all ones on a miss
   const uint32_t* prim;             // each ray's primitive id
-  uint32_t hits;                    // bit i: ray i hit
   const float *dirX, *dirY, *dirZ;  // the rays' directions
   const float* t;                   // their hit distances (z-depths)
   const float *u, *v;               // the hits' barycentrics
 };
 
-// rgb[c][i] of such a packet in SIMD lanes, the records transposed from memory; the background
-// on the lanes that missed. False (and rgb untouched) where it has no SIMD kernel or a lane hit a
-// triangle that is not kFlat: then the passes below do it.
-bool shadeFlatLanes(const FlatLanes& p, const PacketLight& light, float (&rgb)[3][kLanes]);
+using LaneColours = float[3][kLanes];
+
+// Where a packet's colours go: linear (rgb[c][i]), or, when `srgb` is set, as the 8-bit sRGB
+// pixels of srgbLanes with scale 1 (the first `count`).
+struct PacketOut {
+  LaneColours* linear;
+  uint8_t* srgb;
+  int count;
+};
+
+// The colours of n <= kMaxPackets packets whose rays hit kFlat triangles (or nothing), as the
+// passes below (lightLanes, the texture, combineLanes) give them, in SIMD lanes: light and texture
+// reads of all packets first, then the filters and colours, so that several packets' reads are
+// under way at once. Returns bit k set for each packet done; the others (a triangle that is not
+// kFlat, no SIMD kernel) are left to the passes, their output untouched.
+constexpr int kMaxPackets = 8;
+uint32_t shadeFlatPackets(const ShadeScene& scene, const RayLanes* p, int n,
+                          const PacketLight& light, const PacketOut* out);
 
 // Each lane's light factor: ambient + headlight * cos(view) + sun * max(0, cos(sun)), the normal
-// turned towards the camera; and its texture level of detail: the sample covers (z s)^2 / cos
-// m^2 of the surface (z the z-depth, here `t` with the renderer's unnormalised directions), and
-// the level matches its texel count by area. `dir` are the rays' directions.
+// turned towards the camera; and its texture level: the sample covers (z s)^2 / cos m^2 of the
+// surface (z the z-depth, here `t` with the renderer's unnormalised directions), and the level
+// matches its texel count by area (TexturePyramid::levelForArea). `dir` are the rays' directions.
 void lightLanes(const float* dirX, const float* dirY, const float* dirZ, const float* t,
                 const PacketLight& light, PacketShading& s);
 

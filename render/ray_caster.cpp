@@ -21,6 +21,7 @@ namespace {
 constexpr int kPacket = kLanes;  // rays per rtcIntersect8 call: one row of a tile
 constexpr int kTileW = 8;        // tile width in pixels (one packet)
 constexpr int kTileH = 8;        // tile height in pixels (packets per tile)
+static_assert(kTileH <= kMaxPackets);  // a tile's rows are shaded together
 // Meshes this large get a medium-quality BVH, smaller ones a high-quality one (see RayCaster).
 constexpr size_t kMediumQualityTriangles = 500'000;
 
@@ -124,13 +125,10 @@ struct RayCaster::Impl {
   void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y, int cols,
                      Frame& frame) const;
   void shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
-                 float (*rgb)[3][kPacket]) const;
-  void shadePacket(const RTCRayHit8& rh, const PacketLight& light, float (&rgb)[3][kPacket]) const;
+                 LaneColours* rgb, uint8_t* const* pixels, int cols) const;
   void shadeInPasses(const RTCRayHit8& rh, const PacketLight& light,
                      float (&rgb)[3][kPacket]) const;
-  std::optional<FlatPacket> flatPacket(const RTCRayHit8& rh) const;
   void surfaces(const RTCRayHit8& rh, PacketShading& s) const;
-  const ShadeTriangle* commonFlatTriangle(const RTCRayHit8& rh) const;
   void sampleTextures(PacketShading& s) const;
   Eigen::Vector3f unitNormal(const RTCRayHit8& rh, int i) const;
   static ShadeTriangle shadeTriangle(const Mesh& m, size_t t);
@@ -303,18 +301,24 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
     rtcIntersect8(valid, scene, &ctx, &rh[r]);
     writeGeometry(rh[r], options, x0, y0 + r, cols, frame);
   }
-  if (options.rgb && ss == 1) shadeRows(rh, rows, light, colour);
   if (!options.rgb) return;
-  for (int sub = 0; ss > 1 && sub < ss * ss; ++sub) {
+  if (ss == 1) {
+    uint8_t* pixels[kTileH];
+    for (int r = 0; r < rows; ++r) pixels[r] = frame.rgb.pixel(x0, y0 + r);
+    shadeRows(rh, rows, light, colour, pixels, cols);
+    return;
+  }
+  for (int sub = 0; sub < ss * ss; ++sub) {
     for (int r = 0; r < rows; ++r) {
-      setupPacket(P, x0, y0 + r, W, (sub % ss + 0.5f) / ss, (sub / ss + 0.5f) / ss, rh[0], valid);
-      rtcIntersect8(valid, scene, &ctx, &rh[0]);
-      alignas(32) float c[3][kPacket];
-      shadePacket(rh[0], light, c);
+      setupPacket(P, x0, y0 + r, W, (sub % ss + 0.5f) / ss, (sub / ss + 0.5f) / ss, rh[r], valid);
+      rtcIntersect8(valid, scene, &ctx, &rh[r]);
+    }
+    alignas(32) LaneColours c[kTileH];
+    shadeRows(rh, rows, light, c, nullptr, cols);
+    for (int r = 0; r < rows; ++r)
       for (int k = 0; k < 3; ++k)
         for (int i = 0; i < kPacket; ++i)
-          colour[r][k][i] = sub == 0 ? c[k][i] : colour[r][k][i] + c[k][i];
-    }
+          colour[r][k][i] = sub == 0 ? c[r][k][i] : colour[r][k][i] + c[r][k][i];
   }
   const float inv = 1.0f / static_cast<float>(ss * ss);
   for (int r = 0; r < rows; ++r) srgbLanes(colour[r], inv, cols, frame.rgb.pixel(x0, y0 + r));
@@ -349,57 +353,34 @@ void RayCaster::Impl::writeGeometry(const RTCRayHit8& rh, const RenderOptions& o
   }
 }
 
-// Linear colours of a tile's rows: those inside one flat triangle (over a scene of large triangles,
-// most) together, the others one by one.
+// Linear colours of a tile's rows: albedo (material, vertex colours, texture) times ambient,
+// headlight and sun terms; the background on a miss. With `pixels` (no supersampling), each row's
+// first `cols` colours go to pixels[r] as 8-bit sRGB instead. Rows that hit only kFlat triangles
+// (over a scene of large triangles, nearly all) in SIMD lanes, together; the others (vertex
+// colours, scans) in passes over the eight lanes that gather the records, light, sample the
+// textures, combine.
 void RayCaster::Impl::shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
-                                float (*rgb)[3][kPacket]) const {
-  FlatPacket flat[kTileH] = {};
-  LaneColours* out[kTileH] = {};
-  int flatRow[kTileH], n = 0;
-  for (int r = 0; r < rows; ++r) {
-    if (const std::optional<FlatPacket> p = flatPacket(rh[r])) {
-      flat[n] = *p;
-      flatRow[n] = r;
-      out[n++] = &rgb[r];
-    } else {
-      shadePacket(rh[r], light, rgb[r]);
+                                LaneColours* rgb, uint8_t* const* pixels, int cols) const {
+  uint32_t done = 0;
+  if (!triangles.empty()) {
+    RayLanes lanes[kTileH];
+    PacketOut out[kTileH];
+    static_assert(RTC_INVALID_GEOMETRY_ID == ~0u);
+    for (int r = 0; r < rows; ++r) {
+      lanes[r] = {rh[r].hit.geomID, rh[r].hit.primID, rh[r].ray.dir_x, rh[r].ray.dir_y,
+                  rh[r].ray.dir_z,  rh[r].ray.tfar,   rh[r].hit.u,     rh[r].hit.v};
+      out[r] = {&rgb[r], pixels ? pixels[r] : nullptr, cols};
     }
+    done = shadeFlatPackets({triangles.data(), textures.data()}, lanes, rows, light, out);
   }
-  if (shadeFlatPackets(flat, n, light, out)) return;
-  for (int k = 0; k < n; ++k) shadeInPasses(rh[flatRow[k]], light, rgb[flatRow[k]]);
-}
-
-// The packet as a FlatPacket when all its rays hit one flat triangle.
-std::optional<FlatPacket> RayCaster::Impl::flatPacket(const RTCRayHit8& rh) const {
-  const ShadeTriangle* t = commonFlatTriangle(rh);
-  if (!t) return std::nullopt;
-  const TexturePyramid* texture = t->texture >= 0 ? &textures[t->texture] : nullptr;
-  return FlatPacket{t,           texture,  rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z,
-                    rh.ray.tfar, rh.hit.u, rh.hit.v};
-}
-
-// Linear colours of a packet's rays: albedo (material, vertex colours, texture) times ambient,
-// headlight and sun terms; the background on a miss. One flat triangle: one fused pass; several
-// flat ones: their records transposed into lanes; anything else (vertex colours, scans): passes
-// over the eight lanes that gather the records, light, sample the textures, combine.
-void RayCaster::Impl::shadePacket(const RTCRayHit8& rh, const PacketLight& light,
-                                  float (&rgb)[3][kPacket]) const {
-  LaneColours* out = &rgb;
-  if (const std::optional<FlatPacket> p = flatPacket(rh);
-      p && shadeFlatPackets(&*p, 1, light, &out))
-    return;
-  if (!triangles.empty()) {  // several triangles: SIMD when they are all flat ones
-    uint32_t hits = 0;
-    for (int i = 0; i < kPacket; ++i)
-      hits |= static_cast<uint32_t>(rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID) << i;
-    const FlatLanes p{triangles.data(), textures.data(), rh.hit.primID, hits,     rh.ray.dir_x,
-                      rh.ray.dir_y,     rh.ray.dir_z,    rh.ray.tfar,   rh.hit.u, rh.hit.v};
-    if (shadeFlatLanes(p, light, rgb)) return;
+  for (int r = 0; r < rows; ++r) {
+    if ((done >> r) & 1) continue;
+    shadeInPasses(rh[r], light, rgb[r]);
+    if (pixels) srgbLanes(rgb[r], 1.0f, cols, pixels[r]);
   }
-  shadeInPasses(rh, light, rgb);
 }
 
-// shadePacket as passes over the eight lanes (the scalar code the SIMD paths match).
+// shadeRows as passes over the eight lanes (the scalar code the SIMD path matches).
 void RayCaster::Impl::shadeInPasses(const RTCRayHit8& rh, const PacketLight& light,
                                     float (&rgb)[3][kPacket]) const {
   PacketShading s;
@@ -452,24 +433,13 @@ void RayCaster::Impl::surfaces(const RTCRayHit8& rh, PacketShading& s) const {
   }
 }
 
-// The triangle every ray of the packet hit, when they all hit the same kFlat one; else null.
-const ShadeTriangle* RayCaster::Impl::commonFlatTriangle(const RTCRayHit8& rh) const {
-  if (triangles.empty() || rh.hit.geomID[0] == RTC_INVALID_GEOMETRY_ID) return nullptr;
-  const unsigned prim = rh.hit.primID[0];
-  bool same = true;
-  for (int i = 1; i < kPacket; ++i)
-    same &= rh.hit.primID[i] == prim && rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
-  const ShadeTriangle& t = triangles[prim];
-  return same && t.colour == ShadeTriangle::kFlat ? &t : nullptr;
-}
-
 // Each textured lane's texture colour, sampled for all lanes of one texture at once.
 void RayCaster::Impl::sampleTextures(PacketShading& s) const {
   const int first = s.texture[0];
   bool same = true;
   for (int i = 1; i < kPacket; ++i) same &= s.texture[i] == first;
   if (same) {  // the common case: one texture (or none) for all lanes
-    if (first >= 0) textures[first].sample8(s.u, s.v, s.lod, (1u << kPacket) - 1, s.texel);
+    if (first >= 0) textures[first].sample8(s.u, s.v, s.level, (1u << kPacket) - 1, s.texel);
     return;
   }
   uint32_t todo = 0;
@@ -478,7 +448,7 @@ void RayCaster::Impl::sampleTextures(PacketShading& s) const {
     const int t = s.texture[__builtin_ctz(todo)];
     uint32_t lanes = 0;
     for (int i = 0; i < kPacket; ++i) lanes |= static_cast<uint32_t>(s.texture[i] == t) << i;
-    textures[t].sample8(s.u, s.v, s.lod, lanes, s.texel);
+    textures[t].sample8(s.u, s.v, s.level, lanes, s.texel);
     todo &= ~lanes;
   }
 }

@@ -21,64 +21,64 @@ PAIRCAST_AVX2 inline __m256 fract8(__m256 x) {
   return _mm256_and_ps(_mm256_sub_ps(x, _mm256_floor_ps(x)), small);
 }
 
-// TexturePyramid::lodForArea in eight lanes.
-PAIRCAST_AVX2 inline __m256 lodForArea(__m256 texels) {
-  const __m256i bits = _mm256_castps_si256(texels);
-  const __m256 exponent = _mm256_cvtepi32_ps(
-      _mm256_sub_epi32(_mm256_and_si256(_mm256_srli_epi32(bits, 23), _mm256_set1_epi32(255)),
-                       _mm256_set1_epi32(127)));
-  const __m256 one = _mm256_set1_ps(1.0f);
-  const __m256 mantissa = _mm256_add_ps(
-      one, _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_and_si256(bits, _mm256_set1_epi32(0x7FFFFF))),
-                         _mm256_set1_ps(8388608.0f)));
-  const __m256 lod =
-      _mm256_mul_ps(_mm256_set1_ps(0.5f), _mm256_add_ps(exponent, _mm256_sub_ps(mantissa, one)));
-  const __m256 above = _mm256_cmp_ps(texels, one, _CMP_GT_OQ);                     // else 0
-  const __m256 finite = _mm256_cmp_ps(texels, _mm256_set1_ps(1e30f), _CMP_LT_OQ);  // else 100
-  return _mm256_and_ps(_mm256_blendv_ps(_mm256_set1_ps(100.0f), lod, finite), above);
+// TexturePyramid::levelForArea in eight lanes.
+PAIRCAST_AVX2 inline __m256i levelForArea(__m256 area) {
+  const __m256i exponent = _mm256_sub_epi32(
+      _mm256_and_si256(_mm256_srli_epi32(_mm256_castps_si256(area), 23), _mm256_set1_epi32(255)),
+      _mm256_set1_epi32(127));
+  const __m256i level = _mm256_srai_epi32(_mm256_add_epi32(exponent, _mm256_set1_epi32(1)), 1);
+  const __m256 above = _mm256_cmp_ps(area, _mm256_set1_ps(1.0f), _CMP_GT_OQ);  // else 0
+  return _mm256_and_si256(level, _mm256_castps_si256(above));
 }
 
-// What TexturePyramid::sample reads, in eight lanes: the texel pairs of both rows (gathered) and
-// their weights. Apart from filterTexels so that two packets' gathers can be under way at once.
-struct TexelRows {
-  __m256i row0[2], row1[2];  // lanes 0-3 and 4-7: each lane's texel and its right neighbour
+// table[level] per lane, for levels 0-15 (fitsTextureKernel) and a table of kTableSize entries:
+// two permutes in registers, with no branch on whether the lanes share a level.
+PAIRCAST_AVX2 inline __m256i byLevel(const int32_t* table, __m256i level) {
+  static_assert(TexturePyramid::kTableSize == 16);
+  const __m256i low = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(table));
+  const __m256i high = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(table + 8));
+  return _mm256_blendv_epi8(_mm256_permutevar8x32_epi32(low, level),
+                            _mm256_permutevar8x32_epi32(high, level),
+                            _mm256_cmpgt_epi32(level, _mm256_set1_epi32(7)));
+}
+
+// Where TexturePyramid::sample reads, in eight lanes, and the weights of what it reads there.
+// Apart from the reads (texelRows) so that several packets' texels can be fetched before any
+// packet waits for them.
+struct TexelAddresses {
+  __m256i at0, at1;          // each lane's texel on its first and second row (texel index)
   __m256i weight0, weight1;  // (w00, w01) and (w10, w11) as 16-bit pairs
   __m256 finite;             // lanes with finite (u, v)
 };
 
-PAIRCAST_AVX2 inline TexelRows texelRows(const TexturePyramid::Arrays& a, __m256 U, __m256 V,
-                                         __m256 lod) {
-  TexelRows t;
+// What it reads there: the texel pairs of both rows.
+struct TexelRows {
+  __m256i row0[2], row1[2];  // lanes 0-3 and 4-7: each lane's texel and its right neighbour
+  __m256i weight0, weight1;  // as TexelAddresses
+  __m256 finite;
+};
+
+PAIRCAST_AVX2 inline TexelAddresses texelAddresses(const TexturePyramid::Arrays& a, __m256 U,
+                                                   __m256 V, __m256i level) {
+  TexelAddresses t;
   constexpr float kMaxFloat = 3.40282347e38f;
   const __m256 absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
   const __m256 maxFloat = _mm256_set1_ps(kMaxFloat);
   t.finite = _mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(U, absMask), maxFloat, _CMP_LE_OQ),
                            _mm256_cmp_ps(_mm256_and_ps(V, absMask), maxFloat, _CMP_LE_OQ));
-  // std::min(lod, 64) is (64 < lod ? 64 : lod), which is minps(64, lod), NaN included.
-  __m256i level = _mm256_cvttps_epi32(
-      _mm256_add_ps(_mm256_min_ps(_mm256_set1_ps(64.0f), lod), _mm256_set1_ps(0.5f)));
   level =
       _mm256_min_epi32(_mm256_max_epi32(level, _mm256_setzero_si256()), _mm256_set1_epi32(a.top));
-  // Most packets sample one level: then its sizes are broadcast, not gathered.
-  const int first = _mm256_cvtsi256_si32(level);
-  const bool oneLevel =
-      _mm256_movemask_epi8(_mm256_cmpeq_epi32(level, _mm256_set1_epi32(first))) == -1;
-  const __m256i w =
-      oneLevel ? _mm256_set1_epi32(a.width[first]) : _mm256_i32gather_epi32(a.width, level, 4);
-  const __m256i h =
-      oneLevel ? _mm256_set1_epi32(a.height[first]) : _mm256_i32gather_epi32(a.height, level, 4);
-  const __m256i offset =
-      oneLevel ? _mm256_set1_epi32(a.offset[first]) : _mm256_i32gather_epi32(a.offset, level, 4);
-  const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f),
-               sixteen = _mm256_set1_ps(16.0f);
-  const __m256 x = _mm256_sub_ps(_mm256_mul_ps(fract8(U), _mm256_cvtepi32_ps(w)), half);
-  const __m256 y =
-      _mm256_sub_ps(_mm256_mul_ps(_mm256_sub_ps(one, fract8(V)), _mm256_cvtepi32_ps(h)), half);
+  const __m256i w = byLevel(a.width, level), h = byLevel(a.height, level);
+  const __m256i offset = byLevel(a.offset, level);
+  const __m256 one = _mm256_set1_ps(1.0f), bias = _mm256_set1_ps(8.5f);
+  const __m256 w16 = _mm256_cvtepi32_ps(_mm256_slli_epi32(w, 4));
+  const __m256 h16 = _mm256_cvtepi32_ps(_mm256_slli_epi32(h, 4));
   const __m256i k16 = _mm256_set1_epi32(16), k15 = _mm256_set1_epi32(15), k1 = _mm256_set1_epi32(1);
   const __m256i fx = _mm256_sub_epi32(
-      _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(_mm256_add_ps(x, one), sixteen), half)), k16);
+      _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(fract8(U), w16), bias)), k16);
   const __m256i fy = _mm256_sub_epi32(
-      _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(_mm256_add_ps(y, one), sixteen), half)), k16);
+      _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(_mm256_sub_ps(one, fract8(V)), h16), bias)),
+      k16);
   const __m256i ix = _mm256_srai_epi32(fx, 4), iy = _mm256_srai_epi32(fy, 4);
   const __m256i ax = _mm256_and_si256(fx, k15), ay = _mm256_and_si256(fy, k15);
   const __m256i zero = _mm256_setzero_si256();
@@ -91,14 +91,8 @@ PAIRCAST_AVX2 inline TexelRows texelRows(const TexturePyramid::Arrays& a, __m256
   // y * (w + 1) as a multiply-add of 16-bit pairs (y, 0) . (w + 1, 0): half the latency of a
   // 32-bit multiply; levels are narrower than 2^15 (fitsTextureKernel).
   const __m256i stride = _mm256_add_epi32(w, k1);
-  const __m256i at0 = _mm256_add_epi32(_mm256_add_epi32(offset, _mm256_madd_epi16(y0, stride)), x0);
-  const __m256i at1 = _mm256_add_epi32(_mm256_add_epi32(offset, _mm256_madd_epi16(y1, stride)), x0);
-  // Each lane's two texels of a row as one 64-bit load: four lanes a gather.
-  const auto* pairs = reinterpret_cast<const long long*>(a.texels);
-  t.row0[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(at0), 4);
-  t.row0[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(at0, 1), 4);
-  t.row1[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(at1), 4);
-  t.row1[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(at1, 1), 4);
+  t.at0 = _mm256_add_epi32(_mm256_add_epi32(offset, _mm256_madd_epi16(y0, stride)), x0);
+  t.at1 = _mm256_add_epi32(_mm256_add_epi32(offset, _mm256_madd_epi16(y1, stride)), x0);
   // The weights as 16-bit pairs, (w00, w01) for row 0 and (w10, w11) for row 1, at most 256 each:
   // one multiply-add of 16-bit pairs then weighs a channel of both texels of a row.
   const __m256i xPair = _mm256_or_si256(_mm256_sub_epi32(k16, ax), _mm256_slli_epi32(ax, 16));
@@ -106,6 +100,21 @@ PAIRCAST_AVX2 inline TexelRows texelRows(const TexturePyramid::Arrays& a, __m256
   t.weight0 = _mm256_mullo_epi16(xPair, _mm256_or_si256(by, _mm256_slli_epi32(by, 16)));
   t.weight1 = _mm256_mullo_epi16(xPair, _mm256_or_si256(ay, _mm256_slli_epi32(ay, 16)));
   return t;
+}
+
+// The texel pairs at those addresses: each lane's two texels of a row as one 64-bit load, four
+// lanes a gather.
+PAIRCAST_AVX2 inline TexelRows texelRows(const TexturePyramid::Arrays& a, const TexelAddresses& t) {
+  TexelRows r;
+  const auto* pairs = reinterpret_cast<const long long*>(a.texels);
+  r.row0[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(t.at0), 4);
+  r.row0[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(t.at0, 1), 4);
+  r.row1[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(t.at1), 4);
+  r.row1[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(t.at1, 1), 4);
+  r.weight0 = t.weight0;
+  r.weight1 = t.weight1;
+  r.finite = t.finite;
+  return r;
 }
 
 // The bilinear filter of texelRows' texels and their decode to linear RGB (0 where (u, v) was
@@ -144,19 +153,20 @@ PAIRCAST_AVX2 inline void filterTexels(const TexturePyramid::Arrays& a, const Te
   rgb[2] = _mm256_and_ps(_mm256_permutevar8x32_ps(blue, unzip), t.finite);
 }
 
-// TexturePyramid::sample in eight lanes: linear RGB at (u, v), level of detail lod. Level sizes,
-// texel pairs and the decode are gathers.
+// TexturePyramid::sample in eight lanes: linear RGB at (u, v) on `level`. Texel pairs and the
+// decode are gathers.
 PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, __m256 U, __m256 V,
-                                        __m256 lod, __m256 (&rgb)[3]) {
-  filterTexels(a, texelRows(a, U, V, lod), rgb);
+                                        __m256i level, __m256 (&rgb)[3]) {
+  filterTexels(a, texelRows(a, texelAddresses(a, U, V, level)), rgb);
 }
 
 // The same, from and to memory, for the lanes whose bit is set in `lanes`.
 PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, const float* u,
-                                        const float* v, const float* lod, uint32_t lanes,
+                                        const float* v, const int32_t* level, uint32_t lanes,
                                         float (*rgb)[8]) {
   __m256 c[3];
-  sampleTexture(a, _mm256_loadu_ps(u), _mm256_loadu_ps(v), _mm256_loadu_ps(lod), c);
+  sampleTexture(a, _mm256_loadu_ps(u), _mm256_loadu_ps(v),
+                _mm256_loadu_si256(reinterpret_cast<const __m256i*>(level)), c);
   const __m256i store = laneMask(lanes);
   for (int k = 0; k < 3; ++k) {
     // A masked store is not forwarded to a later load: a full one is.

@@ -71,6 +71,9 @@ TexturePyramid::TexturePyramid(const Texture& t) {
     w = std::max(1, w / 2);
     h = std::max(1, h / 2);
   }
+  levels_ = static_cast<int>(width_.size());
+  for (auto* table : {&width_, &height_, &offset_})
+    table->resize(std::max<size_t>(table->size(), kTableSize), 0);
 }
 
 Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
@@ -79,31 +82,31 @@ Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
   return unpackSrgb8(texels_[offset_[level] + static_cast<size_t>(y) * (width_[level] + 1) + x]);
 }
 
-void TexturePyramid::sample8(const float* u, const float* v, const float* lod, uint32_t lanes,
-                             float (*rgb)[8]) const {
+void TexturePyramid::sample8(const float* u, const float* v, const int32_t* level,
+                             uint32_t lanes, float (*rgb)[8]) const {
 #ifdef PAIRCAST_HAVE_AVX2
   if (cpuHasAvx2() && avx2::fitsTextureKernel(*this))
-    return avx2::sampleTexture(arrays(), u, v, lod, lanes, rgb);
+    return avx2::sampleTexture(arrays(), u, v, level, lanes, rgb);
 #endif
   for (int i = 0; i < 8; ++i) {
     if ((lanes >> i) & 1) {
-      const Eigen::Vector3f c = sample(u[i], v[i], lod[i]);
+      const Eigen::Vector3f c = sample(u[i], v[i], level[i]);
       for (int k = 0; k < 3; ++k) rgb[k][i] = c[k];
     }
   }
 }
 
-// The level nearest to lod, and on it the four texels around (u, v) weighted in 1/16 of a
-// texel; the weights apply to the sRGB values, in integer lanes; the sum is decoded once.
-// Texel centres are at (i + 0.5) / W; row 0 is v = 1.
-Eigen::Vector3f TexturePyramid::sample(float u, float v, float lod) const {
+// The four texels around (u, v) on `level` weighted in 1/16 of a texel; the weights apply to the
+// sRGB values, in integer lanes; the sum is decoded once. Texel centres are at (i + 0.5) / W; row
+// 0 is v = 1.
+Eigen::Vector3f TexturePyramid::sample(float u, float v, int level) const {
   if (!(std::fabs(u) <= kMaxFloat && std::fabs(v) <= kMaxFloat)) return Eigen::Vector3f::Zero();
-  const int level = std::clamp(static_cast<int>(std::min(lod, 64.0f) + 0.5f), 0, levels() - 1);
+  level = std::clamp(level, 0, levels() - 1);
   const int w = width_[level], h = height_[level];
-  const float x = fract(u) * w - 0.5f, y = (1.0f - fract(v)) * h - 0.5f;
-  // Positions in 1/16 texel, rounded to the nearest step; the shift floors (fx >= -8).
-  const int fx = static_cast<int>((x + 1.0f) * 16.0f + 0.5f) - 16;
-  const int fy = static_cast<int>((y + 1.0f) * 16.0f + 0.5f) - 16;
+  // Positions x = fract(u) w - 0.5 (y from the top) in 1/16 texel, rounded to the nearest step:
+  // (x + 1) 16 + 0.5 is positive, so the cast floors; the shift floors fx >= -8.
+  const int fx = static_cast<int>(fract(u) * static_cast<float>(16 * w) + 8.5f) - 16;
+  const int fy = static_cast<int>((1.0f - fract(v)) * static_cast<float>(16 * h) + 8.5f) - 16;
   const int ix = fx >> 4, iy = fy >> 4;
   const uint32_t ax = fx & 15, ay = fy & 15;
   const int x0 = ix < 0 ? w - 1 : ix, x1 = ix + 1 >= w ? 0 : ix + 1;

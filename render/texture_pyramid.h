@@ -23,24 +23,27 @@ class TexturePyramid {
   // 2x2 texels in linear space. Throws paircast::Error on an empty or inconsistent texture.
   explicit TexturePyramid(const Texture& texture);
 
-  int levels() const { return static_cast<int>(width_.size()); }
+  int levels() const { return levels_; }
   int width(int level) const { return width_[level]; }
   int height(int level) const { return height_[level]; }
   // Linear RGB of texel (x, y) of `level` (row 0 at the top, v = 1).
   Eigen::Vector3f texel(int level, int x, int y) const;
 
-  // Linear RGB at texture coordinates (u, v) (wrapping; v = 0 at the bottom) at level of detail
-  // `lod` (0 is level 0): bilinear on the nearest level. Zero for non-finite (u, v).
-  Eigen::Vector3f sample(float u, float v, float lod) const;
+  // Linear RGB at texture coordinates (u, v) (wrapping; v = 0 at the bottom), bilinear on
+  // `level` (clamped to the pyramid's). Zero for non-finite (u, v).
+  Eigen::Vector3f sample(float u, float v, int level) const;
   // `sample` for the lanes i of eight whose bit is set in `lanes`: rgb[c][i] from (u[i], v[i])
-  // at lod[i]. Other lanes are left alone.
-  void sample8(const float* u, const float* v, const float* lod, uint32_t lanes,
+  // on level[i]. Other lanes are left alone.
+  void sample8(const float* u, const float* v, const int32_t* level, uint32_t lanes,
                float (*rgb)[8]) const;
 
   // The pyramid's arrays as SIMD kernels read them (render/texture_kernel.h).
+  // The level tables hold at least kTableSize entries (zeros past the last level), so that a
+  // kernel can load the first 16 whole.
+  static constexpr size_t kTableSize = 16;
   struct Arrays {
     const uint32_t* texels;  // see texels_ below
-    const int32_t *width, *height, *offset;
+    const int32_t *width, *height, *offset;  // by level
     int top;              // the last level
     const float* decode;  // sRGB in 8.4 fixed point (0..4080) to linear
   };
@@ -49,18 +52,17 @@ class TexturePyramid {
             offset_.data(), levels() - 1,  kDecode.data()};
   }
 
-  // The level of detail for a sample that covers `area` texels of level 0: log2 of its side, half
-  // of log2(area) (piecewise linear between powers of two), 0 below one texel. The area, since
-  // the renderer gets it without a square root.
-  static float lodForArea(float area) {
-    if (!(area > 1.0f)) return 0.0f;
-    if (!(area < 1e30f)) return 100.0f;
-    // The float's exponent is floor(log2), its mantissa in [1, 2) the linear rest.
+  // The level for a sample that covers `area` texels of level 0: the one whose texel side is
+  // nearest its side, round(log2(area) / 2), which is (floor(log2(area)) + 1) / 2 rounded down:
+  // the float's exponent gives it without a logarithm. 0 at most one texel (and NaN); not clamped
+  // to the pyramid's levels (sample does). The area, since the renderer gets it without a square
+  // root.
+  static int levelForArea(float area) {
+    if (!(area > 1.0f)) return 0;
     uint32_t bits;
     std::memcpy(&bits, &area, sizeof bits);
-    const int exponent = static_cast<int>((bits >> 23) & 255) - 127;
-    const float mantissa = 1.0f + static_cast<float>(bits & 0x7FFFFF) / 8388608.0f;
-    return 0.5f * (static_cast<float>(exponent) + (mantissa - 1.0f));
+    const int exponent = static_cast<int>((bits >> 23) & 255) - 127;  // 128 for infinity
+    return (exponent + 1) >> 1;
   }
 
  private:
@@ -69,7 +71,8 @@ class TexturePyramid {
   // ending with a copy of its first texel, so that a texel and its right neighbour (wrapping)
   // are one 64-bit load.
   std::vector<uint32_t> texels_;
-  std::vector<int32_t> width_, height_, offset_;
+  std::vector<int32_t> width_, height_, offset_;  // by level, padded to kTableSize
+  int levels_ = 0;
   static const std::array<float, 4096> kDecode;  // Arrays::decode
 };
 

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "render/ray_caster.h"
 #include "render/render_albedo.h"
 
@@ -57,14 +59,22 @@ TEST(TexturePyramid, FullSizeMatchesTheTextureAtTexelCentres) {
   EXPECT_EQ(p.sample(0.5f, INFINITY, 0.0f), Eigen::Vector3f::Zero());
 }
 
-TEST(TexturePyramid, LevelOfDetailIsLog2OfTheFootprint) {
-  EXPECT_EQ(TexturePyramid::lodForArea(0.3f), 0.0f);
-  EXPECT_EQ(TexturePyramid::lodForArea(1.0f), 0.0f);
-  EXPECT_FLOAT_EQ(TexturePyramid::lodForArea(16.0f), 2.0f);
-  EXPECT_FLOAT_EQ(TexturePyramid::lodForArea(24.0f), 2.25f);  // linear between powers of two
-  EXPECT_FLOAT_EQ(TexturePyramid::lodForArea(1024.0f * 1024.0f), 10.0f);
-  EXPECT_EQ(TexturePyramid::lodForArea(NAN), 0.0f);
-  EXPECT_GE(TexturePyramid::lodForArea(INFINITY), 30.0f);
+TEST(TexturePyramid, LevelIsLog2OfTheFootprintsSideRounded) {
+  EXPECT_EQ(TexturePyramid::levelForArea(0.3f), 0);
+  EXPECT_EQ(TexturePyramid::levelForArea(1.0f), 0);
+  EXPECT_EQ(TexturePyramid::levelForArea(3.99f), 1);  // side 2.0: level 1 (side 2)
+  EXPECT_EQ(TexturePyramid::levelForArea(16.0f), 2);
+  EXPECT_EQ(TexturePyramid::levelForArea(31.9f), 2);  // side 5.65: nearer 4 than 8 in log2
+  EXPECT_EQ(TexturePyramid::levelForArea(32.0f), 3);  // side 5.66 = 2^2.5: rounds up
+  EXPECT_EQ(TexturePyramid::levelForArea(1024.0f * 1024.0f), 10);
+  EXPECT_EQ(TexturePyramid::levelForArea(NAN), 0);
+  EXPECT_GE(TexturePyramid::levelForArea(INFINITY), 30);
+  // Against the logarithm itself, away from the rounding boundaries.
+  for (float area = 1.5f; area < 1e12f; area *= 1.37f) {
+    const double lod = 0.5 * std::log2(static_cast<double>(area));
+    if (std::fabs(lod - std::floor(lod) - 0.5) < 1e-4) continue;
+    EXPECT_EQ(TexturePyramid::levelForArea(area), static_cast<int>(std::lround(lod))) << area;
+  }
 }
 
 // A far plane tiled with a one-texel checkerboard: each pixel covers many texels. Sampling the
