@@ -53,23 +53,18 @@ const int32_t* linearToSrgb8Table() {
   return table.data();
 }
 
-// srgbLanesScalar in AVX2 lanes, from registers: linearToSrgb8's table index and its two bounds
-// per lane.
-PAIRCAST_AVX2 void srgbPixels(const __m256 (&rgb)[3], float scale, int count, uint8_t* out) {
+// srgbLanesScalar (with scale 1) in AVX2 lanes, from registers. linearToSrgb8's bounds come with
+// the table: its first entry is 0 and its last 255, so x <= 0 (and NaN, which the float minimum
+// passes on and the conversion makes negative) reads the first, x >= 1 the last.
+PAIRCAST_AVX2 void srgbPixels(const __m256 (&rgb)[3], int count, uint8_t* out) {
   const int32_t* table = linearToSrgb8Table();
   __m256i packed = _mm256_setzero_si256();  // lane i: R | G << 8 | B << 16
   for (int c = 0; c < 3; ++c) {
-    const __m256 x = _mm256_mul_ps(rgb[c], _mm256_set1_ps(scale));
-    __m256i index = _mm256_cvttps_epi32(
-        _mm256_add_ps(_mm256_mul_ps(x, _mm256_set1_ps(4096.0f)), _mm256_set1_ps(0.5f)));
-    index =
-        _mm256_min_epi32(_mm256_max_epi32(index, _mm256_setzero_si256()), _mm256_set1_epi32(4096));
-    const __m256i looked = _mm256_i32gather_epi32(table, index, 4);
-    const __m256 positive = _mm256_cmp_ps(x, _mm256_setzero_ps(), _CMP_GT_OQ);  // else 0
-    const __m256 below = _mm256_cmp_ps(x, _mm256_set1_ps(1.0f), _CMP_LT_OQ);    // else 255
-    const __m256i v = _mm256_and_si256(
-        _mm256_blendv_epi8(_mm256_set1_epi32(255), looked, _mm256_castps_si256(below)),
-        _mm256_castps_si256(positive));
+    const __m256 at =
+        _mm256_add_ps(_mm256_mul_ps(rgb[c], _mm256_set1_ps(4096.0f)), _mm256_set1_ps(0.5f));
+    const __m256i index = _mm256_max_epi32(
+        _mm256_cvttps_epi32(_mm256_min_ps(_mm256_set1_ps(4096.5f), at)), _mm256_setzero_si256());
+    const __m256i v = _mm256_i32gather_epi32(table, index, 4);
     packed = _mm256_or_si256(packed, _mm256_sll_epi32(v, _mm_cvtsi32_si128(8 * c)));
   }
   if (count < kLanes) {
@@ -93,8 +88,9 @@ PAIRCAST_AVX2 void srgbPixels(const __m256 (&rgb)[3], float scale, int count, ui
 
 PAIRCAST_AVX2 void srgbLanesAvx2(const float (&rgb)[3][kLanes], float scale, int count,
                                  uint8_t* out) {
-  const __m256 c[3] = {_mm256_loadu_ps(rgb[0]), _mm256_loadu_ps(rgb[1]), _mm256_loadu_ps(rgb[2])};
-  srgbPixels(c, scale, count, out);
+  __m256 c[3];
+  for (int k = 0; k < 3; ++k) c[k] = _mm256_mul_ps(_mm256_loadu_ps(rgb[k]), _mm256_set1_ps(scale));
+  srgbPixels(c, count, out);
 }
 
 PAIRCAST_AVX2 inline __m256 dot(const __m256 (&a)[3], __m256 x, __m256 y, __m256 z) {
@@ -222,7 +218,7 @@ PAIRCAST_AVX2 inline void colours(const __m256 (&albedo)[3], const __m256 (&texe
 
 // A packet's colours to where the caller wants them: linear, or as sRGB pixels.
 PAIRCAST_AVX2 inline void put(const __m256 (&rgb)[3], const PacketOut& out) {
-  if (out.srgb) return srgbPixels(rgb, 1.0f, out.count, out.srgb);
+  if (out.srgb) return srgbPixels(rgb, out.count, out.srgb);
   for (int c = 0; c < 3; ++c) _mm256_storeu_ps((*out.linear)[c], rgb[c]);
 }
 

@@ -113,18 +113,25 @@ TEST(PacketShading, TextureSamplesAgreeToTheBitIncludingEdgeCases) {
 
 TEST(PacketShading, SrgbRowsAgreeWithLinearToSrgb8) {
   float rgb[3][kLanes];
-  const float values[] = {-1.0f, 0.0f, 1e-6f, 0.002f, 0.2f, 0.5f, 0.99999f, 1.0f, 7.0f, NAN};
-  for (int start = 0; start < 10; ++start) {
-    for (int c = 0; c < 3; ++c)
-      for (int i = 0; i < kLanes; ++i) rgb[c][i] = values[(start + 3 * c + i) % 10];
-    for (int count : {8, 5, 1}) {
-      uint8_t out[3 * kLanes + 4];
-      std::fill(std::begin(out), std::end(out), 0xEE);
-      srgbLanes(rgb, 0.75f, count, out);
-      for (int i = 0; i < count; ++i)
-        for (int c = 0; c < 3; ++c) ASSERT_EQ(out[3 * i + c], linearToSrgb8(rgb[c][i] * 0.75f));
-      for (int k = 3 * count; k < 3 * kLanes + 4; ++k)
-        ASSERT_EQ(out[k], 0xEE) << "wrote past pixel " << count;  // the next tile's pixels
+  // The table's ends (0, 1 and just inside them), out of range, and not finite.
+  const float values[] = {-1.0f, 0.0f,     1e-6f,     1.2e-4f, 0.002f,    0.2f,  0.5f,
+                          0.9999f, 0.99999f, 1.0f,   7.0f,    1e30f,     -1e30f, INFINITY,
+                          -INFINITY, NAN};
+  constexpr int kValues = sizeof values / sizeof values[0];
+  for (float scale : {0.75f, 1.0f}) {
+    for (int start = 0; start < kValues; ++start) {
+      for (int c = 0; c < 3; ++c)
+        for (int i = 0; i < kLanes; ++i) rgb[c][i] = values[(start + 3 * c + i) % kValues];
+      for (int count : {8, 5, 1}) {
+        uint8_t out[3 * kLanes + 4];
+        std::fill(std::begin(out), std::end(out), 0xEE);
+        srgbLanes(rgb, scale, count, out);
+        for (int i = 0; i < count; ++i)
+          for (int c = 0; c < 3; ++c)
+            ASSERT_EQ(out[3 * i + c], linearToSrgb8(rgb[c][i] * scale)) << rgb[c][i];
+        for (int k = 3 * count; k < 3 * kLanes + 4; ++k)
+          ASSERT_EQ(out[k], 0xEE) << "wrote past pixel " << count;  // the next tile's pixels
+      }
     }
   }
 }
