@@ -198,11 +198,12 @@ PAIRCAST_AVX2 inline const ShadeTriangle* loadRecords(const ShadeScene& scene, c
   return nullptr;
 }
 
-// What the first phase leaves for the second: light, albedo, and the texel reads of the packet's
-// one texture.
+// What a packet's stages leave for the next: light, albedo, and where to read the packet's one
+// texture.
 struct Prepared {
   Lit lit;
-  avx2::TexelAddresses texels;
+  __m256 u, v;                  // texture coordinates (stage 1)
+  avx2::TexelAddresses texels;  // (stage 2)
   __m256 albedo[3], hit, textured;
   const TexturePyramid* texture;  // of all textured lanes, or null for none
 };
@@ -266,7 +267,7 @@ PAIRCAST_AVX2 inline __m256i laneTextures(const Records& r, __m256 hit, int& one
   return texture;
 }
 
-// The first phase of a packet: its records, light, and its texture's texel addresses. A packet
+// The first stage of a packet: its records, light, and its texture coordinates. A packet
 // over several textures (rare: the seams between materials) is shaded here at once (kDone); one
 // that hits a triangle that is not kFlat, or a texture too large for the kernel, is declined.
 PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const PacketLight& light,
@@ -308,13 +309,12 @@ PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const Pa
   q.texture = &scene.textures[id];
   if (!avx2::fitsTextureKernel(*q.texture)) return Phase::kDeclined;
   const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
-  const __m256 tu = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
-  const __m256 tv = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
-  q.texels = avx2::texelAddresses(q.texture->arrays(), tu, tv, q.lit.level);
+  q.u = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
+  q.v = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
   return Phase::kPrepared;
 }
 
-// The second phase: filter the texels, and the colours.
+// The third stage: read and filter the texels, and the colours.
 PAIRCAST_AVX2 void finish(const Prepared& q, const PacketLight& light, __m256 (&rgb)[3]) {
   __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
   if (q.texture) {
@@ -326,9 +326,12 @@ PAIRCAST_AVX2 void finish(const Prepared& q, const PacketLight& light, __m256 (&
   colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
 }
 
-// The scalar passes' results for n packets, in two phases: light and texture reads for all, then
-// the filters and colours. A packet's texels come from memory (level 2 cache, often): the reads
-// of several packets under way at once take little longer than one packet's.
+// The scalar passes' results for n packets, in stages, each over all the packets: records, light
+// and texture coordinates; texel addresses; texel reads, filters and colours; sRGB. Within a
+// packet each stage waits on a long chain of the one before (a square root and two divisions,
+// the level, the addresses, the gathers); packet after packet, those chains would not fit the
+// CPU's window of instructions in flight, stage by stage the packets' operations are independent.
+// On the room, one thread: RGB+depth / depth 1.50x packet after packet, 1.38x in stages.
 PAIRCAST_AVX2 uint32_t shadeFlatPacketsAvx2(const ShadeScene& scene, const RayLanes* p, int n,
                                             const PacketLight& light, const PacketOut* out) {
   Prepared q[kMaxPackets];
@@ -338,6 +341,9 @@ PAIRCAST_AVX2 uint32_t shadeFlatPacketsAvx2(const ShadeScene& scene, const RayLa
     prepared |= static_cast<uint32_t>(phase == Phase::kPrepared) << k;
     done |= static_cast<uint32_t>(phase != Phase::kDeclined) << k;
   }
+  for (int k = 0; k < n; ++k)
+    if ((prepared >> k) & 1 && q[k].texture)
+      q[k].texels = avx2::texelAddresses(q[k].texture->arrays(), q[k].u, q[k].v, q[k].lit.level);
   __m256 rgb[kMaxPackets][3];
   for (int k = 0; k < n; ++k)
     if ((prepared >> k) & 1) finish(q[k], light, rgb[k]);

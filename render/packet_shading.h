@@ -83,10 +83,11 @@ struct PacketOut {
 };
 
 // The colours of n <= kMaxPackets packets whose rays hit kFlat triangles (or nothing), as the
-// passes below (lightLanes, the texture, combineLanes) give them, in SIMD lanes: light and texture
-// reads of all packets first, then the filters and colours, so that several packets' reads are
-// under way at once. Returns bit k set for each packet done; the others (a triangle that is not
-// kFlat, no SIMD kernel) are left to the passes, their output untouched.
+// passes below (lightLanes, the texture, combineLanes) give them, in SIMD lanes, stage by stage
+// over all the packets (light, texel addresses, texel reads and colours, sRGB) so that the
+// packets' long chains of dependent operations overlap. Returns bit k set for each packet done;
+// the others (a triangle that is not kFlat, no SIMD kernel) are left to the passes, their output
+// untouched.
 constexpr int kMaxPackets = 8;
 uint32_t shadeFlatPackets(const ShadeScene& scene, const RayLanes* p, int n,
                           const PacketLight& light, const PacketOut* out);
