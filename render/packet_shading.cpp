@@ -198,14 +198,16 @@ PAIRCAST_AVX2 inline const ShadeTriangle* loadRecords(const ShadeScene& scene, c
   return nullptr;
 }
 
-// What a packet's stages leave for the next: light, albedo, and where to read the packet's one
-// texture.
+// What a packet's stages leave for the next: light, albedo, and where to read its textures: one
+// (most packets), none, or two (the seams between textured materials).
 struct Prepared {
   Lit lit;
-  __m256 u, v;                  // texture coordinates (stage 1)
-  avx2::TexelAddresses texels;  // (stage 2)
-  __m256 albedo[3], hit, textured;
-  const TexturePyramid* texture;  // of all textured lanes, or null for none
+  __m256 albedo[3], hit;
+  int textures;                        // 0, 1 or 2
+  const TexturePyramid* texture[2];    // the textures
+  __m256 lanes[2];                     // the lanes of each
+  __m256 u, v;                         // texture coordinates (stage 1)
+  avx2::TexelAddresses texels[2];      // where each texture is read (stage 2)
 };
 
 // albedo * texel * light where a lane hit, the background elsewhere.
@@ -248,28 +250,25 @@ PAIRCAST_AVX2 bool sampleTextures(const ShadeScene& scene, const Records& r, con
 
 enum class Phase { kPrepared, kDone, kDeclined };
 
-// Each lane's texture index (-1 for none and on misses) when the lanes hit several triangles, and
-// in `one` the index of all textured lanes: -1 for none, kSeveral for several.
-constexpr int kSeveral = -2;
-PAIRCAST_AVX2 inline __m256i laneTextures(const Records& r, __m256 hit, int& one) {
-  const __m256i texture =
-      _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), _mm256_castps_si256(hit)),
-                      _mm256_andnot_si256(_mm256_castps_si256(hit), _mm256_set1_epi32(-1)));
-  const int textured =
-      _mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1))));
-  one = -1;
-  if (!textured) return texture;
-  alignas(32) int32_t ids[kLanes];
-  _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
-  one = ids[__builtin_ctz(static_cast<unsigned>(textured))];
-  const __m256i lanes = _mm256_cmpeq_epi32(texture, _mm256_set1_epi32(one));
-  if (_mm256_movemask_ps(_mm256_castsi256_ps(lanes)) != textured) one = kSeveral;
-  return texture;
+// The lanes of each texture, into q, when there are at most two; false when there are more.
+// `ids`: each lane's texture, -1 for none; `todo`: the lanes that have one.
+PAIRCAST_AVX2 inline bool splitTextures(const ShadeScene& scene, __m256i ids, int todo,
+                                        Prepared& q) {
+  alignas(32) int32_t id[kLanes];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(id), ids);
+  for (q.textures = 0; todo; ++q.textures) {
+    if (q.textures == 2) return false;
+    const int t = id[__builtin_ctz(static_cast<unsigned>(todo))];
+    q.lanes[q.textures] = _mm256_castsi256_ps(_mm256_cmpeq_epi32(ids, _mm256_set1_epi32(t)));
+    q.texture[q.textures] = &scene.textures[t];
+    todo &= ~_mm256_movemask_ps(q.lanes[q.textures]);
+  }
+  return true;
 }
 
-// The first stage of a packet: its records, light, and its texture coordinates. A packet
-// over several textures (rare: the seams between materials) is shaded here at once (kDone); one
-// that hits a triangle that is not kFlat, or a texture too large for the kernel, is declined.
+// The first stage of a packet: its records, light, and its texture coordinates. A packet over
+// more than two textures (rare) is shaded here at once (kDone); one that hits a triangle that is
+// not kFlat, or a texture too large for the kernel, is declined.
 PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const PacketLight& light,
                             Prepared& q, const PacketOut& out) {
   const __m256i miss = _mm256_cmpeq_epi32(
@@ -278,36 +277,41 @@ PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const Pa
   const auto hits = static_cast<uint32_t>(_mm256_movemask_ps(q.hit));
   Records r;
   const ShadeTriangle* triangle = loadRecords(scene, p, q.hit, hits, r);
-  int id = -1;  // the texture of all textured lanes
-  __m256i texture = _mm256_set1_epi32(-1);
+  __m256 textured = _mm256_setzero_ps();
+  __m256i ids = _mm256_set1_epi32(-1);  // each lane's texture, -1 for none
+  bool split = true;                    // at most two textures, in q
+  q.textures = 0;
   if (triangle) {  // one triangle: its colour and texture hold for all lanes
     if (hits && triangle->colour != ShadeTriangle::kFlat) return Phase::kDeclined;
-    id = hits ? triangle->texture : -1;
-    q.textured = id >= 0 ? q.hit : _mm256_setzero_ps();
+    if (hits && triangle->texture >= 0) {
+      q.textures = 1;
+      q.texture[0] = &scene.textures[triangle->texture];
+      q.lanes[0] = textured = q.hit;
+    }
   } else {
-    const __m256i colour =
-        _mm256_and_si256(_mm256_castps_si256(r.f[4]), _mm256_castps_si256(q.hit));
+    const __m256i hit = _mm256_castps_si256(q.hit);
+    const __m256i colour = _mm256_and_si256(_mm256_castps_si256(r.f[4]), hit);
     if (!_mm256_testz_si256(colour, colour)) return Phase::kDeclined;  // a lane is not kFlat (0)
-    texture = laneTextures(r, q.hit, id);
-    q.textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(texture, _mm256_set1_epi32(-1)));
+    ids = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), hit),
+                          _mm256_andnot_si256(hit, _mm256_set1_epi32(-1)));
+    textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(ids, _mm256_set1_epi32(-1)));
+    split = splitTextures(scene, ids, _mm256_movemask_ps(textured), q);
   }
-  q.texture = nullptr;
   for (int c = 0; c < 3; ++c) q.albedo[c] = r.f[5 + c];
   const __m256 n[3] = {r.f[0], r.f[1], r.f[2]};
   q.lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
-                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], q.textured), light);
-  if (id == -1) return Phase::kPrepared;
-  if (id == kSeveral) {
+                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], textured), light);
+  if (!split) {
     __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
-    const int todo = _mm256_movemask_ps(q.textured);
-    if (!sampleTextures(scene, r, p, texture, q.lit.level, todo, texel)) return Phase::kDeclined;
+    const int todo = _mm256_movemask_ps(textured);
+    if (!sampleTextures(scene, r, p, ids, q.lit.level, todo, texel)) return Phase::kDeclined;
     __m256 rgb[3];
     colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
     put(rgb, out);
     return Phase::kDone;
   }
-  q.texture = &scene.textures[id];
-  if (!avx2::fitsTextureKernel(*q.texture)) return Phase::kDeclined;
+  for (int t = 0; t < q.textures; ++t)
+    if (!avx2::fitsTextureKernel(*q.texture[t])) return Phase::kDeclined;
   const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
   q.u = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
   q.v = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
@@ -317,11 +321,11 @@ PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const Pa
 // The third stage: read and filter the texels, and the colours.
 PAIRCAST_AVX2 void finish(const Prepared& q, const PacketLight& light, __m256 (&rgb)[3]) {
   __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
-  if (q.texture) {
+  for (int t = 0; t < q.textures; ++t) {
     __m256 c[3];
-    const TexturePyramid::Arrays a = q.texture->arrays();
-    avx2::filterTexels(a, avx2::texelRows(a, q.texels), c);
-    for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], q.textured);
+    const TexturePyramid::Arrays a = q.texture[t]->arrays();
+    avx2::filterTexels(a, avx2::texelRows(a, q.texels[t]), c);
+    for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], q.lanes[t]);
   }
   colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
 }
@@ -342,8 +346,9 @@ PAIRCAST_AVX2 uint32_t shadeFlatPacketsAvx2(const ShadeScene& scene, const RayLa
     done |= static_cast<uint32_t>(phase != Phase::kDeclined) << k;
   }
   for (int k = 0; k < n; ++k)
-    if ((prepared >> k) & 1 && q[k].texture)
-      q[k].texels = avx2::texelAddresses(q[k].texture->arrays(), q[k].u, q[k].v, q[k].lit.level);
+    for (int t = 0; (prepared >> k) & 1 && t < q[k].textures; ++t)
+      q[k].texels[t] =
+          avx2::texelAddresses(q[k].texture[t]->arrays(), q[k].u, q[k].v, q[k].lit.level);
   __m256 rgb[kMaxPackets][3];
   for (int k = 0; k < n; ++k)
     if ((prepared >> k) & 1) finish(q[k], light, rgb[k]);
