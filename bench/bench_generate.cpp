@@ -77,33 +77,29 @@ nlohmann::json runRefCovis(const std::string& stem) {
 }
 
 // Seconds per render of `views` random views, `threads` workers each rendering its own views on
-// one core (omp off), as generate_pairs' workers do. Best of 3 rounds.
+// one core (omp off), as generate_pairs' workers do: one round.
 double secondsPerRender(const RayCaster& caster, const std::vector<Camera>& views, unsigned threads,
                         bool rgb) {
-  double best = 1e30;
-  for (int round = 0; round < 3; ++round) {
-    std::atomic<size_t> next{0};
-    const auto t0 = Clock::now();
-    std::vector<std::thread> pool;
-    for (unsigned t = 0; t < threads; ++t)
-      pool.emplace_back([&] {
-        omp_set_num_threads(1);
-        Frame frame;
-        ImageF depth;
-        RenderOptions ro;  // what generate_pairs renders: colour and depth
-        ro.normals = false;
-        ro.ids = false;
-        for (size_t i; (i = next++) < views.size();) {
-          if (rgb)
-            caster.render(views[i], ro, frame);
-          else
-            caster.renderDepth(views[i], depth);
-        }
-      });
-    for (auto& t : pool) t.join();
-    best = std::min(best, std::chrono::duration<double>(Clock::now() - t0).count() / views.size());
-  }
-  return best;
+  std::atomic<size_t> next{0};
+  const auto t0 = Clock::now();
+  std::vector<std::thread> pool;
+  for (unsigned t = 0; t < threads; ++t)
+    pool.emplace_back([&] {
+      omp_set_num_threads(1);
+      Frame frame;
+      ImageF depth;
+      RenderOptions ro;  // what generate_pairs renders: colour and depth
+      ro.normals = false;
+      ro.ids = false;
+      for (size_t i; (i = next++) < views.size();) {
+        if (rgb)
+          caster.render(views[i], ro, frame);
+        else
+          caster.renderDepth(views[i], depth);
+      }
+    });
+  for (auto& t : pool) t.join();
+  return std::chrono::duration<double>(Clock::now() - t0).count() / views.size();
 }
 
 struct RenderLimit {
@@ -131,11 +127,17 @@ class RenderProbe {
     }
     while (views_.size() < 64) add(sampler_.sampleView(K, rng), resolution);
   }
+  // Best of 7 rounds, each of the three renders in turn, so that a change of machine load
+  // touches all three alike.
   RenderLimit measure(unsigned threads) const {
-    RenderLimit r;
-    r.rgbDepthSeconds = secondsPerRender(caster_, views_, threads, true);
-    r.depthSeconds = secondsPerRender(caster_, views_, threads, false);
-    r.screenDepthSeconds = secondsPerRender(caster_, smallViews_, threads, false);
+    RenderLimit r{1e30, 1e30, 1e30};
+    for (int round = 0; round < 7; ++round) {
+      r.rgbDepthSeconds =
+          std::min(r.rgbDepthSeconds, secondsPerRender(caster_, views_, threads, true));
+      r.depthSeconds = std::min(r.depthSeconds, secondsPerRender(caster_, views_, threads, false));
+      r.screenDepthSeconds =
+          std::min(r.screenDepthSeconds, secondsPerRender(caster_, smallViews_, threads, false));
+    }
     return r;
   }
 
