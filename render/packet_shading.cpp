@@ -174,8 +174,8 @@ PAIRCAST_AVX2 inline const ShadeTriangle* loadRecords(const ShadeScene& scene, c
                                                       __m256 hit, uint32_t hits, Records& r) {
   static_assert(sizeof(ShadeTriangle) == 16 * sizeof(float));
   alignas(32) uint32_t prim[kLanes];
-  const __m256i ids = _mm256_and_si256(
-      _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p.prim)), _mm256_castps_si256(hit));
+  const __m256i ids = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p.prim)),
+                                       _mm256_castps_si256(hit));
   _mm256_store_si256(reinterpret_cast<__m256i*>(prim), ids);
   const uint32_t first = hits ? prim[__builtin_ctz(hits)] : 0;
   const __m256i same = _mm256_cmpeq_epi32(ids, _mm256_set1_epi32(static_cast<int>(first)));
@@ -203,11 +203,11 @@ PAIRCAST_AVX2 inline const ShadeTriangle* loadRecords(const ShadeScene& scene, c
 struct Prepared {
   Lit lit;
   __m256 albedo[3], hit;
-  int textures;                        // 0, 1 or 2
-  const TexturePyramid* texture[2];    // the textures
-  __m256 lanes[2];                     // the lanes of each
-  __m256 u, v;                         // texture coordinates (stage 1)
-  avx2::TexelAddresses texels[2];      // where each texture is read (stage 2)
+  int textures;                      // 0, 1 or 2
+  const TexturePyramid* texture[2];  // the textures
+  __m256 lanes[2];                   // the lanes of each
+  __m256 u, v;                       // texture coordinates (stage 1)
+  avx2::TexelAddresses texels[2];    // where each texture is read (stage 2)
 };
 
 // albedo * texel * light where a lane hit, the background elsewhere.
@@ -228,8 +228,7 @@ PAIRCAST_AVX2 inline void put(const __m256 (&rgb)[3], const PacketOut& out) {
 // The texels of lanes over several textures, a texture at a time; false where one does not fit
 // the kernel.
 PAIRCAST_AVX2 bool sampleTextures(const ShadeScene& scene, const Records& r, const RayLanes& p,
-                                  __m256i texture, __m256i level, int todo,
-                                  __m256 (&texel)[3]) {
+                                  __m256i texture, __m256i level, int todo, __m256 (&texel)[3]) {
   const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
   const __m256 tu = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
   const __m256 tv = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
@@ -266,6 +265,39 @@ PAIRCAST_AVX2 inline bool splitTextures(const ShadeScene& scene, __m256i ids, in
   return true;
 }
 
+// Which lanes have which texture.
+struct LaneTextures {
+  __m256i ids;      // each lane's texture, -1 for none (and on misses)
+  __m256 textured;  // the lanes with one
+  bool split;       // at most two textures, in Prepared
+};
+
+// The packet's textures: into q when there are at most two. False when a lane hit a triangle that
+// is not kFlat. `triangle`: as loadRecords returns it.
+PAIRCAST_AVX2 inline bool packetTextures(const ShadeScene& scene, const ShadeTriangle* triangle,
+                                         const Records& r, uint32_t hits, Prepared& q,
+                                         LaneTextures& t) {
+  t = {_mm256_set1_epi32(-1), _mm256_setzero_ps(), true};
+  q.textures = 0;
+  if (triangle) {  // one triangle: its colour and texture hold for all lanes
+    if (hits && triangle->colour != ShadeTriangle::kFlat) return false;
+    if (hits && triangle->texture >= 0) {
+      q.textures = 1;
+      q.texture[0] = &scene.textures[triangle->texture];
+      q.lanes[0] = t.textured = q.hit;
+    }
+    return true;
+  }
+  const __m256i hit = _mm256_castps_si256(q.hit);
+  const __m256i colour = _mm256_and_si256(_mm256_castps_si256(r.f[4]), hit);
+  if (!_mm256_testz_si256(colour, colour)) return false;  // a lane is not kFlat (0)
+  t.ids = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), hit),
+                          _mm256_andnot_si256(hit, _mm256_set1_epi32(-1)));
+  t.textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(t.ids, _mm256_set1_epi32(-1)));
+  t.split = splitTextures(scene, t.ids, _mm256_movemask_ps(t.textured), q);
+  return true;
+}
+
 // The first stage of a packet: its records, light, and its texture coordinates. A packet over
 // more than two textures (rare) is shaded here at once (kDone); one that hits a triangle that is
 // not kFlat, or a texture too large for the kernel, is declined.
@@ -277,41 +309,23 @@ PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const Pa
   const auto hits = static_cast<uint32_t>(_mm256_movemask_ps(q.hit));
   Records r;
   const ShadeTriangle* triangle = loadRecords(scene, p, q.hit, hits, r);
-  __m256 textured = _mm256_setzero_ps();
-  __m256i ids = _mm256_set1_epi32(-1);  // each lane's texture, -1 for none
-  bool split = true;                    // at most two textures, in q
-  q.textures = 0;
-  if (triangle) {  // one triangle: its colour and texture hold for all lanes
-    if (hits && triangle->colour != ShadeTriangle::kFlat) return Phase::kDeclined;
-    if (hits && triangle->texture >= 0) {
-      q.textures = 1;
-      q.texture[0] = &scene.textures[triangle->texture];
-      q.lanes[0] = textured = q.hit;
-    }
-  } else {
-    const __m256i hit = _mm256_castps_si256(q.hit);
-    const __m256i colour = _mm256_and_si256(_mm256_castps_si256(r.f[4]), hit);
-    if (!_mm256_testz_si256(colour, colour)) return Phase::kDeclined;  // a lane is not kFlat (0)
-    ids = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), hit),
-                          _mm256_andnot_si256(hit, _mm256_set1_epi32(-1)));
-    textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(ids, _mm256_set1_epi32(-1)));
-    split = splitTextures(scene, ids, _mm256_movemask_ps(textured), q);
-  }
+  LaneTextures t;
+  if (!packetTextures(scene, triangle, r, hits, q, t)) return Phase::kDeclined;
   for (int c = 0; c < 3; ++c) q.albedo[c] = r.f[5 + c];
   const __m256 n[3] = {r.f[0], r.f[1], r.f[2]};
   q.lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
-                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], textured), light);
-  if (!split) {
+                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], t.textured), light);
+  if (!t.split) {
     __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
-    const int todo = _mm256_movemask_ps(textured);
-    if (!sampleTextures(scene, r, p, ids, q.lit.level, todo, texel)) return Phase::kDeclined;
+    const int todo = _mm256_movemask_ps(t.textured);
+    if (!sampleTextures(scene, r, p, t.ids, q.lit.level, todo, texel)) return Phase::kDeclined;
     __m256 rgb[3];
     colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
     put(rgb, out);
     return Phase::kDone;
   }
-  for (int t = 0; t < q.textures; ++t)
-    if (!avx2::fitsTextureKernel(*q.texture[t])) return Phase::kDeclined;
+  for (int k = 0; k < q.textures; ++k)
+    if (!avx2::fitsTextureKernel(*q.texture[k])) return Phase::kDeclined;
   const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
   q.u = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
   q.v = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);

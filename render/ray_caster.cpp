@@ -18,9 +18,9 @@
 namespace paircast {
 namespace {
 
-constexpr int kPacket = kLanes;  // rays per rtcIntersect8 call: one row of a tile
-constexpr int kTileW = 8;        // tile width in pixels (one packet)
-constexpr int kTileH = 8;        // tile height in pixels (packets per tile)
+constexpr int kPacket = kLanes;        // rays per rtcIntersect8 call: one row of a tile
+constexpr int kTileW = 8;              // tile width in pixels (one packet)
+constexpr int kTileH = 8;              // tile height in pixels (packets per tile)
 static_assert(kTileH <= kMaxPackets);  // a tile's rows are shaded together
 // Meshes this large get a medium-quality BVH, smaller ones a high-quality one (see RayCaster).
 constexpr size_t kMediumQualityTriangles = 500'000;
@@ -124,8 +124,8 @@ struct RayCaster::Impl {
                   int x0, int y0, Frame& frame) const;
   void writeGeometry(const RTCRayHit8& rh, const RenderOptions& options, int x0, int y, int cols,
                      Frame& frame) const;
-  void shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light,
-                 LaneColours* rgb, uint8_t* const* pixels, int cols) const;
+  void shadeRows(const RTCRayHit8* rh, int rows, const PacketLight& light, LaneColours* rgb,
+                 uint8_t* const* pixels, int cols) const;
   void shadeInPasses(const RTCRayHit8& rh, const PacketLight& light,
                      float (&rgb)[3][kPacket]) const;
   void surfaces(const RTCRayHit8& rh, PacketShading& s) const;

@@ -82,8 +82,8 @@ Eigen::Vector3f TexturePyramid::texel(int level, int x, int y) const {
   return unpackSrgb8(texels_[offset_[level] + static_cast<size_t>(y) * (width_[level] + 1) + x]);
 }
 
-void TexturePyramid::sample8(const float* u, const float* v, const int32_t* level,
-                             uint32_t lanes, float (*rgb)[8]) const {
+void TexturePyramid::sample8(const float* u, const float* v, const int32_t* level, uint32_t lanes,
+                             float (*rgb)[8]) const {
 #ifdef PAIRCAST_HAVE_AVX2
   if (cpuHasAvx2() && avx2::fitsTextureKernel(*this))
     return avx2::sampleTexture(arrays(), u, v, level, lanes, rgb);

@@ -42,10 +42,10 @@ class TexturePyramid {
   // kernel can load the first 16 whole.
   static constexpr size_t kTableSize = 16;
   struct Arrays {
-    const uint32_t* texels;  // see texels_ below
+    const uint32_t* texels;                  // see texels_ below
     const int32_t *width, *height, *offset;  // by level
-    int top;              // the last level
-    const float* decode;  // sRGB in 8.4 fixed point (0..4080) to linear
+    int top;                                 // the last level
+    const float* decode;                     // sRGB in 8.4 fixed point (0..4080) to linear
   };
   Arrays arrays() const {
     return {texels_.data(), width_.data(), height_.data(),

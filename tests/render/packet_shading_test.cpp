@@ -163,9 +163,8 @@ TEST(PacketShading, TextureSamplesAgreeToTheBitIncludingEdgeCases) {
 TEST(PacketShading, SrgbRowsAgreeWithLinearToSrgb8) {
   float rgb[3][kLanes];
   // The table's ends (0, 1 and just inside them), out of range, and not finite.
-  const float values[] = {-1.0f, 0.0f,     1e-6f,     1.2e-4f, 0.002f,    0.2f,  0.5f,
-                          0.9999f, 0.99999f, 1.0f,   7.0f,    1e30f,     -1e30f, INFINITY,
-                          -INFINITY, NAN};
+  const float values[] = {-1.0f,    0.0f, 1e-6f, 1.2e-4f, 0.002f, 0.2f,     0.5f,      0.9999f,
+                          0.99999f, 1.0f, 7.0f,  1e30f,   -1e30f, INFINITY, -INFINITY, NAN};
   constexpr int kValues = sizeof values / sizeof values[0];
   for (float scale : {0.75f, 1.0f}) {
     for (int start = 0; start < kValues; ++start) {
