@@ -199,15 +199,15 @@ PAIRCAST_AVX2 inline const ShadeTriangle* loadRecords(const ShadeScene& scene, c
 }
 
 // What a packet's stages leave for the next: light, albedo, and where to read its textures: one
-// (most packets), none, or two (the seams between textured materials).
+// (most packets), none, two (the seams between textured materials), at most one a lane.
 struct Prepared {
   Lit lit;
   __m256 albedo[3], hit;
-  int textures;                      // 0, 1 or 2
-  const TexturePyramid* texture[2];  // the textures
-  __m256 lanes[2];                   // the lanes of each
-  __m256 u, v;                       // texture coordinates (stage 1)
-  avx2::TexelAddresses texels[2];    // where each texture is read (stage 2)
+  int textures;                           // how many
+  const TexturePyramid* texture[kLanes];  // the textures
+  __m256 lanes[kLanes];                   // the lanes of each
+  __m256 u, v;                            // texture coordinates (stage 1)
+  avx2::TexelAddresses texels[kLanes];    // where each texture is read (stage 2)
 };
 
 // albedo * texel * light where a lane hit, the background elsewhere.
@@ -225,111 +225,70 @@ PAIRCAST_AVX2 inline void put(const __m256 (&rgb)[3], const PacketOut& out) {
   for (int c = 0; c < 3; ++c) _mm256_storeu_ps((*out.linear)[c], rgb[c]);
 }
 
-// The texels of lanes over several textures, a texture at a time; false where one does not fit
-// the kernel.
-PAIRCAST_AVX2 bool sampleTextures(const ShadeScene& scene, const Records& r, const RayLanes& p,
-                                  __m256i texture, __m256i level, int todo, __m256 (&texel)[3]) {
-  const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
-  const __m256 tu = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
-  const __m256 tv = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
-  alignas(32) int32_t ids[kLanes];
-  _mm256_store_si256(reinterpret_cast<__m256i*>(ids), texture);
-  while (todo) {
-    const int id = ids[__builtin_ctz(static_cast<unsigned>(todo))];
-    const TexturePyramid& pyramid = scene.textures[id];
-    if (!avx2::fitsTextureKernel(pyramid)) return false;
-    const __m256 lanes = _mm256_castsi256_ps(_mm256_cmpeq_epi32(texture, _mm256_set1_epi32(id)));
-    __m256 c[3];
-    avx2::sampleTexture(pyramid.arrays(), tu, tv, level, c);
-    for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], lanes);
-    todo &= ~_mm256_movemask_ps(lanes);
-  }
-  return true;
-}
-
-enum class Phase { kPrepared, kDone, kDeclined };
-
-// The lanes of each texture, into q, when there are at most two; false when there are more.
-// `ids`: each lane's texture, -1 for none; `todo`: the lanes that have one.
-PAIRCAST_AVX2 inline bool splitTextures(const ShadeScene& scene, __m256i ids, int todo,
+// The lanes of each texture, into q. `ids`: each lane's texture, -1 for none; `todo`: the lanes
+// that have one.
+PAIRCAST_AVX2 inline void splitTextures(const ShadeScene& scene, __m256i ids, int todo,
                                         Prepared& q) {
   alignas(32) int32_t id[kLanes];
   _mm256_store_si256(reinterpret_cast<__m256i*>(id), ids);
   for (q.textures = 0; todo; ++q.textures) {
-    if (q.textures == 2) return false;
     const int t = id[__builtin_ctz(static_cast<unsigned>(todo))];
     q.lanes[q.textures] = _mm256_castsi256_ps(_mm256_cmpeq_epi32(ids, _mm256_set1_epi32(t)));
     q.texture[q.textures] = &scene.textures[t];
     todo &= ~_mm256_movemask_ps(q.lanes[q.textures]);
   }
-  return true;
 }
 
-// Which lanes have which texture.
-struct LaneTextures {
-  __m256i ids;      // each lane's texture, -1 for none (and on misses)
-  __m256 textured;  // the lanes with one
-  bool split;       // at most two textures, in Prepared
-};
-
-// The packet's textures: into q when there are at most two. False when a lane hit a triangle that
-// is not kFlat. `triangle`: as loadRecords returns it.
+// The packet's textures, into q, and the lanes that have one. False when a lane hit a triangle
+// that is not kFlat. `triangle`: as loadRecords returns it.
 PAIRCAST_AVX2 inline bool packetTextures(const ShadeScene& scene, const ShadeTriangle* triangle,
                                          const Records& r, uint32_t hits, Prepared& q,
-                                         LaneTextures& t) {
-  t = {_mm256_set1_epi32(-1), _mm256_setzero_ps(), true};
+                                         __m256& textured) {
+  textured = _mm256_setzero_ps();
   q.textures = 0;
   if (triangle) {  // one triangle: its colour and texture hold for all lanes
     if (hits && triangle->colour != ShadeTriangle::kFlat) return false;
     if (hits && triangle->texture >= 0) {
       q.textures = 1;
       q.texture[0] = &scene.textures[triangle->texture];
-      q.lanes[0] = t.textured = q.hit;
+      q.lanes[0] = textured = q.hit;
     }
     return true;
   }
   const __m256i hit = _mm256_castps_si256(q.hit);
   const __m256i colour = _mm256_and_si256(_mm256_castps_si256(r.f[4]), hit);
   if (!_mm256_testz_si256(colour, colour)) return false;  // a lane is not kFlat (0)
-  t.ids = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), hit),
-                          _mm256_andnot_si256(hit, _mm256_set1_epi32(-1)));
-  t.textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(t.ids, _mm256_set1_epi32(-1)));
-  t.split = splitTextures(scene, t.ids, _mm256_movemask_ps(t.textured), q);
+  const __m256i ids = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), hit),
+                                      _mm256_andnot_si256(hit, _mm256_set1_epi32(-1)));
+  textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(ids, _mm256_set1_epi32(-1)));
+  splitTextures(scene, ids, _mm256_movemask_ps(textured), q);
   return true;
 }
 
-// The first stage of a packet: its records, light, and its texture coordinates. A packet over
-// more than two textures (rare) is shaded here at once (kDone); one that hits a triangle that is
-// not kFlat, or a texture too large for the kernel, is declined.
-PAIRCAST_AVX2 Phase prepare(const ShadeScene& scene, const RayLanes& p, const PacketLight& light,
-                            Prepared& q, const PacketOut& out) {
+// The first stage of a packet: its records, light, and its texture coordinates. False (the
+// packet declined) when it hits a triangle that is not kFlat or a texture too large for the
+// kernel.
+PAIRCAST_AVX2 bool prepare(const ShadeScene& scene, const RayLanes& p, const PacketLight& light,
+                           Prepared& q) {
   const __m256i miss = _mm256_cmpeq_epi32(
       _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p.geomID)), _mm256_set1_epi32(-1));
   q.hit = _mm256_castsi256_ps(_mm256_xor_si256(miss, _mm256_set1_epi32(-1)));
   const auto hits = static_cast<uint32_t>(_mm256_movemask_ps(q.hit));
   Records r;
   const ShadeTriangle* triangle = loadRecords(scene, p, q.hit, hits, r);
-  LaneTextures t;
-  if (!packetTextures(scene, triangle, r, hits, q, t)) return Phase::kDeclined;
+  __m256 textured;
+  if (!packetTextures(scene, triangle, r, hits, q, textured)) return false;
+  for (int k = 0; k < q.textures; ++k)
+    if (!avx2::fitsTextureKernel(*q.texture[k])) return false;
   for (int c = 0; c < 3; ++c) q.albedo[c] = r.f[5 + c];
   const __m256 n[3] = {r.f[0], r.f[1], r.f[2]};
   q.lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
-                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], t.textured), light);
-  if (!t.split) {
-    __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
-    const int todo = _mm256_movemask_ps(t.textured);
-    if (!sampleTextures(scene, r, p, t.ids, q.lit.level, todo, texel)) return Phase::kDeclined;
-    __m256 rgb[3];
-    colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
-    put(rgb, out);
-    return Phase::kDone;
-  }
-  for (int k = 0; k < q.textures; ++k)
-    if (!avx2::fitsTextureKernel(*q.texture[k])) return Phase::kDeclined;
+                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], textured), light);
+  if (!q.textures) return true;
   const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
   q.u = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
   q.v = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
-  return Phase::kPrepared;
+  return true;
 }
 
 // The third stage: read and filter the texels, and the colours.
@@ -337,8 +296,7 @@ PAIRCAST_AVX2 void finish(const Prepared& q, const PacketLight& light, __m256 (&
   __m256 texel[3] = {_mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f), _mm256_set1_ps(1.0f)};
   for (int t = 0; t < q.textures; ++t) {
     __m256 c[3];
-    const TexturePyramid::Arrays a = q.texture[t]->arrays();
-    avx2::filterTexels(a, avx2::texelRows(a, q.texels[t]), c);
+    avx2::filterTexels(q.texture[t]->arrays(), q.texels[t], c);
     for (int k = 0; k < 3; ++k) texel[k] = _mm256_blendv_ps(texel[k], c[k], q.lanes[t]);
   }
   colours(q.albedo, texel, q.lit.light, q.hit, light, rgb);
@@ -353,12 +311,9 @@ PAIRCAST_AVX2 void finish(const Prepared& q, const PacketLight& light, __m256 (&
 PAIRCAST_AVX2 uint32_t shadeFlatPacketsAvx2(const ShadeScene& scene, const RayLanes* p, int n,
                                             const PacketLight& light, const PacketOut* out) {
   Prepared q[kMaxPackets];
-  uint32_t prepared = 0, done = 0;
-  for (int k = 0; k < n; ++k) {
-    const Phase phase = prepare(scene, p[k], light, q[k], out[k]);
-    prepared |= static_cast<uint32_t>(phase == Phase::kPrepared) << k;
-    done |= static_cast<uint32_t>(phase != Phase::kDeclined) << k;
-  }
+  uint32_t prepared = 0;
+  for (int k = 0; k < n; ++k)
+    prepared |= static_cast<uint32_t>(prepare(scene, p[k], light, q[k])) << k;
   for (int k = 0; k < n; ++k)
     for (int t = 0; (prepared >> k) & 1 && t < q[k].textures; ++t)
       q[k].texels[t] =
@@ -368,7 +323,7 @@ PAIRCAST_AVX2 uint32_t shadeFlatPacketsAvx2(const ShadeScene& scene, const RayLa
     if ((prepared >> k) & 1) finish(q[k], light, rgb[k]);
   for (int k = 0; k < n; ++k)
     if ((prepared >> k) & 1) put(rgb[k], out[k]);
-  return done;
+  return prepared;
 }
 
 PAIRCAST_AVX2 void combineLanesAvx2(const PacketShading& s, const PacketLight& light,

@@ -7,9 +7,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <mutex>
-#include <optional>
 
 #include "render/packet_shading.h"
 #include "render/texture_pyramid.h"

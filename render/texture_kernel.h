@@ -43,19 +43,12 @@ PAIRCAST_AVX2 inline __m256i byLevel(const int32_t* table, __m256i level) {
 }
 
 // Where TexturePyramid::sample reads, in eight lanes, and the weights of what it reads there.
-// Apart from the reads (texelRows) so that several packets' texels can be fetched before any
-// packet waits for them.
+// Apart from the reads (filterTexels) so that the packet shader computes several packets'
+// addresses, a long chain each, before it reads any.
 struct TexelAddresses {
   __m256i at0, at1;          // each lane's texel on its first and second row (texel index)
   __m256i weight0, weight1;  // (w00, w01) and (w10, w11) as 16-bit pairs
   __m256 finite;             // lanes with finite (u, v)
-};
-
-// What it reads there: the texel pairs of both rows.
-struct TexelRows {
-  __m256i row0[2], row1[2];  // lanes 0-3 and 4-7: each lane's texel and its right neighbour
-  __m256i weight0, weight1;  // as TexelAddresses
-  __m256 finite;
 };
 
 PAIRCAST_AVX2 inline TexelAddresses texelAddresses(const TexturePyramid::Arrays& a, __m256 U,
@@ -102,25 +95,16 @@ PAIRCAST_AVX2 inline TexelAddresses texelAddresses(const TexturePyramid::Arrays&
   return t;
 }
 
-// The texel pairs at those addresses: each lane's two texels of a row as one 64-bit load, four
-// lanes a gather.
-PAIRCAST_AVX2 inline TexelRows texelRows(const TexturePyramid::Arrays& a, const TexelAddresses& t) {
-  TexelRows r;
-  const auto* pairs = reinterpret_cast<const long long*>(a.texels);
-  r.row0[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(t.at0), 4);
-  r.row0[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(t.at0, 1), 4);
-  r.row1[0] = _mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(t.at1), 4);
-  r.row1[1] = _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(t.at1, 1), 4);
-  r.weight0 = t.weight0;
-  r.weight1 = t.weight1;
-  r.finite = t.finite;
-  return r;
-}
-
-// The bilinear filter of texelRows' texels and their decode to linear RGB (0 where (u, v) was
-// not finite).
-PAIRCAST_AVX2 inline void filterTexels(const TexturePyramid::Arrays& a, const TexelRows& t,
+// The texels at those addresses, filtered bilinearly and decoded to linear RGB (0 where (u, v)
+// was not finite).
+PAIRCAST_AVX2 inline void filterTexels(const TexturePyramid::Arrays& a, const TexelAddresses& t,
                                        __m256 (&rgb)[3]) {
+  // Each lane's two texels of a row as one 64-bit load, four lanes a gather: lanes 0-3, 4-7.
+  const auto* pairs = reinterpret_cast<const long long*>(a.texels);
+  const __m256i row0[2] = {_mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(t.at0), 4),
+                           _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(t.at0, 1), 4)};
+  const __m256i row1[2] = {_mm256_i32gather_epi64(pairs, _mm256_castsi256_si128(t.at1), 4),
+                           _mm256_i32gather_epi64(pairs, _mm256_extracti128_si256(t.at1, 1), 4)};
   // Per half (lanes 0-3, 4-7): each lane's weights twice, for its R and G pairs.
   const __m256i twice[2] = {_mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3),
                             _mm256_setr_epi32(4, 4, 5, 5, 6, 6, 7, 7)};
@@ -134,10 +118,10 @@ PAIRCAST_AVX2 inline void filterTexels(const TexturePyramid::Arrays& a, const Te
   for (int part = 0; part < 2; ++part) {
     const __m256i w0 = _mm256_permutevar8x32_epi32(t.weight0, twice[part]);
     const __m256i w1 = _mm256_permutevar8x32_epi32(t.weight1, twice[part]);
-    rg[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(t.row0[part], toRG), w0),
-                                _mm256_madd_epi16(_mm256_shuffle_epi8(t.row1[part], toRG), w1));
-    b[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(t.row0[part], toB), w0),
-                               _mm256_madd_epi16(_mm256_shuffle_epi8(t.row1[part], toB), w1));
+    rg[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(row0[part], toRG), w0),
+                                _mm256_madd_epi16(_mm256_shuffle_epi8(row1[part], toRG), w1));
+    b[part] = _mm256_add_epi32(_mm256_madd_epi16(_mm256_shuffle_epi8(row0[part], toB), w0),
+                               _mm256_madd_epi16(_mm256_shuffle_epi8(row1[part], toB), w1));
   }
   // Decode (255 * 256 >> 4 at most), then back to one vector per channel.
   const float* table = a.decode;
@@ -157,7 +141,7 @@ PAIRCAST_AVX2 inline void filterTexels(const TexturePyramid::Arrays& a, const Te
 // decode are gathers.
 PAIRCAST_AVX2 inline void sampleTexture(const TexturePyramid::Arrays& a, __m256 U, __m256 V,
                                         __m256i level, __m256 (&rgb)[3]) {
-  filterTexels(a, texelRows(a, texelAddresses(a, U, V, level)), rgb);
+  filterTexels(a, texelAddresses(a, U, V, level), rgb);
 }
 
 // The same, from and to memory, for the lanes whose bit is set in `lanes`.
