@@ -13,7 +13,7 @@
 #include <cstddef>
 #include <string>
 
-#include "render/camera.h"
+#include "util/camera.h"
 #include "util/image.h"
 
 namespace paircast {

@@ -12,7 +12,7 @@
 #include <optional>
 #include <vector>
 
-#include "render/camera.h"
+#include "util/camera.h"
 #include "util/image.h"
 
 namespace paircast {

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "dataset/shard.h"
-#include "render/camera.h"
+#include "util/camera.h"
 
 namespace paircast {
 

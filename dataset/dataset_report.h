@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "render/camera.h"
+#include "util/camera.h"
 
 namespace paircast {
 

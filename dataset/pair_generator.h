@@ -13,12 +13,10 @@
 #include "dataset/viewpoint_sampler.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
+#include "shard/shard_format.h"  // kMaxViews
 #include "util/image.h"
 
 namespace paircast {
-
-// The most views a sample may have: names stay at two digits (<idx>_<k>.jpeg, <key>.<k>.jpg).
-constexpr int kMaxViews = 99;
 
 constexpr int kAutoScreen = -1;
 constexpr int kAutoScreenDivisor = 16;

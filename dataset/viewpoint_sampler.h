@@ -7,7 +7,7 @@
 
 #include "dataset/floor_map.h"
 #include "dataset/habitat_frame.h"
-#include "render/camera.h"
+#include "util/camera.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
 #include "util/random.h"

@@ -5,7 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "fuzz/fuzz_inputs.h"
-#include "render/camera.h"
+#include "util/camera.h"
 #include "render/scene_loader.h"
 
 namespace paircast::fuzz {

@@ -22,6 +22,7 @@
 #include "dataset/shard.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
+#include "shard/shard_set.h"
 #include "util/error.h"
 #include "util/image_io.h"
 
@@ -310,16 +311,22 @@ class PyPairStream {
 
 // ---- Shards -------------------------------------------------------------------------------------
 
-// A shard read by readShard on a background thread that decodes into a bounded queue, so that
-// decoding overlaps the training step. Malformed samples become warnings, as readShard reports
-// them.
+// Each message as a Python RuntimeWarning.
+void warnAll(const std::vector<std::string>& messages) {
+  for (const auto& w : messages)
+    if (PyErr_WarnEx(PyExc_RuntimeWarning, w.c_str(), 1) < 0) throw py::error_already_set();
+}
+
+// A shard read through ShardIndex on a background thread that decodes into a bounded queue, so
+// that decoding overlaps the training step. Samples the index refuses become warnings; so does a
+// damaged shard's tail, and a shard with nothing usable is an error.
 class PyShardReader {
  public:
   struct Decoded {
     std::string key;
+    SampleRecord record;
     std::vector<Image8> rgb;
     std::vector<ImageF> depth;
-    nlohmann::json record;
   };
 
   PyShardReader(py::handle path, bool depth, size_t queue)
@@ -347,8 +354,7 @@ class PyShardReader {
         error_ = nullptr;
       }
     }
-    for (const auto& w : warnings)
-      if (PyErr_WarnEx(PyExc_RuntimeWarning, w.c_str(), 1) < 0) throw py::error_already_set();
+    warnAll(warnings);
     if (error) std::rethrow_exception(error);
     if (!d) {
       if (!warnings.empty()) return next();
@@ -372,32 +378,49 @@ class PyShardReader {
  private:
   struct Stopped {};
 
+  void warn(const std::string& message) {
+    std::lock_guard<std::mutex> lock(mu_);
+    warnings_.push_back(message);
+    cv_.notify_all();
+  }
+
+  Decoded decode(const ShardIndex& index, size_t i) {
+    const IndexedSample& s = index[i];
+    Decoded d{s.key, s.record, {}, {}};
+    for (int k = 0; k < s.record.views; ++k) {
+      const std::string name = index.describe(i, MemberKind::kImage, k + 1);
+      const Bytes jpeg = index.read(s.image[k]);
+      d.rgb.push_back(decodeImage8(jpeg.data(), jpeg.size(), name));
+      if (d.rgb.back().size() != d.rgb[0].size())
+        throw Error(name, "differs in size from view 1 of its sample");
+      if (depth_ && !s.depth.empty()) {
+        const Bytes exr = index.read(s.depth[k]);
+        d.depth.push_back(
+            decodeImageF(exr.data(), exr.size(), index.describe(i, MemberKind::kDepth, k + 1)));
+      }
+    }
+    return d;
+  }
+
   void run() {
     try {
-      readShard(
-          path_,
-          [&](ShardSample&& s) {
-            Decoded d;
-            d.key = s.key;
-            for (size_t k = 0; k < s.jpeg.size(); ++k) {
-              const std::string name = path_ + ": " + s.key + "." + std::to_string(k + 1);
-              d.rgb.push_back(decodeImage8(s.jpeg[k].data(), s.jpeg[k].size(), name + ".jpg"));
-              if (depth_ && k < s.depthExr.size() && !s.depthExr[k].empty())
-                d.depth.push_back(
-                    decodeImageF(s.depthExr[k].data(), s.depthExr[k].size(), name + ".depth.exr"));
-            }
-            d.record = std::move(s.record);
-            std::unique_lock<std::mutex> lock(mu_);
-            cv_.wait(lock, [&] { return stop_ || queue_.size() < capacity_; });
-            if (stop_) throw Stopped{};
-            queue_.push_back(std::move(d));
-            cv_.notify_all();
-          },
-          [&](const std::string& message) {
-            std::lock_guard<std::mutex> lock(mu_);
-            warnings_.push_back(message);
-            cv_.notify_all();
-          });
+      const ShardIndex index = ShardIndex::open(path_, [&](const std::string& m) { warn(m); });
+      if (index.damaged() && index.size() == 0) throw Error(path_, index.damage());
+      if (index.damaged()) warn(path_ + ": " + index.damage() + "; its whole samples are used");
+      for (size_t i = 0; i < index.size(); ++i) {
+        std::optional<Decoded> d;
+        try {
+          d = decode(index, i);
+        } catch (const Error& e) {
+          warn(std::string(e.what()) + ", skipped");
+          continue;
+        }
+        std::unique_lock<std::mutex> lock(mu_);
+        cv_.wait(lock, [&] { return stop_ || queue_.size() < capacity_; });
+        if (stop_) throw Stopped{};
+        queue_.push_back(std::move(*d));
+        cv_.notify_all();
+      }
     } catch (const Stopped&) {
     } catch (...) {
       std::lock_guard<std::mutex> lock(mu_);
@@ -408,44 +431,24 @@ class PyShardReader {
     cv_.notify_all();
   }
 
+  // The record's schema as a PairSample, for sampleToDict.
   py::dict toDict(Decoded&& d) {
-    const SampleRecord r = parseSampleRecord(d.record, path_ + ": sample '" + d.key + "'");
+    const SampleRecord& r = d.record;
+    const size_t V = static_cast<size_t>(r.views);
     PairSample s;
     s.scene = r.scene;
     s.index = r.index;
-    const auto seed = d.record.find("seed");
-    if (seed != d.record.end() && seed->is_number_unsigned()) s.seed = seed->get<uint64_t>();
-    const size_t V = static_cast<size_t>(r.views);
-    if (d.rgb.size() != V || r.camera.size() != V)
-      throw Error(path_, "sample '" + d.key + "' does not have the views its record names");
-    for (const Image8& image : d.rgb)
-      if (image.size() != d.rgb[0].size())
-        throw Error(path_, "sample '" + d.key + "' has views of different sizes");
+    s.seed = r.seed.value_or(0);
     s.camera = r.camera;
     s.rgb = std::move(d.rgb);
     if (d.depth.size() == V) s.depth = std::move(d.depth);
     s.covis.resize(V);
     s.covis[0].covis = 1.0;
-    // Each view's covis with view 1: CroCo's covisibility_ratios after view 1's valid fraction.
-    const auto ratios = d.record.find("covisibility_ratios");
-    for (size_t k = 1; k < V; ++k) {
-      if (ratios != d.record.end() && ratios->is_array() && ratios->size() == V &&
-          (*ratios)[k].is_number())
-        s.covis[k].covis = (*ratios)[k].get<double>();
-      else if (k == 1)
-        s.covis[k].covis = r.covis;
-    }
-    // CroCo's pairwise_visibility_ratios, when whole: [V][V].
-    const auto pairwise = d.record.find("pairwise_visibility_ratios");
-    if (pairwise != d.record.end() && pairwise->is_array() && pairwise->size() == V) {
-      std::vector<std::vector<double>> visibility;
-      for (const auto& row : *pairwise) {
-        if (!row.is_array() || row.size() != V) break;
-        visibility.emplace_back();
-        for (const auto& v : row) visibility.back().push_back(v.is_number() ? v.get<double>() : 0);
-      }
-      if (visibility.size() == V) s.visibility = std::move(visibility);
-    }
+    for (size_t k = 1; k < V; ++k)
+      s.covis[k].covis = r.covisibilityRatios.size() == V ? r.covisibilityRatios[k]
+                         : k == 1                         ? r.covis
+                                                          : 0.0;
+    s.visibility = r.pairwiseVisibility;
     py::dict out = sampleToDict(s);
     out["key"] = d.key;
     return out;
@@ -461,6 +464,65 @@ class PyShardReader {
   std::exception_ptr error_;
   bool stop_ = false, done_ = false;
   std::thread thread_;
+};
+
+// Several shards as one indexed list (ShardSet), for paircast.torch.ShardPairs: the sample's
+// size and name for the caller's random draws, then each view's crop decoded straight into a
+// numpy array, float32 normalised or uint8, [3, H, W], with the GIL released.
+class PyShardSet {
+ public:
+  explicit PyShardSet(py::handle paths) {
+    const std::vector<std::string> files = pathsFromPy(paths);
+    std::vector<std::string> warnings;
+    {
+      py::gil_scoped_release release;
+      set_ = ShardSet::open(files, [&](const std::string& m) { warnings.push_back(m); });
+    }
+    warnAll(warnings);
+  }
+
+  size_t size() const { return set_.size(); }
+
+  // (key, scene, index, views, height, width) of sample i.
+  py::tuple info(size_t i) const {
+    check(i);
+    const IndexedSample& s = set_[i];
+    return py::make_tuple(s.key, s.record.scene, s.record.index, s.record.views,
+                          s.record.camera[0].height, s.record.camera[0].width);
+  }
+
+  py::array decode(size_t i, int view, int top, int left, int height, int width,
+                   const std::string& dtype) const {
+    check(i);
+    if (view < 0 || view >= set_[i].record.views)
+      throw py::index_error("view " + std::to_string(view) + " of a sample of " +
+                            std::to_string(set_[i].record.views));
+    if (dtype != "float32" && dtype != "uint8")
+      throw py::value_error("dtype must be 'float32' or 'uint8', not '" + dtype + "'");
+    const CropBox box{top, left, height, width};
+    const std::vector<py::ssize_t> shape{3, height, width};
+    if (dtype == "uint8") {
+      py::array_t<uint8_t> out(shape);
+      decodeInto(i, view, box, PixelLayout::kUint8CHW, out.mutable_data());
+      return std::move(out);
+    }
+    py::array_t<float> out(shape);
+    decodeInto(i, view, box, PixelLayout::kNormalizedFloatCHW, out.mutable_data());
+    return std::move(out);
+  }
+
+ private:
+  void check(size_t i) const {
+    if (i >= set_.size())
+      throw py::index_error("sample " + std::to_string(i) + " of " + std::to_string(set_.size()));
+  }
+  void decodeInto(size_t i, int view, const CropBox& box, PixelLayout layout, void* out) const {
+    if (box.height < 1 || box.width < 1) throw Error("the crop must be at least 1 x 1");
+    py::gil_scoped_release release;
+    set_.decodeView(i, view, box, layout, out);
+  }
+
+  ShardSet set_;
 };
 
 py::array_t<uint8_t> decodeImagePy(const py::bytes& data, const std::string& name) {
@@ -562,6 +624,17 @@ PYBIND11_MODULE(_paircast, m) {
       .def("close", &PyShardReader::close)
       .def("__enter__", [](py::object self) { return self; })
       .def("__exit__", [](PyShardReader& r, py::args) { r.close(); });
+
+  py::class_<PyShardSet>(m, "ShardSet",
+                         "Samples of several shards, indexed; views decoded straight into crops")
+      .def(py::init<py::handle>(), py::arg("paths"))
+      .def("__len__", &PyShardSet::size)
+      .def("info", &PyShardSet::info, py::arg("i"),
+           "(key, scene, index, views, height, width) of sample i")
+      .def("decode", &PyShardSet::decode, py::arg("i"), py::arg("view"), py::arg("top"),
+           py::arg("left"), py::arg("height"), py::arg("width"), py::arg("dtype") = "float32",
+           "The crop of view `view` (from 0) of sample i as [3, height, width]: float32 "
+           "normalised with ImageNet's mean and std, or uint8. Only the crop is decoded.");
 
   m.def("decode_image", &decodeImagePy, py::arg("data"), py::arg("name") = "image.jpg",
         "Decodes a PNG or JPEG held in bytes to uint8 [H, W, 3]; name picks the format.");

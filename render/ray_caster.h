@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <memory>
 
-#include "render/camera.h"
+#include "util/camera.h"
 #include "render/frame.h"
 #include "render/mesh.h"
 

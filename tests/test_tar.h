@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "shard/shard_format.h"
 #include "util/image.h"
 #include "util/image_io.h"
 
@@ -58,6 +59,22 @@ inline std::string jpegBytes(int level = -1, int size = 8) {
     img.data[i] = static_cast<uint8_t>(level >= 0 ? level : i * 7);
   const auto bytes = encodeImage(img, "jpg", 90);
   return std::string(bytes.begin(), bytes.end());
+}
+
+// The record member "<key>.json" of a sample of `views` views of width x height, as the shard
+// format requires it (shard/shard_format.h): the key's scene and index, one camera a view.
+inline TarMember recordMember(const std::string& key, int views, int width = 8, int height = 8) {
+  SampleRecord r;
+  const size_t dash = key.rfind('-');
+  r.scene = key.substr(0, dash);
+  r.index = dash == std::string::npos ? 0 : std::strtoull(key.c_str() + dash + 1, nullptr, 10);
+  r.views = views;
+  for (int k = 0; k < views; ++k) {
+    r.camera.push_back(Camera::fromHfov(width, height, 60));
+    r.camera.back().t_cam2world.x() = 0.1 * k;
+  }
+  if (views >= 2) r.covis = r.v_ij = r.v_ji = 0.5;
+  return {key + ".json", recordToJson(r).dump()};
 }
 
 }  // namespace paircast::testing

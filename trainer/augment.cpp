@@ -1,6 +1,7 @@
 #include "trainer/augment.h"
 
 #include "model/croco_net.h"
+#include "util/jpeg_decoder.h"
 
 namespace paircast {
 namespace {
@@ -50,23 +51,60 @@ torch::Tensor colorJitter(const torch::Tensor& x0, double brightness, double con
   return x;
 }
 
+namespace {
+
+// The colour jitter (when on) and the normalisation of one cropped image, [3, S, S] in [0, 1].
+torch::Tensor jitterAndNormalize(torch::Tensor x, const AugmentOptions& o, Rng& rng) {
+  if (o.colorJitter) {
+    int order[3] = {0, 1, 2};
+    for (int i = 2; i > 0; --i) std::swap(order[i], order[rng.below(i + 1)]);  // random order
+    const double br = rng.uniform(o.jitterLow, o.jitterHigh),
+                 ct = rng.uniform(o.jitterLow, o.jitterHigh),
+                 st = rng.uniform(o.jitterLow, o.jitterHigh);
+    x = colorJitter(x, br, ct, st, order);
+  }
+  return imagenetNormalize(x.unsqueeze(0)).squeeze(0).contiguous();
+}
+
+bool isJpeg(const EncodedImage& e) {
+  return e.bytes.size() >= 3 && e.bytes[0] == 0xff && e.bytes[1] == 0xd8 && e.bytes[2] == 0xff;
+}
+
+// randomCrop's draws, with only the crop decoded when the image is a JPEG at least S x S.
+torch::Tensor cropEncoded(const EncodedImage& e, int size, Rng& rng) {
+  if (isJpeg(e)) {
+    const JpegSize full = jpegSize(e.bytes.data(), e.bytes.size(), e.name);
+    if (full.width >= size && full.height >= size) {
+      CropBox box;
+      box.height = box.width = size;
+      box.top = static_cast<int>(rng.below(full.height - size + 1));
+      box.left = static_cast<int>(rng.below(full.width - size + 1));
+      Image8 crop(size, size, 3);
+      decodeJpegCrop(e.bytes.data(), e.bytes.size(), e.name, box, PixelLayout::kUint8HWC,
+                     crop.data.data());
+      return toTensor(crop);
+    }
+  }
+  return randomCrop(toTensor(decodeImage8(e.bytes.data(), e.bytes.size(), e.name)), size, rng);
+}
+
+}  // namespace
+
 std::pair<torch::Tensor, torch::Tensor> augmentPair(const Image8& a, const Image8& b,
                                                     const AugmentOptions& o, Rng& rng) {
   torch::Tensor out[2];
   const Image8* imgs[2] = {&a, &b};
-  for (int k = 0; k < 2; ++k) {
-    auto x = randomCrop(toTensor(*imgs[k]), o.size, rng);
-    if (o.colorJitter) {
-      int order[3] = {0, 1, 2};
-      for (int i = 2; i > 0; --i) std::swap(order[i], order[rng.below(i + 1)]);  // random order
-      const double br = rng.uniform(o.jitterLow, o.jitterHigh),
-                   ct = rng.uniform(o.jitterLow, o.jitterHigh),
-                   st = rng.uniform(o.jitterLow, o.jitterHigh);
-      x = colorJitter(x, br, ct, st, order);
-    }
-    out[k] = imagenetNormalize(x.unsqueeze(0)).squeeze(0).contiguous();
-  }
+  for (int k = 0; k < 2; ++k)
+    out[k] = jitterAndNormalize(randomCrop(toTensor(*imgs[k]), o.size, rng), o, rng);
   return {out[0], out[1]};
+}
+
+std::pair<torch::Tensor, torch::Tensor> augmentEncodedPair(const EncodedImage& a,
+                                                           const EncodedImage& b,
+                                                           const AugmentOptions& o, Rng& rng) {
+  torch::Tensor x = jitterAndNormalize(cropEncoded(a, o.size, rng), o, rng);
+  torch::Tensor y = jitterAndNormalize(cropEncoded(b, o.size, rng), o, rng);
+  return {x, y};
 }
 
 }  // namespace paircast

@@ -7,6 +7,7 @@
 #include <torch/torch.h>
 
 #include "util/image.h"
+#include "util/image_io.h"
 #include "util/random.h"
 
 namespace paircast {
@@ -21,6 +22,14 @@ struct AugmentOptions {
 // resized up first (bilinear). Deterministic for a given rng state.
 std::pair<torch::Tensor, torch::Tensor> augmentPair(const Image8& a, const Image8& b,
                                                     const AugmentOptions& o, Rng& rng);
+
+// The same from encoded images, with the same draws: each image's crop is drawn from its size
+// in the header and only the crop is decoded (util/jpeg_decoder.h), so the result equals
+// augmentPair of the decoded images. Images that are no JPEG, or smaller than the crop, are
+// decoded whole. Throws paircast::Error naming the image when it does not decode.
+std::pair<torch::Tensor, torch::Tensor> augmentEncodedPair(const EncodedImage& a,
+                                                           const EncodedImage& b,
+                                                           const AugmentOptions& o, Rng& rng);
 
 // One image: crop (x0, y0) of size S and the colour jitter, exposed for the tests.
 torch::Tensor colorJitter(const torch::Tensor& rgb01, double brightness, double contrast,

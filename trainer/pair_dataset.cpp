@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 
+#include "shard/shard_index.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
@@ -37,48 +38,17 @@ std::vector<std::string> expandPatterns(const std::vector<std::string>& patterns
   return files;
 }
 
-uint64_t octal(const char* p, size_t n) {
-  uint64_t v = 0;
-  for (size_t i = 0; i < n && p[i]; ++i) {
-    if (p[i] == ' ') continue;
-    if (p[i] < '0' || p[i] > '7') return UINT64_MAX;
-    v = v * 8 + (p[i] - '0');
+// The whole file, or [offset, offset + length) of it.
+std::vector<unsigned char> readMember(const std::string& file, uint64_t offset, uint64_t length) {
+  if (length == 0) {
+    const std::string bytes = readFile(file);
+    return {bytes.begin(), bytes.end()};
   }
-  return v;
+  return readFileRange(file, offset, length);
 }
 
-std::vector<unsigned char> readRange(const std::string& file, uint64_t offset, uint64_t length) {
-  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throw Error(file, "cannot open");
-  std::vector<unsigned char> data(length);
-  uint64_t done = 0;
-  while (done < length) {
-    const ssize_t n =
-        ::pread(fd, data.data() + done, length - done, static_cast<off_t>(offset + done));
-    if (n <= 0) {
-      ::close(fd);
-      throw Error(file, "short read (file changed or truncated)");
-    }
-    done += static_cast<uint64_t>(n);
-  }
-  ::close(fd);
-  return data;
-}
-
-// The view number of a shard member name after its key ("3.jpg" -> 3), or 0 when the member
-// is not a view (K.json, K.1.depth.exr, K.01.jpg).
-int viewNumber(const std::string& member) {
-  constexpr size_t kMaxDigits = 6;
-  const size_t dot = member.find('.');
-  if (dot == 0 || dot > kMaxDigits || member.compare(dot, std::string::npos, ".jpg") != 0 ||
-      member[0] == '0')
-    return 0;
-  int k = 0;
-  for (size_t i = 0; i < dot; ++i) {
-    if (member[i] < '0' || member[i] > '9') return 0;
-    k = k * 10 + (member[i] - '0');
-  }
-  return k;
+void warn(const std::string& message) {
+  std::fprintf(stderr, "pretrain: warning: %s\n", message.c_str());
 }
 
 }  // namespace
@@ -86,58 +56,24 @@ int viewNumber(const std::string& member) {
 PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
   PairDataset ds;
   for (const auto& file : expandPatterns(patterns)) {
-    const uint64_t fileSize = fs::file_size(file);
-    std::ifstream in(file, std::ios::binary);
-    if (!in) throw Error(file, "cannot open shard");
-    std::map<std::string, std::map<int, Member>> views;  // key -> view number -> member
-    std::vector<std::string> order;
-    uint64_t pos = 0;
-    char h[512];
-    bool truncated = false;
-    while (pos + 512 <= fileSize) {
-      in.seekg(static_cast<std::streamoff>(pos));
-      if (!in.read(h, 512)) break;
-      if (h[0] == '\0') break;  // end-of-archive blocks
-      const std::string name(h, strnlen(h, 100));
-      const uint64_t size = octal(h + 124, 12);
-      if (size == UINT64_MAX || pos + 512 + size > fileSize) {
-        truncated = true;
-        break;
-      }
-      const char type = h[156];
-      const size_t dot = name.find('.');
-      if ((type == '0' || type == '\0') && dot != std::string::npos &&
-          name.find('/') == std::string::npos) {
-        const std::string key = name.substr(0, dot);
-        const int k = viewNumber(name.substr(dot + 1));
-        if (k > 0 && size > 0) {  // an empty member counts as missing
-          if (!views.count(key)) order.push_back(key);
-          views[key][k] = Member{file, pos + 512, size, name};
-        }
-      }
-      pos += 512 + (size + 511) / 512 * 512;
-    }
-    if (truncated)
-      std::fprintf(stderr, "pretrain: warning: %s is truncated; its whole samples are used\n",
-                   file.c_str());
-    size_t incomplete = 0;
-    for (const auto& key : order) {
-      const auto& members = views[key];
-      if (!members.count(1) || members.size() < 2) {
-        ++incomplete;
+    const ShardIndex index = ShardIndex::open(file, warn);
+    if (index.damaged()) warn(file + ": " + index.damage() + "; its whole samples are used");
+    size_t single = 0;
+    for (const IndexedSample& s : index.samples()) {
+      auto member = [&](size_t k) {
+        return Member{file, s.image[k].offset, s.image[k].size,
+                      memberName(s.key, MemberKind::kImage, static_cast<int>(k) + 1)};
+      };
+      if (s.image.size() < 2) {
+        ++single;
         continue;
       }
-      Sample sample{key, members.at(1), {}};
-      for (const auto& [k, m] : members)
-        if (k != 1) sample.others.push_back(m);
+      Sample sample{s.key, member(0), {}};
+      for (size_t k = 1; k < s.image.size(); ++k) sample.others.push_back(member(k));
       ds.samples_.push_back(std::move(sample));
     }
-    // A truncated shard's last sample is cut by the truncation, reported above.
-    if (incomplete > (truncated ? 1u : 0u))
-      std::fprintf(stderr,
-                   "pretrain: warning: %s: %zu samples lack view 1 (KEY.1.jpg) or any other "
-                   "view; skipped\n",
-                   file.c_str(), incomplete);
+    if (single)
+      warn(file + ": " + std::to_string(single) + " samples have one view, no pair; skipped");
   }
   if (ds.samples_.empty())
     throw Error(patterns.empty() ? "--data" : patterns[0], "no complete pair in the shards");
@@ -189,14 +125,19 @@ void PairDataset::restrictTo(const std::string& keysFile) {
   samples_ = std::move(kept);
 }
 
-std::pair<Image8, Image8> PairDataset::load(size_t i, uint64_t draw) const {
+std::pair<EncodedImage, EncodedImage> PairDataset::encoded(size_t i, uint64_t draw) const {
   const Sample& s = samples_.at(i);
   auto one = [&](const Member& m) {
-    if (m.length == 0) return readImage8(m.file);
-    const auto bytes = readRange(m.file, m.offset, m.length);
-    return decodeImage8(bytes.data(), bytes.size(), m.file + ":" + m.name);
+    return EncodedImage{readMember(m.file, m.offset, m.length),
+                        m.name.empty() ? m.file : m.file + ":" + m.name};
   };
   return {one(s.first), one(s.others[draw % s.others.size()])};
+}
+
+std::pair<Image8, Image8> PairDataset::load(size_t i, uint64_t draw) const {
+  auto [a, b] = encoded(i, draw);
+  return {decodeImage8(a.bytes.data(), a.bytes.size(), a.name),
+          decodeImage8(b.bytes.data(), b.bytes.size(), b.name)};
 }
 
 std::string PairDataset::describe(size_t i) const {

@@ -30,6 +30,12 @@ Image8 readImage8(const std::string& path, int channels = 3);
 // Reads a float image (e.g. a depth EXR), keeping its channel count.
 ImageF readImageF(const std::string& path);
 
+// An encoded image held in memory, with the name its messages give (a file, or "shard: member").
+struct EncodedImage {
+  std::vector<unsigned char> bytes;
+  std::string name;
+};
+
 // Decodes images held in memory; `name` is used in error messages and to pick the format.
 Image8 decodeImage8(const void* data, size_t size, const std::string& name, int channels = 3);
 ImageF decodeImageF(const void* data, size_t size, const std::string& name);

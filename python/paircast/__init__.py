@@ -11,14 +11,15 @@ width, height (OpenCV axes: x right, y down, z forward). Bad input raises pairca
 ValueError) whose message names what is wrong. paircast.torch has the PyTorch datasets.
 """
 
-from ._paircast import (Error, PairStream, Scene, ShardReader, covisibility, decode_exr,
-                        decode_image, encode_image, load_scene)
+from ._paircast import (Error, PairStream, Scene, ShardReader, ShardSet, covisibility,
+                        decode_exr, decode_image, encode_image, load_scene)
 
 __all__ = [
     "Error",
     "PairStream",
     "Scene",
     "ShardReader",
+    "ShardSet",
     "covisibility",
     "decode_exr",
     "decode_image",

@@ -19,13 +19,14 @@ diagonal), scene, index.
 import glob
 import math
 import os
+import warnings
 import zlib
 
 import numpy as np
 import torch
 from torch.utils.data import IterableDataset, get_worker_info
 
-from . import Error, PairStream, ShardReader
+from . import Error, PairStream, ShardReader, ShardSet
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -86,18 +87,27 @@ class _Pairs(IterableDataset):
         scene = zlib.crc32(str(sample["scene"]).encode())
         return np.random.default_rng([self.seed, self.epoch, scene, int(sample["index"])])
 
+    def _crop_box(self, height, width, rng):
+        """(top, left, h, w) of the crop of an image of height x width: drawn from rng when crop
+        is set (independently for the two images, as CroCo's RandomCropPair does), else the
+        whole image."""
+        if self.crop is None:
+            return 0, 0, height, width
+        h, w = self.crop
+        if h > height or w > width:
+            raise ValueError(f"crop {self.crop} is larger than the images ({height} x {width})")
+        top = int(rng.integers(0, height - h + 1))
+        left = int(rng.integers(0, width - w + 1))
+        return top, left, h, w
+
+    def _other_view(self, views, rng):
+        """The view paired with view 0: view 1 of a pair, else one drawn from rng."""
+        return 1 if views == 2 else int(rng.integers(1, views))
+
     def _image(self, image, rng):
-        """uint8 [H, W, 3] -> float32 [3, h, w] in [0, 1] (normalised), and the crop's corner.
-        Crops are drawn independently for the two images, as CroCo's RandomCropPair does."""
-        top = left = 0
-        if self.crop is not None:
-            h, w = self.crop
-            if h > image.shape[0] or w > image.shape[1]:
-                raise ValueError(f"crop {self.crop} is larger than the images "
-                                 f"({image.shape[0]} x {image.shape[1]})")
-            top = int(rng.integers(0, image.shape[0] - h + 1))
-            left = int(rng.integers(0, image.shape[1] - w + 1))
-            image = image[top:top + h, left:left + w]
+        """uint8 [H, W, 3] -> float32 [3, h, w] in [0, 1] (normalised), and the crop's corner."""
+        top, left, h, w = self._crop_box(image.shape[0], image.shape[1], rng)
+        image = image[top:top + h, left:left + w]
         src = torch.from_numpy(image).permute(2, 0, 1)
         out = torch.empty(src.shape, dtype=torch.float32)
         out.copy_(src).div_(255.0)
@@ -111,7 +121,7 @@ class _Pairs(IterableDataset):
         images = sample["images"]
         if images.shape[0] < 2:
             raise Error(f"sample {sample.get('key', sample['index'])} has one view: no pair")
-        other = 1 if images.shape[0] == 2 else int(rng.integers(1, images.shape[0]))
+        other = self._other_view(images.shape[0], rng)
         image1, crop1 = self._image(images[0], rng)
         image2, crop2 = self._image(images[other], rng)
         if not self.return_dict:
@@ -187,13 +197,25 @@ class ShardPairs(_Pairs):
 
     pattern: a glob ('pairs/pairs-*.tar'), a shard path, or a list of them. Shards are split
     among the readers (every DataLoader worker of every rank); with fewer shards than readers,
-    each reader reads every shard and keeps every parts-th sample. shuffle: a new shard order
-    each epoch (set_epoch). depth: also decode the depth maps when the shards have them.
+    each reader indexes every shard and decodes only every parts-th sample. shuffle: a new shard
+    order each epoch (set_epoch). depth: also decode the depth maps when the shards have them.
+    dtype: "float32" (normalised with ImageNet's mean and std unless normalize=False) or "uint8"
+    ([3, h, w] as stored, for users who normalise on the GPU).
+
+    Pairs (return_dict=False, depth=False) are read through paircast.ShardSet: only the crops
+    are decoded, by libjpeg-turbo, straight into the tensors' layout, with the GIL released.
+    return_dict=True decodes whole samples through paircast.ShardReader. A sample that cannot be
+    used (a missing member, a corrupt JPEG) is skipped with a RuntimeWarning.
     """
 
     def __init__(self, pattern, crop=None, normalize=True, return_dict=False, depth=False,
-                 shuffle=False, seed=0, rank=None, world_size=None):
+                 shuffle=False, seed=0, rank=None, world_size=None, dtype="float32"):
         super().__init__(seed, crop, normalize, return_dict, rank, world_size)
+        if dtype not in ("float32", "uint8"):
+            raise ValueError(f"dtype must be 'float32' or 'uint8', not {dtype!r}")
+        if dtype == "uint8" and (return_dict or depth):
+            raise ValueError("dtype='uint8' is for pairs: use it without return_dict and depth")
+        self.dtype = dtype
         patterns = [pattern] if isinstance(pattern, (str, os.PathLike)) else list(pattern)
         files = []
         for p in patterns:
@@ -213,10 +235,46 @@ class ShardPairs(_Pairs):
             np.random.default_rng([self.seed, self.epoch]).shuffle(files)
         by_file = len(files) >= parts
         mine = files[part::parts] if by_file else files
+        if self.return_dict or self.depth:
+            yield from self._samples(mine, by_file, part, parts)
+        else:
+            yield from self._crops(mine, by_file, part, parts)
+
+    def _samples(self, files, by_file, part, parts):
+        """Whole samples through ShardReader, as dicts (or pairs) made by _pair."""
         n = 0
-        for path in mine:
+        for path in files:
             with ShardReader(path, depth=self.depth) as reader:
                 for sample in reader:
                     n += 1
                     if by_file or (n - 1) % parts == part:
                         yield self._pair(sample)
+
+    def _crops(self, files, by_file, part, parts):
+        """(image1, image2) through ShardSet: the same draws as _pair, only the crops decoded."""
+        if not files:
+            return
+        shards = ShardSet(files)
+        dtype = "float32" if self.normalize else "uint8"
+        if self.dtype == "uint8":
+            dtype = "uint8"
+        for i in range(0 if by_file else part, len(shards), 1 if by_file else parts):
+            key, scene, index, views, height, width = shards.info(i)
+            if views < 2:
+                warnings.warn(f"{key}: one view, no pair; skipped", RuntimeWarning)
+                continue
+            rng = np.random.default_rng([self.seed, self.epoch, zlib.crc32(scene.encode()),
+                                         int(index)])
+            other = self._other_view(views, rng)
+            box1 = self._crop_box(height, width, rng)
+            box2 = self._crop_box(height, width, rng)
+            try:
+                image1 = shards.decode(i, 0, *box1, dtype=dtype)
+                image2 = shards.decode(i, other, *box2, dtype=dtype)
+            except Error as e:
+                warnings.warn(f"{e}, skipped", RuntimeWarning)
+                continue
+            image1, image2 = torch.from_numpy(image1), torch.from_numpy(image2)
+            if dtype == "uint8" and self.dtype == "float32":  # normalize=False: [0, 1]
+                image1, image2 = image1.float().div_(255.0), image2.float().div_(255.0)
+            yield image1, image2

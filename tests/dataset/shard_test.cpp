@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "fake_sample.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -111,9 +112,6 @@ TEST(Shard, MalformedSamplesAndUnsafeEntriesAreSkippedAndReported) {
                {"b-1.json", good},  // missing member
                {"../evil.1.jpg", "x"},
                {"/abs.2.jpg", "x"},  // unsafe paths
-               {"c-1.1.jpg", "x"},
-               {"c-1.2.jpg", "y"},
-               {"c-1.json", R"({"paircast_shard_version": 99})"},
                {"d-1.1.jpg", "x"},
                {"d-1.2.jpg", "y"},
                {"d-1.json", good}},
@@ -129,9 +127,31 @@ TEST(Shard, MalformedSamplesAndUnsafeEntriesAreSkippedAndReported) {
   EXPECT_NE(all.find("'b-1' is incomplete"), std::string::npos) << all;
   EXPECT_NE(all.find("../evil.1.jpg"), std::string::npos) << all;
   EXPECT_NE(all.find("/abs.2.jpg"), std::string::npos) << all;
-  EXPECT_NE(all.find("unsupported version"), std::string::npos) << all;
   EXPECT_NE(all.find("e-1.1.jpg"), std::string::npos) << all;
   EXPECT_FALSE(fs::exists(dir + "/../evil.1.jpg"));
+}
+
+TEST(Shard, AnotherVersionIsRefusedWholeNamingTheShardAndBothVersions) {
+  const std::string dir = testing::scratchDir("version");
+  nlohmann::json future = encodePair(fakePair(1, false), false, 90).record;
+  future["paircast_shard_version"] = kShardVersion + 1;
+  const std::string good = encodePair(fakePair(0, false), false, 90).record.dump();
+  writeRawTar(dir + "/future.tar", {{"a-0.1.jpg", "x"},
+                                    {"a-0.2.jpg", "y"},
+                                    {"a-0.json", good},
+                                    {"b-1.1.jpg", "x"},
+                                    {"b-1.2.jpg", "y"},
+                                    {"b-1.json", future.dump()}});
+  size_t delivered = 0;
+  const std::string why = testing::refusalOf(dir + "/future.tar", [&] {
+    readShard(dir + "/future.tar", [&](ShardSample&&) { ++delivered; });
+  });
+  EXPECT_EQ(delivered, 0u);  // refused whole, not sample by sample
+  EXPECT_NE(why.find("paircast_shard_version " + std::to_string(kShardVersion + 1)),
+            std::string::npos)
+      << why;
+  EXPECT_NE(why.find("reads version " + std::to_string(kShardVersion)), std::string::npos) << why;
+  EXPECT_NE(why.find("regenerate"), std::string::npos) << why;
 }
 
 TEST(Shard, OversizedEntriesAreRefusedBeforeAllocation) {

@@ -27,7 +27,7 @@ namespace {
 namespace fs = std::filesystem;
 
 // `pairs` pairs of smooth random 64 x 64 images (shifted views of one pattern), as JPEGs in a
-// tar shard laid out as generate_pairs writes them: <key>.1.jpg, <key>.2.jpg.
+// tar shard laid out as generate_pairs writes them: <key>.1.jpg, <key>.2.jpg, <key>.json.
 std::string writeShard(const std::string& dir, int pairs) {
   Rng rng(7);
   std::vector<testing::TarMember> members;
@@ -41,10 +41,13 @@ std::string writeShard(const std::string& dir, int pairs) {
             img.pixel(x, y)[c] = static_cast<uint8_t>(
                 127 + 120 * std::sin(fx * (x + 4 * view) + fy * y + 2.0 * c + k));
       char name[32];
-      std::snprintf(name, sizeof name, "%08d.%d.jpg", k, view);
+      std::snprintf(name, sizeof name, "s-%08d.%d.jpg", k, view);
       const auto jpeg = encodeImage(img, "jpg", 90);
       members.emplace_back(name, std::string(jpeg.begin(), jpeg.end()));
     }
+    char key[32];
+    std::snprintf(key, sizeof key, "s-%08d", k);
+    members.push_back(testing::recordMember(key, 2, 64, 64));
   }
   const std::string tar = testing::ustar(members), path = dir + "/pairs-000000.tar";
   std::ofstream(path, std::ios::binary).write(tar.data(), static_cast<std::streamsize>(tar.size()));

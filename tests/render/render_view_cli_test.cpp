@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "render/camera.h"
+#include "util/camera.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/image_io.h"

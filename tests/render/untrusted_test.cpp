@@ -12,7 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "render/camera.h"
+#include "util/camera.h"
 #include "render/scene_loader.h"
 #include "test_errors.h"
 #include "test_paths.h"

@@ -21,6 +21,10 @@ std::string jpeg() {
   return testing::jpegBytes();
 }
 
+testing::TarMember record(const std::string& key) {
+  return testing::recordMember(key, 2);
+}
+
 std::string write(const std::string& name, const std::string& bytes) {
   const std::string path = testing::scratchDir("untrusted_index") + "/" + name;
   std::ofstream(path, std::ios::binary) << bytes;
@@ -32,14 +36,18 @@ TEST(UntrustedShardIndex, LinksFoldersAndEscapingNamesAreNeverIndexed) {
   const std::string path = write("links.tar", ustar({
                                                   {"a-0.1.jpg", j},
                                                   {"a-0.2.jpg", j},
+                                                  record("a-0"),
                                                   {"b-0.1.jpg", "", '2'},  // symbolic link
                                                   {"b-0.2.jpg", j},
+                                                  record("b-0"),
                                                   {"c-0.1.jpg", "", '1'},  // hard link
                                                   {"c-0.2.jpg", j},
+                                                  record("c-0"),
                                                   {"../d-0.1.jpg", j},
                                                   {"../d-0.2.jpg", j},
                                                   {"e-0.1.jpg", "", '5'},  // folder
                                                   {"e-0.2.jpg", j},
+                                                  record("e-0"),
                                               }));
   const PairDataset ds = PairDataset::fromShards({path});
   ASSERT_EQ(ds.size(), 1u);
@@ -55,8 +63,10 @@ TEST(UntrustedShardIndex, SizesBeyondTheFileStopTheScanBeforeAnyRead) {
   // there, keeping the whole sample before it.
   const std::string path = write("huge.tar", ustar({{"a-0.1.jpg", j},
                                                     {"a-0.2.jpg", j},
+                                                    record("a-0"),
                                                     {"b-0.1.jpg", j, '0', "77777777777"},
-                                                    {"b-0.2.jpg", j}}));
+                                                    {"b-0.2.jpg", j},
+                                                    record("b-0")}));
   const PairDataset ds = PairDataset::fromShards({path});
   ASSERT_EQ(ds.size(), 1u);
   EXPECT_EQ(ds.key(0), "a-0");
@@ -68,7 +78,8 @@ TEST(UntrustedShardIndex, SizesBeyondTheFileStopTheScanBeforeAnyRead) {
 TEST(UntrustedShardIndex, AMemberThatDoesNotDecodeNamesTheShardAndThePair) {
   const std::string j = jpeg();
   const std::string path =
-      write("corrupt.tar", ustar({{"a-0.1.jpg", j}, {"a-0.2.jpg", "not a jpeg at all"}}));
+      write("corrupt.tar",
+            ustar({{"a-0.1.jpg", j}, {"a-0.2.jpg", "not a jpeg at all"}, record("a-0")}));
   const PairDataset ds = PairDataset::fromShards({path});
   ASSERT_EQ(ds.size(), 1u);
   const std::string why = testing::refusalOf(path, [&] { ds.load(0); });

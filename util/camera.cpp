@@ -1,4 +1,4 @@
-#include "render/camera.h"
+#include "util/camera.h"
 
 #include <cmath>
 #include <nlohmann/json.hpp>

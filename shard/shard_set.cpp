@@ -1,0 +1,46 @@
+#include "shard/shard_set.h"
+
+#include "util/error.h"
+
+namespace paircast {
+
+ShardSet ShardSet::open(const std::vector<std::string>& files, const ShardIndex::Warn& warn) {
+  ShardSet set;
+  for (const std::string& file : files) {
+    ShardIndex index = ShardIndex::open(file, warn);
+    if (index.damaged() && warn)
+      warn(file + ": " + index.damage() + "; its whole samples are used");
+    for (size_t k = 0; k < index.size(); ++k) set.where_.push_back({set.shards_.size(), k});
+    set.shards_.push_back(std::move(index));
+  }
+  if (set.where_.empty() && !files.empty()) throw Error(files[0], "no usable sample in the shards");
+  return set;
+}
+
+const IndexedSample& ShardSet::operator[](size_t i) const {
+  const Where& w = where_.at(i);
+  return shards_[w.shard][w.sample];
+}
+
+const std::string& ShardSet::shard(size_t i) const {
+  return shards_[where_.at(i).shard].path();
+}
+
+void ShardSet::decodeView(size_t i, int view, const CropBox& box, PixelLayout layout,
+                          void* out) const {
+  const Where& w = where_.at(i);
+  const ShardIndex& index = shards_[w.shard];
+  const IndexedSample& s = index[w.sample];
+  PAIRCAST_CHECK(view >= 0 && view < static_cast<int>(s.image.size()));
+  const std::string name = index.describe(w.sample, MemberKind::kImage, view + 1);
+  const Bytes bytes = index.read(s.image[view]);
+  const JpegSize size = jpegSize(bytes.data(), bytes.size(), name);
+  const Camera& camera = s.record.camera[view];
+  if (size.width != camera.width || size.height != camera.height)
+    throw Error(name, "is " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+                          " but its camera is " + std::to_string(camera.width) + "x" +
+                          std::to_string(camera.height));
+  decodeJpegCrop(bytes.data(), bytes.size(), name, box, layout, out);
+}
+
+}  // namespace paircast
