@@ -1,4 +1,5 @@
-// libFuzzer target: tar shards through the trainer's index (trainer/pair_dataset.h).
+// libFuzzer target: tar shards through the shard codec's index (shard/shard_index.h), as the
+// trainer and ShardSet read them.
 #include "fuzz/trainer_inputs.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {

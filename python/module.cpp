@@ -8,6 +8,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <sys/mman.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <condition_variable>
 #include <cstring>
@@ -483,6 +486,13 @@ class PyShardSet {
 
   size_t size() const { return set_.size(); }
 
+  // [(path, first sample, count)] of each shard, in order.
+  py::list ranges() const {
+    py::list out;
+    for (const auto& r : set_.ranges()) out.append(py::make_tuple(r.path, r.first, r.count));
+    return out;
+  }
+
   // (key, scene, index, views, height, width) of sample i.
   py::tuple info(size_t i) const {
     check(i);
@@ -511,6 +521,23 @@ class PyShardSet {
     return std::move(out);
   }
 
+  // decode() into `out`, a writable C-contiguous array of shape [3, height, width] and the
+  // dtype's type (a slot of a batch tensor): no array is allocated.
+  void decodeIntoArray(size_t i, int view, int top, int left, py::array out) const {
+    check(i);
+    if (view < 0 || view >= set_[i].record.views)
+      throw py::index_error("view " + std::to_string(view) + " of a sample of " +
+                            std::to_string(set_[i].record.views));
+    const bool isFloat = py::isinstance<py::array_t<float>>(out),
+               isUint8 = py::isinstance<py::array_t<uint8_t>>(out);
+    if ((!isFloat && !isUint8) || out.ndim() != 3 || out.shape(0) != 3 || !out.writeable() ||
+        !(out.flags() & py::array::c_style))
+      throw py::value_error("out must be a writable C-contiguous float32 or uint8 [3, H, W] array");
+    const CropBox box{top, left, static_cast<int>(out.shape(1)), static_cast<int>(out.shape(2))};
+    decodeInto(i, view, box, isFloat ? PixelLayout::kNormalizedFloatCHW : PixelLayout::kUint8CHW,
+               out.mutable_data());
+  }
+
  private:
   void check(size_t i) const {
     if (i >= set_.size())
@@ -524,6 +551,22 @@ class PyShardSet {
 
   ShardSet set_;
 };
+
+// Faults in the pages of a fresh array in one call (MADV_POPULATE_WRITE, Linux 5.14), instead of
+// one page fault at a time while a decoder writes it: a batch tensor in shared memory is tens of
+// megabytes. False where the kernel does not offer it (nothing changes then).
+bool prefaultPy(py::array array) {
+  if (!array.writeable()) throw py::value_error("prefault needs a writable array");
+#ifdef MADV_POPULATE_WRITE
+  const uintptr_t page = static_cast<uintptr_t>(::sysconf(_SC_PAGESIZE));
+  const uintptr_t begin = reinterpret_cast<uintptr_t>(array.mutable_data()) & ~(page - 1);
+  const uintptr_t end = reinterpret_cast<uintptr_t>(array.mutable_data()) + array.nbytes();
+  py::gil_scoped_release release;
+  return ::madvise(reinterpret_cast<void*>(begin), end - begin, MADV_POPULATE_WRITE) == 0;
+#else
+  return false;
+#endif
+}
 
 py::array_t<uint8_t> decodeImagePy(const py::bytes& data, const std::string& name) {
   const std::string_view bytes = data;
@@ -629,13 +672,20 @@ PYBIND11_MODULE(_paircast, m) {
                          "Samples of several shards, indexed; views decoded straight into crops")
       .def(py::init<py::handle>(), py::arg("paths"))
       .def("__len__", &PyShardSet::size)
+      .def("ranges", &PyShardSet::ranges, "[(path, first sample, count)] of each shard, in order")
       .def("info", &PyShardSet::info, py::arg("i"),
            "(key, scene, index, views, height, width) of sample i")
       .def("decode", &PyShardSet::decode, py::arg("i"), py::arg("view"), py::arg("top"),
            py::arg("left"), py::arg("height"), py::arg("width"), py::arg("dtype") = "float32",
            "The crop of view `view` (from 0) of sample i as [3, height, width]: float32 "
-           "normalised with ImageNet's mean and std, or uint8. Only the crop is decoded.");
+           "normalised with ImageNet's mean and std, or uint8. Only the crop is decoded.")
+      .def("decode_into", &PyShardSet::decodeIntoArray, py::arg("i"), py::arg("view"),
+           py::arg("top"), py::arg("left"), py::arg("out"),
+           "decode() into `out`, a writable C-contiguous [3, height, width] float32 (normalised) "
+           "or uint8 array, such as one slot of a batch tensor's numpy view.");
 
+  m.def("prefault", &prefaultPy, py::arg("array"),
+        "Faults in a fresh array's pages in one call (Linux 5.14+); False where unavailable.");
   m.def("decode_image", &decodeImagePy, py::arg("data"), py::arg("name") = "image.jpg",
         "Decodes a PNG or JPEG held in bytes to uint8 [H, W, 3]; name picks the format.");
   m.def("encode_image", &encodeImagePy, py::arg("image"), py::arg("format") = "png",

@@ -26,6 +26,16 @@ const std::string& ShardSet::shard(size_t i) const {
   return shards_[where_.at(i).shard].path();
 }
 
+std::vector<ShardSet::Range> ShardSet::ranges() const {
+  std::vector<Range> out;
+  size_t first = 0;
+  for (const ShardIndex& index : shards_) {
+    out.push_back({index.path(), first, index.size()});
+    first += index.size();
+  }
+  return out;
+}
+
 void ShardSet::decodeView(size_t i, int view, const CropBox& box, PixelLayout layout,
                           void* out) const {
   const Where& w = where_.at(i);

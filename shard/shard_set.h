@@ -23,6 +23,12 @@ class ShardSet {
   size_t size() const { return where_.size(); }
   const IndexedSample& operator[](size_t i) const;
   const std::string& shard(size_t i) const;
+  // The shards in order, each with its first sample and its count of samples.
+  struct Range {
+    std::string path;
+    size_t first = 0, count = 0;
+  };
+  std::vector<Range> ranges() const;
 
   // Decodes `box` of view `view` (from 0) of sample i into `out` (H W 3 elements of `layout`).
   // Throws paircast::Error naming the shard and member when the JPEG does not decode, its size

@@ -27,6 +27,7 @@ import torch
 from torch.utils.data import IterableDataset, get_worker_info
 
 from . import Error, PairStream, ShardReader, ShardSet
+from ._paircast import prefault
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -204,13 +205,27 @@ class ShardPairs(_Pairs):
 
     Pairs (return_dict=False, depth=False) are read through paircast.ShardSet: only the crops
     are decoded, by libjpeg-turbo, straight into the tensors' layout, with the GIL released.
+    batch_size=B yields batches ([B, 3, h, w] each, the last one smaller unless drop_last) that
+    each worker decodes straight into shared memory, so the DataLoader (batch_size=None) neither
+    collates nor copies them:
+
+        DataLoader(ShardPairs(shards, crop=224, batch_size=64), batch_size=None, num_workers=8)
     return_dict=True decodes whole samples through paircast.ShardReader. A sample that cannot be
     used (a missing member, a corrupt JPEG) is skipped with a RuntimeWarning.
     """
 
     def __init__(self, pattern, crop=None, normalize=True, return_dict=False, depth=False,
-                 shuffle=False, seed=0, rank=None, world_size=None, dtype="float32"):
+                 shuffle=False, seed=0, rank=None, world_size=None, dtype="float32",
+                 batch_size=None, drop_last=False):
         super().__init__(seed, crop, normalize, return_dict, rank, world_size)
+        if batch_size is not None:
+            if int(batch_size) < 1:
+                raise ValueError(f"batch_size must be positive, not {batch_size}")
+            if return_dict or depth or crop is None:
+                raise ValueError("batch_size= batches pairs of one crop size: give crop=, "
+                                 "without return_dict and depth")
+        self.batch_size = None if batch_size is None else int(batch_size)
+        self.drop_last = bool(drop_last)
         if dtype not in ("float32", "uint8"):
             raise ValueError(f"dtype must be 'float32' or 'uint8', not {dtype!r}")
         if dtype == "uint8" and (return_dict or depth):
@@ -227,6 +242,21 @@ class ShardPairs(_Pairs):
         self.files = files
         self.depth = bool(depth)
         self.shuffle = bool(shuffle)
+        self._shards = None
+        if not (return_dict or depth):
+            self._index()  # here, so that a bad shard fails now and forked workers inherit it
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_shards"] = None  # rebuilt where it is unpickled (spawned workers)
+        return state
+
+    def _index(self):
+        """The ShardSet of every shard, and each shard's (first sample, count)."""
+        if self._shards is None:
+            shards = ShardSet(self.files)
+            self._shards = shards, {path: (first, count) for path, first, count in shards.ranges()}
+        return self._shards
 
     def __iter__(self):
         part, parts, _ = reader_part(self.rank, self.world_size)
@@ -237,6 +267,8 @@ class ShardPairs(_Pairs):
         mine = files[part::parts] if by_file else files
         if self.return_dict or self.depth:
             yield from self._samples(mine, by_file, part, parts)
+        elif self.batch_size is not None:
+            yield from self._batches(mine, by_file, part, parts)
         else:
             yield from self._crops(mine, by_file, part, parts)
 
@@ -250,15 +282,17 @@ class ShardPairs(_Pairs):
                     if by_file or (n - 1) % parts == part:
                         yield self._pair(sample)
 
-    def _crops(self, files, by_file, part, parts):
-        """(image1, image2) through ShardSet: the same draws as _pair, only the crops decoded."""
-        if not files:
-            return
-        shards = ShardSet(files)
-        dtype = "float32" if self.normalize else "uint8"
-        if self.dtype == "uint8":
-            dtype = "uint8"
-        for i in range(0 if by_file else part, len(shards), 1 if by_file else parts):
+    def _dtype(self):
+        """What ShardSet decodes into: normalised float32, or uint8 (dtype="uint8", or
+        normalize=False, which then divides by 255)."""
+        return "float32" if self.dtype == "float32" and self.normalize else "uint8"
+
+    def _plan(self, files, by_file, part, parts):
+        """(shards, i, other view, box1, box2) of each of this reader's pairs, with _pair's
+        draws."""
+        shards, ranges = self._index()
+        order = [i for f in files for i in range(ranges[f][0], ranges[f][0] + ranges[f][1])]
+        for i in order if by_file else order[part::parts]:
             key, scene, index, views, height, width = shards.info(i)
             if views < 2:
                 warnings.warn(f"{key}: one view, no pair; skipped", RuntimeWarning)
@@ -266,15 +300,61 @@ class ShardPairs(_Pairs):
             rng = np.random.default_rng([self.seed, self.epoch, zlib.crc32(scene.encode()),
                                          int(index)])
             other = self._other_view(views, rng)
-            box1 = self._crop_box(height, width, rng)
-            box2 = self._crop_box(height, width, rng)
+            yield shards, i, other, self._crop_box(height, width, rng), \
+                self._crop_box(height, width, rng)
+
+    def _as_output(self, image):
+        """uint8 decoded for normalize=False becomes float32 in [0, 1]."""
+        if self.dtype == "float32" and not self.normalize:
+            return image.float().div_(255.0)
+        return image
+
+    def _crops(self, files, by_file, part, parts):
+        """(image1, image2) through ShardSet: only the crops decoded."""
+        dtype = self._dtype()
+        for shards, i, other, box1, box2 in self._plan(files, by_file, part, parts):
             try:
                 image1 = shards.decode(i, 0, *box1, dtype=dtype)
                 image2 = shards.decode(i, other, *box2, dtype=dtype)
             except Error as e:
                 warnings.warn(f"{e}, skipped", RuntimeWarning)
                 continue
-            image1, image2 = torch.from_numpy(image1), torch.from_numpy(image2)
-            if dtype == "uint8" and self.dtype == "float32":  # normalize=False: [0, 1]
-                image1, image2 = image1.float().div_(255.0), image2.float().div_(255.0)
-            yield image1, image2
+            yield self._as_output(torch.from_numpy(image1)), self._as_output(torch.from_numpy(image2))
+
+    def _batches(self, files, by_file, part, parts):
+        """Batches of (image1, image2), decoded straight into (shared) batch tensors."""
+        dtype = torch.float32 if self._dtype() == "float32" else torch.uint8
+        h, w = self.crop
+        batch, filled = None, 0
+        for shards, i, other, box1, box2 in self._plan(files, by_file, part, parts):
+            if batch is None:
+                batch = [_batch_tensor((self.batch_size, 3, h, w), dtype) for _ in range(2)]
+                views = [b.numpy() for b in batch]
+            try:
+                shards.decode_into(i, 0, box1[0], box1[1], views[0][filled])
+                shards.decode_into(i, other, box2[0], box2[1], views[1][filled])
+            except Error as e:
+                warnings.warn(f"{e}, skipped", RuntimeWarning)
+                continue
+            filled += 1
+            if filled == self.batch_size:
+                yield self._as_output(batch[0]), self._as_output(batch[1])
+                batch, filled = None, 0
+        if filled and not self.drop_last:
+            yield self._as_output(batch[0][:filled]), self._as_output(batch[1][:filled])
+
+
+def _batch_tensor(shape, dtype):
+    """An empty tensor, in shared memory inside a DataLoader worker (as its collate makes one), so
+    that handing it to the main process copies nothing."""
+    if get_worker_info() is None:
+        return torch.empty(shape, dtype=dtype)
+    numel = math.prod(shape)
+    elem = torch.empty(0, dtype=dtype)
+    if hasattr(elem, "_typed_storage"):  # torch >= 2.0
+        storage = elem._typed_storage()._new_shared(numel)
+    else:
+        storage = elem.storage()._new_shared(numel)
+    out = elem.new(storage).view(shape)
+    prefault(out.numpy())  # one call instead of a page fault every 4 KiB as the decoder writes
+    return out

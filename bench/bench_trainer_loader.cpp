@@ -1,0 +1,53 @@
+// bench_trainer_loader: the C++ pre-trainer's batch loader alone (PairDataset over shards, crops
+// decoded straight from the JPEGs, CroCo's colour jitter, normalisation and masks), in pairs/s
+// and pairs/s per worker thread. bench/bench_loader.py runs it beside the Python loaders; it
+// prints one JSON line.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "trainer/batch_loader.h"
+#include "trainer/pair_dataset.h"
+#include "util/timer.h"
+
+using namespace paircast;
+
+int main(int argc, char** argv) {
+  std::vector<std::string> shards;
+  int workers = 1, batch = 64, imgSize = 224, batches = 10;
+  CLI::App app{"pairs/s of the pre-trainer's batch loader alone"};
+  app.add_option("--shards", shards, "Shards or glob patterns")->required();
+  app.add_option("--workers", workers, "Loader threads")->check(CLI::Range(1, 256));
+  app.add_option("--batch-size", batch, "Pairs per batch")->check(CLI::Range(1, 4096));
+  app.add_option("--img-size", imgSize, "Crop side")->check(CLI::Range(16, 4096));
+  app.add_option("--batches", batches, "Batches timed after the first")->check(CLI::Range(1, 1 << 20));
+  CLI11_PARSE(app, argc, argv);
+  try {
+    torch::set_num_threads(1);  // the loader's threads are the only parallelism measured
+    const PairDataset ds = PairDataset::fromShards(shards);
+    TrainConfig c;
+    c.model = presetConfig("base");
+    c.model.img_size = imgSize;
+    c.batchSize = batch;
+    c.workers = workers;
+    c.epochs = 1 << 20;
+    BatchLoader loader({{&ds, 1.0, "shards"}}, c, 0, 0, 1);
+    loader.get(0);  // the workers' start and their window fill
+    const auto start = SteadyClock::now();
+    for (int b = 1; b <= batches; ++b) loader.get(b);
+    const double seconds = secondsSince(start);
+    const double rate = batches * batch / seconds;
+    std::printf("%s\n", nlohmann::json({{"bench", "trainer_loader"},
+                                        {"workers", workers},
+                                        {"pairs", batches * batch},
+                                        {"seconds", seconds},
+                                        {"pairs_per_second", rate},
+                                        {"pairs_per_second_per_thread", rate / workers}})
+                            .dump()
+                            .c_str());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_trainer_loader: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
