@@ -2,12 +2,12 @@
 # Gathers in .gpu/ (git-ignored) what scripts/gpu_check.sh needs on a GPU machine that has a
 # CUDA PyTorch but no network, no root and none of the render libraries: small shards made here
 # by generate_pairs, naver/croco's models/ (the official CroCoNet, which paircast does not ship),
-# the header-only libraries, libjpeg-turbo (headers and static library) and GoogleTest's sources.
+# the header-only libraries (nlohmann-json, CLI11, Eigen), libjpeg-turbo (headers and static library) and GoogleTest's sources.
 # Run it on the machine with the full build (Debian 12 with scripts/setup.sh's packages):
 #
 #   scripts/gpu_prepare.sh --croco-dir ~/src/croco [--pairs-per-scene 200] [--build build]
 #
-# Then carry .gpu along and run scripts/gpu_check.sh there. It comes to about 25 MiB, 18 MiB of
+# Then carry .gpu along and run scripts/gpu_check.sh there. It comes to about 35 MiB, 18 MiB of
 # which are the shards (600 pairs with the default 200 per scene).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -32,6 +32,8 @@ rm -rf .gpu && mkdir -p .gpu/prefix/include .gpu/prefix/lib .gpu/croco
 cp -r "$CROCO_DIR/models" .gpu/croco/
 git -C "$CROCO_DIR" rev-parse HEAD > .gpu/croco/COMMIT 2>/dev/null || true
 cp -r /usr/include/nlohmann /usr/include/CLI .gpu/prefix/include/
+# Eigen (header-only): cameras in shard records (util/camera.h).
+mkdir -p .gpu/prefix/include/eigen3 && cp -r /usr/include/eigen3/Eigen .gpu/prefix/include/eigen3/
 cp /usr/include/jpeglib.h /usr/include/jerror.h /usr/include/jmorecfg.h \
   /usr/include/x86_64-linux-gnu/jconfig.h .gpu/prefix/include/
 # Static: nothing to find at run time, whatever the GPU machine's distribution.
