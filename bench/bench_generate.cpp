@@ -196,8 +196,8 @@ nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, 
 int main(int argc, char** argv) {
   std::vector<std::string> sceneArgs;
   std::string up = "y";
-  // A real run makes thousands of pairs a scene: 1000 keep the scene's load and BVH build (0.1 s
-  // on the shipped scenes, 0.6 s on a 1.3M-triangle scan) to a few percent, as there.
+  // A real run makes thousands of pairs a scene: 1000 keep the scene's load and BVH build, which
+  // every run pays once a scene, to a few percent of the run, as there.
   int pairs = 1000, plainPairs = 200, jobs = 0, refPairs = 5;
   CLI::App app{"Pair generation speed and co-visibility cost"};
   app.add_option("--scenes", sceneArgs, "Scenes (default: scenes/ and ../shared/scenes)");

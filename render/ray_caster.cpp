@@ -87,11 +87,11 @@ PacketLight packetLight(const ShadingOptions& o, float sampleSize) {
           sampleSize, {o.background.x(), o.background.y(), o.background.z()}};
 }
 
-// Neighbouring rays of a small image are far apart. Over a large mesh Embree traverses them
-// faster as incoherent (1.3M-triangle scan, one thread: 0.34 against 0.44 ms at 32x32, 2.75
-// against 2.86 ms at 128x128, but 7.8 against 6.5 ms at 256x256); over a small one, slower
-// (2k-triangle apartment: 0.13 against 0.07 ms at 64x64). Meshes count as large from
-// kMediumQualityTriangles, where the BVH quality changes too.
+// Neighbouring rays of a small image are far apart, so the eight rays of a packet share little
+// of their path through a deep BVH: over a large mesh Embree traverses them better as incoherent
+// rays. At larger images, or over a small mesh whose BVH is shallow, the rays of a packet stay
+// together and the coherent traversal wins. Meshes count as large from kMediumQualityTriangles,
+// where the BVH quality changes too.
 constexpr int kIncoherentPixels = 128 * 128;
 
 inline RTCIntersectContext primaryContext(int width, int height, bool largeMesh) {
@@ -193,9 +193,9 @@ RayCaster::RayCaster(const Mesh& mesh) : mesh_(mesh), impl_(std::make_unique<Imp
   const auto start = std::chrono::steady_clock::now();
   RTCDevice device = sharedDevice();
   impl_->scene = rtcNewScene(device);
-  // High quality (spatial splits) pays on small scenes, which render for long. On a 1.3M-triangle
-  // scan it took 1.0 s against medium's 0.5 s, and the same 418 candidate views then rendered
-  // as fast (10.0-10.3 s with either).
+  // High quality (spatial splits) pays on small scenes, which are built in no time and rendered
+  // for long. On a scan of a million triangles and more it takes about twice medium's build time,
+  // for no faster rendering.
   impl_->largeMesh = mesh.numTriangles() >= kMediumQualityTriangles;
   const RTCBuildQuality quality =
       impl_->largeMesh ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH;

@@ -33,7 +33,7 @@ struct LoadOptions {
   size_t maxVertices = 150'000'000;    // likewise for vertices
   uint64_t maxFileBytes = 4ull << 30;  // refuse larger files (the scene and every file it names)
   // Binary little-endian PLY files (as ScanNet and Replica ship) are read by our own reader,
-  // several times faster than assimp's and with a fraction of its memory; false forces assimp.
+  // straight into the Mesh, without assimp's generic per-property containers; false forces assimp.
   bool plyFastPath = true;
 };
 

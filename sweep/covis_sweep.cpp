@@ -304,7 +304,7 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
       series.push_back(s);
     }
     // The random encoder as a dashed line, unless it lies so far from the sets that the line
-    // would flatten them (the completion loss: 1.28 against 0.61-0.63); then in the title.
+    // would flatten them (as the completion loss's can, far above every set's); then in the title.
     const double baseline = random[m.key].get<double>();
     double lo = INFINITY, hi = -INFINITY;
     for (const auto& s : series)
