@@ -138,15 +138,6 @@ std::string progressText(size_t done, size_t total, size_t accepted, size_t cand
   return line;
 }
 
-void validateConfig(const GenerateConfig& cfg) {
-  if (cfg.out.empty()) throw Error("--out is required");
-  if (cfg.pairsPerScene < 1) throw Error("--pairs-per-scene must be at least 1");
-  if (cfg.numShards < 1 || cfg.shardIndex < 0 || cfg.shardIndex >= cfg.numShards)
-    throw Error("--shard-index must be in [0, --num-shards)");
-  if (!cfg.shards && !cfg.croco) throw Error("--format must be shards, croco or both");
-  if (cfg.shardSize < 1) throw Error("--shard-size must be at least 1");
-  validatePairOptions(cfg.pair);
-}
 
 // One run of the job. The constructor plans it; run() makes and writes what is missing;
 // summarise() assembles the outputs from the journal, so a resumed run reports everything.
@@ -221,7 +212,7 @@ class GenerateRun {
 };
 
 GenerateRun::GenerateRun(const GenerateConfig& cfg) : cfg_(cfg) {
-  validateConfig(cfg);
+  cfg.validate();
   part_ = cfg.numShards > 1 ? "-" + std::to_string(cfg.shardIndex) : "";
   jobs_ =
       cfg.jobs > 0 ? cfg.jobs : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
@@ -673,6 +664,20 @@ nlohmann::json runGenerate(const GenerateConfig& config) {
   GenerateRun run(config);
   run.run();
   return run.summarise();
+}
+
+void GenerateConfig::validate() const {
+  if (out.empty()) throw OptionError("out", "an output folder is required");
+  if (pairsPerScene < 1) throw OptionError("pairs_per_scene", "pairs per scene must be at least 1");
+  if (numShards < 1 || shardIndex < 0 || shardIndex >= numShards)
+    throw OptionError("shard_index", "the part index must be in [0, number of parts), got " +
+                                         std::to_string(shardIndex) + " of " +
+                                         std::to_string(numShards));
+  if (!shards && !croco) throw OptionError("format", "choose shards, the CroCo layout, or both");
+  if (shardSize < 1) throw OptionError("shard_size", "pairs per shard must be at least 1");
+  if (jpegQuality < 1 || jpegQuality > 100)
+    throw OptionError("jpeg_quality", "JPEG quality must be in 1..100");
+  pair.validate();
 }
 
 }  // namespace paircast

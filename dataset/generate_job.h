@@ -17,6 +17,9 @@
 namespace paircast {
 
 struct GenerateConfig {
+  // Checks what a user sets (the pair options too); throws OptionError naming the field.
+  void validate() const;
+
   std::vector<std::string> scenes;  // files, folders (searched recursively) or .txt lists
   std::string out;
   int pairsPerScene = 100;

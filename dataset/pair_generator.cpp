@@ -66,22 +66,36 @@ std::vector<ScreenStageSpec> screenStages(const PairOptions& o) {
   return stages;
 }
 
-void validatePairOptions(const PairOptions& o) {
-  if (!(o.minCovis >= 0 && o.maxCovis <= 1 && o.minCovis <= o.maxCovis))
-    throw Error("the covis band must satisfy 0 <= --min-covis <= --max-covis <= 1");
-  if (o.maxAttempts < 1 || o.maxReferences < 1) throw Error("attempt limits must be at least 1");
-  if (o.views < 1 || o.views > kMaxViews)
-    throw Error("--views must be in [1, " + std::to_string(kMaxViews) + "], got " +
-                std::to_string(o.views));
-  if (o.screenResolution < 0 && o.screenResolution != kAutoScreen)
-    throw Error("--screen-resolution must be >= 0 (0 turns screening off), got " +
-                std::to_string(o.screenResolution));
-  if (o.screenResolution > o.resolution)
-    throw Error("--screen-resolution (" + std::to_string(o.screenResolution) +
-                ") must not exceed --resolution (" + std::to_string(o.resolution) + ")");
-  if (!(o.screenCovisMargin >= 0 && o.screenFineMargin >= 0 && o.screenFrameMargin >= 0 &&
-        o.screenValidMargin >= 0))
-    throw Error("screening margins must be >= 0");
+void PairOptions::validate() const {
+  auto in = [](double v, double lo, double hi) { return v >= lo && v <= hi; };
+  if (!in(resolution, kMinResolution, kMaxResolution))
+    throw OptionError("resolution", "resolution must be in " + std::to_string(kMinResolution) +
+                                        ".." + std::to_string(kMaxResolution) + " pixels, got " +
+                                        std::to_string(resolution));
+  if (!in(hfov, kMinHfov, kMaxHfov))
+    throw OptionError("hfov", "hfov must be in [1, 179] degrees, got " + std::to_string(hfov));
+  if (!(minCovis >= 0 && maxCovis <= 1 && minCovis <= maxCovis))
+    throw OptionError("min_covis",
+                      "the covis band must satisfy 0 <= min_covis <= max_covis <= 1");
+  if (!in(minValidFraction, 0, 1))
+    throw OptionError("min_valid", "the minimum valid fraction must be in [0, 1]");
+  if (maxAttempts < 1 || maxReferences < 1)
+    throw OptionError("max_attempts", "attempt limits must be at least 1");
+  if (views < 1 || views > kMaxViews)
+    throw OptionError("views", "views must be in [1, " + std::to_string(kMaxViews) + "], got " +
+                                   std::to_string(views));
+  if (screenResolution < 0 && screenResolution != kAutoScreen)
+    throw OptionError("screen_resolution",
+                      "the screening resolution must be >= 0 (0 turns screening off), got " +
+                          std::to_string(screenResolution));
+  if (screenResolution > resolution)
+    throw OptionError("screen_resolution", "the screening resolution (" +
+                                               std::to_string(screenResolution) +
+                                               ") must not exceed the resolution (" +
+                                               std::to_string(resolution) + ")");
+  if (!(in(screenCovisMargin, 0, 1) && in(screenFineMargin, 0, 1) &&
+        in(screenFrameMargin, 0, 1) && screenValidMargin >= 0))
+    throw OptionError("screen_margin", "screening margins must be in [0, 1]");
 }
 
 // One view while a sample is being made.
@@ -103,7 +117,7 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
       sampler_(sampler),
       options_(options),
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
-  validatePairOptions(options);
+  options.validate();
   options_.screenResolution = screenResolution(options);
   for (const ScreenStageSpec& stage : screenStages(options_))
     screens_.push_back({Camera::fromHfov(stage.side, stage.side, options.hfov), stage.margin});

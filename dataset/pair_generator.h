@@ -23,6 +23,12 @@ constexpr int kAutoScreenDivisor = 16;
 constexpr int kMinAutoScreen = 16;
 
 struct PairOptions {
+  static constexpr int kMinResolution = 16, kMaxResolution = 4096;
+  static constexpr double kMinHfov = 1.0, kMaxHfov = 179.0;
+
+  // Checks what a user sets; throws OptionError naming the field.
+  void validate() const;
+
   int resolution = 256;   // square images, pixels
   double hfov = 60.0;     // degrees
   double minCovis = 0.5;  // keep a view when its covis with view 1 lies in [minCovis, maxCovis]
@@ -59,8 +65,6 @@ struct PairOptions {
   RenderOptions render;
 };
 
-// Checks the options a user sets; throws paircast::Error with the option's name.
-void validatePairOptions(const PairOptions& options);
 // The screening resolution in use (kAutoScreen resolved), 0 when off.
 int screenResolution(const PairOptions& options);
 

@@ -188,7 +188,7 @@ std::optional<std::string> resolveScenePath(const std::string& scene,
 
 nlohmann::json runReplay(const ReplayConfig& cfg) {
   const auto start = SteadyClock::now();
-  if (cfg.out.empty()) throw Error("--out is required");
+  if (cfg.out.empty()) throw OptionError("out", "an output folder is required");
   std::vector<ReplayFile> files;
   std::set<std::string> taken;
   for (const auto& path : metadataFiles(cfg.metadata)) {

@@ -769,30 +769,31 @@ void loadStateDictStrict(CroCoNet& model, const std::map<std::string, torch::Ten
 void checkConfigAgainstState(const CroCoConfig& c,
                              const std::map<std::string, torch::Tensor>& state,
                              const std::string& source) {
-  auto expect = [&](const std::string& key, std::vector<int64_t> shape, const std::string& flag) {
+  auto expect = [&](const std::string& key, std::vector<int64_t> shape,
+                    const std::string& fields) {
     auto it = state.find(key);
     if (it == state.end()) throw Error(source, "checkpoint has no '" + key + "'");
     if (it->second.sizes() != c10::IntArrayRef(shape)) {
       std::ostringstream os;
-      os << "'" << key << "' has shape " << it->second.sizes() << ", the flags imply "
-         << c10::IntArrayRef(shape) << " (check " << flag << ")";
+      os << "'" << key << "' has shape " << it->second.sizes() << ", the model config implies "
+         << c10::IntArrayRef(shape) << " (check " << fields << ")";
       throw Error(source, os.str());
     }
   };
   expect("patch_embed.proj.weight", {c.enc_embed_dim, 3, c.patch_size, c.patch_size},
-         "--enc-dim, --patch-size");
-  expect("decoder_embed.weight", {c.dec_embed_dim, c.enc_embed_dim}, "--dec-dim");
-  expect("prediction_head.weight", {c.patchDim(), c.dec_embed_dim}, "--patch-size");
-  if (!c.rope()) expect("enc_pos_embed", {c.numPatches(), c.enc_embed_dim}, "--img-size");
+         "enc_embed_dim, patch_size");
+  expect("decoder_embed.weight", {c.dec_embed_dim, c.enc_embed_dim}, "dec_embed_dim");
+  expect("prediction_head.weight", {c.patchDim(), c.dec_embed_dim}, "patch_size");
+  if (!c.rope()) expect("enc_pos_embed", {c.numPatches(), c.enc_embed_dim}, "img_size");
   const std::string lastEnc = "enc_blocks." + std::to_string(c.enc_depth - 1) + ".norm1.weight";
   if (!state.count(lastEnc) ||
       state.count("enc_blocks." + std::to_string(c.enc_depth) + ".norm1.weight"))
-    throw Error(source, "checkpoint's encoder depth differs from --enc-depth " +
+    throw Error(source, "checkpoint's encoder depth differs from the config's enc_depth " +
                             std::to_string(c.enc_depth));
   const std::string lastDec = "dec_blocks." + std::to_string(c.dec_depth - 1) + ".norm1.weight";
   if (!state.count(lastDec) ||
       state.count("dec_blocks." + std::to_string(c.dec_depth) + ".norm1.weight"))
-    throw Error(source, "checkpoint's decoder depth differs from --dec-depth " +
+    throw Error(source, "checkpoint's decoder depth differs from the config's dec_depth " +
                             std::to_string(c.dec_depth));
 }
 

@@ -255,14 +255,9 @@ class PyPairStream {
   PyPairStream(py::handle scenes, uint64_t seed, int resolution, double hfov, double minCovis,
                double maxCovis, int views, const std::string& up, double scale, int threads,
                int start, int step, uint64_t offset, size_t queue) {
-    if (views < 1 || views > kMaxViews)
-      throw py::value_error("views must be in 1.." + std::to_string(kMaxViews) + ", got " +
-                            std::to_string(views));
-    if (resolution < 8 || resolution > 8192) throw Error("resolution must be in 8..8192");
-    if (!(hfov > 0 && hfov < 180)) throw Error("hfov must be in (0, 180) degrees");
+    // The pair options are checked by PairOptions::validate(), as generate_pairs' are; these
+    // two are the binding's own.
     if (threads < 0) throw Error("threads must be >= 0 (0: one per core)");
-    if (!(minCovis >= 0 && minCovis <= maxCovis && maxCovis <= 1))
-      throw Error("the covis band must satisfy 0 <= min_covis <= max_covis <= 1");
     if (!(scale > 0) || !std::isfinite(scale)) throw Error("scale must be positive");
     PairStreamOptions o;
     o.scenes = pathsFromPy(scenes);
@@ -273,7 +268,7 @@ class PyPairStream {
     o.pair.minCovis = minCovis;
     o.pair.maxCovis = maxCovis;
     o.pair.views = views;
-    validatePairOptions(o.pair);  // here, not per scene inside PairStream, where it would skip
+    o.pair.validate();  // here, not per scene inside PairStream, where it would skip
     o.seed = seed;
     o.firstIndex = offset;
     o.threads = threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency());

@@ -207,7 +207,7 @@ struct ScanMesh {
 
 ScanMesh buildScanMesh(const ScanSpec& spec) {
   if (spec.triangles < 1000 || spec.triangles > 100'000'000)
-    throw Error("--triangles must be between 1000 and 100000000");
+    throw OptionError("triangles", "a scan must have between 1000 and 100000000 triangles");
   if (!(spec.noise >= 0.0f) || spec.noise > 0.05f)
     throw Error("scan noise must be between 0 and 5 cm");
   const Room room = layoutRoom(spec.seed);

@@ -40,16 +40,12 @@ int main(int argc, char** argv) {
   app.add_option("--scene-root", replay.sceneRoot,
                  "With --from-metadata: folder under which the metadata's scene paths are found");
   app.add_option("--out", cfg.out, "Output folder")->required();
-  app.add_option("--pairs-per-scene", cfg.pairsPerScene, "Pairs to make in each scene")
-      ->check(CLI::Range(1, 100000000));
-  app.add_option("--resolution", cfg.pair.resolution, "Image width and height, pixels")
-      ->check(CLI::Range(16, 4096));
-  app.add_option("--hfov", cfg.pair.hfov, "Horizontal field of view, degrees")
-      ->check(CLI::Range(1.0, 179.0));
-  app.add_option("--min-covis", cfg.pair.minCovis, "Keep pairs with covis >= this")
-      ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--max-covis", cfg.pair.maxCovis, "Keep pairs with covis <= this")
-      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--pairs-per-scene", cfg.pairsPerScene, "Pairs to make in each scene");
+  // Ranges are checked by GenerateConfig::validate(), the one place they are written.
+  app.add_option("--resolution", cfg.pair.resolution, "Image width and height, pixels (16..4096)");
+  app.add_option("--hfov", cfg.pair.hfov, "Horizontal field of view, degrees (1..179)");
+  app.add_option("--min-covis", cfg.pair.minCovis, "Keep pairs with covis >= this");
+  app.add_option("--max-covis", cfg.pair.maxCovis, "Keep pairs with covis <= this");
   app.add_option(
          "--covis-normalize", normalize,
          "valid: divide by valid pixels (the paper); all: by all pixels (CroCo's generator)")
@@ -68,39 +64,32 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 1024));
   app.add_option("--format", format, "shards, croco or both")
       ->check(CLI::IsMember({"shards", "croco", "both"}));
-  app.add_option("--shard-size", cfg.shardSize, "Pairs per tar shard")
-      ->check(CLI::Range(1, 10000000));
+  app.add_option("--shard-size", cfg.shardSize, "Pairs per tar shard");
   app.add_option("--shard-index", cfg.shardIndex,
                  "This machine's part of the scene list (0-based)");
   app.add_option("--num-shards", cfg.numShards, "Number of parts the scene list is split into")
       ->check(CLI::Range(1, 100000));
-  app.add_option("--jpeg-quality", cfg.jpegQuality, "JPEG quality")->check(CLI::Range(1, 100));
+  app.add_option("--jpeg-quality", cfg.jpegQuality, "JPEG quality (1..100)");
   app.add_option("--supersample", cfg.pair.render.supersample, "s x s colour samples per pixel")
       ->check(CLI::Range(1, 4));
-  app.add_option("--max-attempts", cfg.pair.maxAttempts, "Second views tried per reference view")
-      ->check(CLI::Range(1, 100000));
-  app.add_option("--min-valid", cfg.pair.minValidFraction, "Minimum fraction of pixels with depth")
-      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--max-attempts", cfg.pair.maxAttempts, "Second views tried per reference view");
+  app.add_option("--min-valid", cfg.pair.minValidFraction, "Minimum fraction of pixels with depth");
   app.add_option("--views", cfg.pair.views,
                  "Views per sample (CroCo's views_count): view 1 and views-1 others, each with "
                  "covis in the band with view 1");
   app.add_option("--screen-resolution", cfg.pair.screenResolution,
                  "Screen candidates on depth at this resolution first, then at twice it while at "
                  "most a quarter of --resolution (0: off; default: a sixteenth of --resolution, "
-                 "at least 16, off below 64)")
-      ->check(CLI::NonNegativeNumber);
+                 "at least 16, off below 64)");
   app.add_option("--screen-margin", cfg.pair.screenCovisMargin,
                  "Screening keeps candidates whose 32x32 covis estimate is within this of the band "
-                 "(other sides: see --screen-fine-margin)")
-      ->check(CLI::Range(0.0, 1.0));
+                 "(other sides: see --screen-fine-margin)");
   app.add_option("--screen-fine-margin", cfg.pair.screenFineMargin,
                  "The same margin for a 64x64 estimate; other sides take the same ratio per "
-                 "doubling (16x16: margin^2 / fine margin)")
-      ->check(CLI::Range(0.0, 1.0));
+                 "doubling (16x16: margin^2 / fine margin)");
   app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
                  "Before rendering, turn down candidates whose share of the reference inside their "
-                 "frame is below --min-covis by more than this")
-      ->check(CLI::Range(0.0, 1.0));
+                 "frame is below --min-covis by more than this");
   app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
                "Also write 8-bit co-visibility masks (255: seen by the other view)");
   bool allowSkipped = false;

@@ -12,7 +12,17 @@
 
 namespace paircast {
 
+// The flag of a library's option field ("pairs_per_scene" -> "--pairs-per-scene"), or "" when
+// this command has none by that name.
+inline std::string flagOf(const CLI::App& app, const std::string& field) {
+  std::string flag = "--" + field;
+  for (char& c : flag)
+    if (c == '_') c = '-';
+  return app.get_option_no_throw(flag) ? flag : "";
+}
+
 // Exit codes: 0 success, 1 error (bad input, I/O), 2 bad command line, 3 internal error.
+// A library's OptionError is a bad command line: the message gets the flag's name.
 inline int runTool(const char* name, CLI::App& app, int argc, char** argv,
                    const std::function<int()>& body) {
   try {
@@ -22,6 +32,11 @@ inline int runTool(const char* name, CLI::App& app, int argc, char** argv,
   }
   try {
     return body();
+  } catch (const OptionError& e) {
+    const std::string flag = flagOf(app, e.field());
+    std::fprintf(stderr, "%s: error: %s%s\n", name, flag.empty() ? "" : (flag + ": ").c_str(),
+                 e.what());
+    return 2;
   } catch (const Error& e) {
     std::fprintf(stderr, "%s: error: %s\n", name, e.what());
     return 1;

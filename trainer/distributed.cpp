@@ -104,7 +104,7 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
     d->impl_->group = c10::make_intrusive<c10d::ProcessGroupNCCL>(d->impl_->store, d->rank_, world);
     return d;
 #else
-    throw Error("--device cuda with WORLD_SIZE > 1 needs a LibTorch built with NCCL");
+    throw OptionError("device", "device cuda with WORLD_SIZE > 1 needs a LibTorch built with NCCL");
 #endif
   }
 #if !defined(PAIRCAST_HAVE_GLOO)

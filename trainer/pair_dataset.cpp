@@ -76,7 +76,7 @@ PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
       warn(file + ": " + std::to_string(single) + " samples have one view, no pair; skipped");
   }
   if (ds.samples_.empty())
-    throw Error(patterns.empty() ? "--data" : patterns[0], "no complete pair in the shards");
+    throw Error(patterns.empty() ? "shards" : patterns[0], "no complete pair in the shards");
   return ds;
 }
 

@@ -119,8 +119,25 @@ double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs
          (baseLr - minLr) * 0.5 * (1.0 + std::cos(M_PI * std::min(1.0, (e - warmupEpochs) / span)));
 }
 
+void TrainConfig::validate() const {
+  if (shards.empty() && crocoDir.empty() && live.empty())
+    throw OptionError("data", "give a data source: shards, a CroCo folder or live scenes (or "
+                              "several, with weights)");
+  if (amp != "bf16" && amp != "fp16" && amp != "none")
+    throw OptionError("amp", "mixed precision must be bf16, fp16 or none, not '" + amp + "'");
+  if (out.empty()) throw OptionError("out", "an output folder is required");
+  if (batchSize < 1) throw OptionError("batch_size", "the batch size must be >= 1");
+  if (accumIter < 1) throw OptionError("accum_iter", "accumulation steps must be >= 1");
+  if (epochs < 1) throw OptionError("epochs", "epochs must be >= 1");
+  if (workers < 1) throw OptionError("workers", "data workers must be >= 1");
+  if (device != "cpu" && device != "cuda")
+    throw OptionError("device", "the device must be cpu or cuda, not '" + device + "'");
+  model.validate();
+}
+
 nlohmann::json runPretrain(const TrainConfig& c) {
-  if (c.device != "cpu" && c.device != "cuda") throw Error("--device must be cpu or cuda");
+  if (c.device != "cpu" && c.device != "cuda")
+    throw OptionError("device", "the device must be cpu or cuda, not '" + c.device + "'");
   const std::unique_ptr<Distributed> dist = Distributed::fromEnvironment(c.device);
   return runPretrain(c, dist.get());
 }
@@ -146,17 +163,6 @@ class StopSignals {
   Handler oldInt_, oldTerm_;
 };
 
-void validate(const TrainConfig& c) {
-  if (c.shards.empty() && c.crocoDir.empty() && c.live.empty())
-    throw Error("give a data source: --data, --croco-dir or --live (or several, with weights)");
-  if (c.amp != "bf16" && c.amp != "fp16" && c.amp != "none")
-    throw Error("--amp must be bf16, fp16 or none, not '" + c.amp + "'");
-  if (c.out.empty()) throw Error("--out is required");
-  if (c.batchSize < 1 || c.accumIter < 1 || c.epochs < 1)
-    throw Error("batch size, accum-iter and epochs must be >= 1");
-  c.model.validate();
-  if (c.device != "cpu" && c.device != "cuda") throw Error("--device must be cpu or cuda");
-}
 
 // One run of runPretrain. Its stages, in order: the constructor (device and output folder),
 // openDataSources, buildModelAndOptimizer, resumeOrStartLog, startLoaders, trainSteps and
@@ -173,7 +179,7 @@ class Pretraining {
         progress_(c.progress && lead_) {
     if (c.device == "cuda") {
       if (!torch::cuda::is_available())
-        throw Error("--device cuda, but this LibTorch has no CUDA device");
+        throw OptionError("device", "device cuda, but this LibTorch has no CUDA device");
       device_ =
           torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
       allowTf32();
@@ -319,7 +325,8 @@ class Pretraining {
   void restoreCheckpoint() {
     const Checkpoint ck = loadCheckpoint(ckptPath_);
     if (ck.hasArgs && configFromJson(ck.args, ckptPath_).enc_embed_dim != c_.model.enc_embed_dim)
-      throw Error(ckptPath_, "checkpoint was trained with other hyper-parameters than --preset");
+      throw Error(ckptPath_, "checkpoint was trained with other hyper-parameters than the model "
+                             "config");
     loadStateDictStrict(model_, ck.model, ckptPath_);
     restoreOptimizer(*opt_, ordered_, ck.extraTensors, ckptPath_);
     iter_ = ck.extra.value("step", int64_t{0});
@@ -534,7 +541,7 @@ class Pretraining {
 }  // namespace
 
 nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
-  validate(c);
+  c.validate();
   Pretraining run(c, dist);
   run.openDataSources();
   run.buildModelAndOptimizer();

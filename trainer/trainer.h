@@ -15,6 +15,9 @@ namespace paircast {
 class Distributed;
 
 struct TrainConfig {
+  // Checks what a user sets (the model config too); throws OptionError naming the field.
+  void validate() const;
+
   // Data: one or more of these. With one source, each epoch is a permutation of it. With
   // several, each sample comes from a source drawn with these weights (normalised; samples
   // within a source drawn with replacement), and an epoch is the sum of the sources' sizes.

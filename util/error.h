@@ -20,6 +20,19 @@ class Error : public std::runtime_error {
   std::string path_;
 };
 
+// A bad option of a library's config struct: `field` names it as the struct and Python do
+// (snake_case, e.g. "pairs_per_scene"), and what() says what is wrong in domain terms. A command
+// adds its flag's name (tools/tool_main.h), the Python binding its keyword's.
+class OptionError : public Error {
+ public:
+  OptionError(std::string field, const std::string& message)
+      : Error(message), field_(std::move(field)) {}
+  const std::string& field() const { return field_; }
+
+ private:
+  std::string field_;
+};
+
 [[noreturn]] void checkFailed(const char* file, int line, const char* expr, const std::string& msg);
 
 }  // namespace paircast

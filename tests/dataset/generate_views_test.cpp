@@ -411,10 +411,10 @@ TEST(GeneratePairsCli, BadNewOptionsAreClearErrors) {
   EXPECT_EQ(cmd({"--screen-resolution", "0"}), 0);
   PairOptions o;
   o.views = 0;
-  EXPECT_THROW(validatePairOptions(o), Error);
+  EXPECT_THROW(o.validate(), Error);
   o.views = 2;
   o.screenResolution = 300;
-  EXPECT_THROW(validatePairOptions(o), Error);
+  EXPECT_THROW(o.validate(), Error);
 }
 
 }  // namespace
