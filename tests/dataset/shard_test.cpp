@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "fake_sample.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -68,7 +69,8 @@ TEST(Shard, TruncatedShardDeliversWhatPrecedesTheDamageThenFails) {
   }
   EXPECT_GE(delivered, 1u);
   EXPECT_LT(delivered, 4u);
-  EXPECT_THROW(readShard(dir + "/none.tar", [](ShardSample&&) {}), Error);
+  EXPECT_ERROR_CONTAINS(readShard(dir + "/none.tar", [](ShardSample&&) {}),
+                        dir + "/none.tar: no such shard");
 }
 
 // Writes a tar with hand-made entries, for the malformed cases.
