@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <exception>
+#include <initializer_list>
 #include <string>
 
 #include "util/error.h"
@@ -25,4 +27,31 @@ std::string refusalOf(const std::string& path, F&& read) {
   return "";
 }
 
+// Whether `run` throws a paircast::Error whose message holds each of `parts` (the file it names,
+// the words of the throw site); for EXPECT_ERROR_CONTAINS.
+template <class F>
+::testing::AssertionResult errorContains(F&& run, std::initializer_list<std::string> parts) {
+  std::string what;
+  try {
+    run();
+    return ::testing::AssertionFailure() << "nothing was thrown";
+  } catch (const Error& e) {
+    what = e.what();
+  } catch (const std::exception& e) {
+    return ::testing::AssertionFailure()
+           << "threw another exception than paircast::Error: " << e.what();
+  } catch (...) {
+    return ::testing::AssertionFailure() << "threw another exception than paircast::Error";
+  }
+  for (const std::string& part : parts)
+    if (what.find(part) == std::string::npos)
+      return ::testing::AssertionFailure() << "the message lacks \"" << part << "\": " << what;
+  return ::testing::AssertionSuccess() << what;
+}
+
 }  // namespace paircast::testing
+
+// EXPECT_ERROR_CONTAINS(statement, part, ...): `statement` throws a paircast::Error whose
+// message holds every part (std::string or string literal), such as the file and the reason.
+#define EXPECT_ERROR_CONTAINS(statement, ...) \
+  EXPECT_TRUE(::paircast::testing::errorContains([&] { statement; }, {__VA_ARGS__}))

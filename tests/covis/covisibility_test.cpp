@@ -9,6 +9,7 @@
 #include "covis/unproject.h"
 #include "render/procedural_scene.h"
 #include "render/ray_caster.h"
+#include "test_errors.h"
 #include "util/error.h"
 #include "util/random.h"
 
@@ -293,17 +294,20 @@ TEST(Covisibility, InvalidDepthValuesAreMisses) {
 TEST(Covisibility, RejectsBadInput) {
   const Camera c = cameraAt({0, 0, 0}, {0, 0, 1}, 8, 8);
   const ImageF d(8, 8, 1, 1.0f);
-  EXPECT_THROW(computeCovisibility(c, ImageF(8, 7, 1, 1.0f), c, d), Error);
-  EXPECT_THROW(computeCovisibility(c, d, c, ImageF(8, 8, 3, 1.0f)), Error);
+  EXPECT_ERROR_CONTAINS(computeCovisibility(c, ImageF(8, 7, 1, 1.0f), c, d),
+                        "a depth map of 8x7x1 does not match its camera of 8x8");
+  EXPECT_ERROR_CONTAINS(computeCovisibility(c, d, c, ImageF(8, 8, 3, 1.0f)),
+                        "a depth map of 8x8x3 does not match its camera of 8x8");
   CovisOptions o;
   o.stride = 0;
-  EXPECT_THROW(computeCovisibility(c, d, c, d, o), Error);
+  EXPECT_ERROR_CONTAINS(computeCovisibility(c, d, c, d, o), "covis stride must be >= 1, got 0");
   o.stride = 1;
   o.absTol = -1;
-  EXPECT_THROW(computeCovisibility(c, d, c, d, o), Error);
+  EXPECT_ERROR_CONTAINS(computeCovisibility(c, d, c, d, o), "covis tolerances must be >= 0");
   EXPECT_EQ(parseCovisNormalize("all"), CovisOptions::Normalize::All);
   EXPECT_EQ(parseCovisNormalize("valid"), CovisOptions::Normalize::Valid);
-  EXPECT_THROW(parseCovisNormalize("some"), Error);
+  EXPECT_ERROR_CONTAINS(parseCovisNormalize("some"),
+                        "covis normalisation must be 'valid' or 'all', got 'some'");
 }
 
 // ---- Properties over many seeded random cases ----
@@ -398,7 +402,8 @@ TEST(Covisibility, InFrameFractionBoundsVisibilityFromAbove) {
   EXPECT_GT(tighter, 0) << "occlusion never mattered: the bound is not tested";
   CovisOptions bad;
   bad.stride = 0;
-  EXPECT_THROW(inFrameFraction(ci, analyticDepth(ci, scene), cj, bad), Error);
+  EXPECT_ERROR_CONTAINS(inFrameFraction(ci, analyticDepth(ci, scene), cj, bad),
+                        "covis stride must be >= 1, got 0");
 }
 
 TEST(Covisibility, SwappingViewsSwapsTheDirections) {

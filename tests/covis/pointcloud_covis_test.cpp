@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "covis/covisibility.h"
+#include "test_errors.h"
 #include "util/error.h"
 #include "util/random.h"
 
@@ -131,7 +132,8 @@ TEST(PointCloudCovis, EmptyViewsGiveZero) {
   EXPECT_EQ(r.valid_i, 0.0);
   PointCloudCovisOptions bad;
   bad.radius = 0;
-  EXPECT_THROW(computePointCloudCovisibility(c, full, c, full, bad), Error);
+  EXPECT_ERROR_CONTAINS(computePointCloudCovisibility(c, full, c, full, bad),
+                        "point-cloud covis radius must be > 0");
 }
 
 }  // namespace

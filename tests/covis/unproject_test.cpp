@@ -4,6 +4,7 @@
 
 #include <limits>
 
+#include "test_errors.h"
 #include "util/error.h"
 #include "util/random.h"
 
@@ -115,9 +116,12 @@ TEST(Unproject, ValidDepthAndChecks) {
   EXPECT_FALSE(validDepth(std::numeric_limits<float>::quiet_NaN()));
   const Camera c = Camera::fromHfov(8, 6, 60);
   EXPECT_NO_THROW(checkDepthMatches(c, ImageF(8, 6, 1)));
-  EXPECT_THROW(checkDepthMatches(c, ImageF(6, 8, 1)), Error);
-  EXPECT_THROW(checkDepthMatches(c, ImageF(8, 6, 2)), Error);
-  EXPECT_THROW(unprojectDepth(c, ImageF(8, 5, 1)), Error);
+  EXPECT_ERROR_CONTAINS(checkDepthMatches(c, ImageF(6, 8, 1)),
+                        "a depth map of 6x8x1 does not match its camera of 8x6");
+  EXPECT_ERROR_CONTAINS(checkDepthMatches(c, ImageF(8, 6, 2)),
+                        "a depth map of 8x6x2 does not match its camera of 8x6");
+  EXPECT_ERROR_CONTAINS(unprojectDepth(c, ImageF(8, 5, 1)),
+                        "a depth map of 8x5x1 does not match its camera of 8x6");
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include <set>
 
 #include "dataset/generate_job.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -120,10 +121,10 @@ TEST(DatasetReport, KeysSelectPairsAndBadInputIsRefused) {
   o.out = out;
   EXPECT_EQ(writeDatasetReport(o)["pairs"], 2);
   o.keysFile = out + "/missing.txt";
-  EXPECT_THROW(writeDatasetReport(o), Error);
+  EXPECT_ERROR_CONTAINS(writeDatasetReport(o), out + "/missing.txt: cannot read the key list");
   ReportOptions none;
   none.dir = out + "/nonexistent";
-  EXPECT_THROW(writeDatasetReport(none), Error);
+  EXPECT_ERROR_CONTAINS(writeDatasetReport(none), none.dir + ": no such folder");
   ReportOptions empty;
   empty.dir = testing::scratchDir("empty");
   try {

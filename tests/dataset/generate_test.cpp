@@ -14,6 +14,7 @@
 
 #include "dataset/shard.h"
 #include "dataset/test_scenes.h"
+#include "test_errors.h"
 #include "test_files.h"
 #include "test_paths.h"
 #include "test_process.h"
@@ -183,7 +184,8 @@ TEST(GeneratePairs, BadScenesAreSkippedAndListed) {
   EXPECT_NE(reasons.find("corrupt.glb"), std::string::npos);
   EXPECT_NE(reasons.find("no walkable floor"), std::string::npos);
   GenerateConfig missing = smallConfig({dir + "/does-not-exist"}, dir + "/out2");
-  EXPECT_THROW(runGenerate(missing), Error);
+  EXPECT_ERROR_CONTAINS(runGenerate(missing),
+                        dir + "/does-not-exist: no such scene file, folder or list");
 }
 
 TEST(GeneratePairs, ScenesAreFreedOnceTheirPairsAreDone) {
@@ -275,14 +277,15 @@ TEST(GeneratePairs, BadArgumentsAreClearErrors) {
   const std::string dir = testing::scratchDir("args");
   GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
   c.pairsPerScene = 0;
-  EXPECT_THROW(runGenerate(c), Error);
+  EXPECT_ERROR_CONTAINS(runGenerate(c), "--pairs-per-scene must be at least 1");
   c = smallConfig({writeRoom(dir)}, dir + "/out");
   c.shardIndex = 2;
-  EXPECT_THROW(runGenerate(c), Error);
+  EXPECT_ERROR_CONTAINS(runGenerate(c), "--shard-index must be in [0, --num-shards)");
   c = smallConfig({writeRoom(dir)}, dir + "/out");
   c.pair.minCovis = 0.9;
   c.pair.maxCovis = 0.2;
-  EXPECT_THROW(runGenerate(c), Error);
+  EXPECT_ERROR_CONTAINS(runGenerate(c),
+                        "the covis band must satisfy 0 <= --min-covis <= --max-covis <= 1");
   const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/generate_pairs";
   EXPECT_NE(runCommand({tool, "--scenes", dir, "--out", dir + "/o", "--format", "zip"}, -1), 0);
   EXPECT_NE(runCommand({tool, "--scenes", dir + "/nothing", "--out", dir + "/o"}, -1), 0);

@@ -12,6 +12,7 @@
 #include "dataset/pair_generator.h"
 #include "dataset/shard.h"
 #include "dataset/test_scenes.h"
+#include "test_errors.h"
 #include "test_files.h"
 #include "test_paths.h"
 #include "test_process.h"
@@ -411,10 +412,11 @@ TEST(GeneratePairsCli, BadNewOptionsAreClearErrors) {
   EXPECT_EQ(cmd({"--screen-resolution", "0"}), 0);
   PairOptions o;
   o.views = 0;
-  EXPECT_THROW(o.validate(), Error);
+  EXPECT_ERROR_CONTAINS(o.validate(), "views must be in [1, ", "got 0");
   o.views = 2;
   o.screenResolution = 300;
-  EXPECT_THROW(o.validate(), Error);
+  EXPECT_ERROR_CONTAINS(o.validate(),
+                        "the screening resolution (300) must not exceed the resolution (256)");
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <set>
 
 #include "dataset/test_scenes.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/error.h"
 
@@ -60,7 +61,7 @@ TEST(PairStream, NoUsableSceneIsAnError) {
   testing::writeBoxesObj(dir + "/wall.obj", {{{0, 0, 0}, {0.1f, 3, 4}}});
   PairStreamOptions o;
   o.scenes = {dir + "/wall.obj"};
-  EXPECT_THROW(PairStream stream(o), Error);
+  EXPECT_ERROR_CONTAINS(PairStream stream(o), "no usable scene for the live pair stream");
 }
 
 }  // namespace

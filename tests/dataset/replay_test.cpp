@@ -9,6 +9,7 @@
 #include "dataset/generate_job.h"
 #include "dataset/habitat_frame.h"
 #include "dataset/test_scenes.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "test_process.h"
 #include "util/atomic_file.h"
@@ -26,7 +27,8 @@ TEST(HabitatFrame, IdentityQuaternionLooksDownMinusZWithYUp) {
   EXPECT_TRUE(R.col(2).isApprox(Eigen::Vector3d(0, 0, -1)));  // OpenCV forward
   EXPECT_TRUE(R.col(1).isApprox(Eigen::Vector3d(0, -1, 0)));  // OpenCV down
   EXPECT_TRUE(R.col(0).isApprox(Eigen::Vector3d(1, 0, 0)));
-  EXPECT_THROW(cameraRotationFromHabitat({0, 0, 0, 0}), Error);
+  EXPECT_ERROR_CONTAINS(cameraRotationFromHabitat({0, 0, 0, 0}),
+                        "camera orientation is not a rotation quaternion");
 }
 
 TEST(HabitatFrame, ZUpStagesAreRotatedIntoHabitatsYUpWorld) {

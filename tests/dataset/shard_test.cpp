@@ -69,7 +69,8 @@ TEST(Shard, TruncatedShardDeliversWhatPrecedesTheDamageThenFails) {
   }
   EXPECT_GE(delivered, 1u);
   EXPECT_LT(delivered, 4u);
-  EXPECT_THROW(readShard(dir + "/none.tar", [](ShardSample&&) {}), Error);
+  EXPECT_ERROR_CONTAINS(readShard(dir + "/none.tar", [](ShardSample&&) {}),
+                        dir + "/none.tar: no such shard");
 }
 
 // Writes a tar with hand-made entries, for the malformed cases.

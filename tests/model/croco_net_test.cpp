@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "model/checkpoint.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -27,7 +28,8 @@ TEST(CroCoNet, ShapesOfTheForwardPass) {
   EXPECT_EQ(out.prediction.sizes(), (std::vector<int64_t>{2, 16, 768}));
   EXPECT_EQ(out.mask.sizes(), (std::vector<int64_t>{2, 16}));
   EXPECT_EQ(out.target.sizes(), (std::vector<int64_t>{2, 16, 768}));
-  EXPECT_THROW(net->forward(torch::randn({2, 3, 32, 32}), img2), Error);
+  EXPECT_ERROR_CONTAINS(net->forward(torch::randn({2, 3, 32, 32}), img2),
+                        "CroCo input must be [B, 3, 64, 64]");
 }
 
 TEST(CroCoNet, ParameterCountsOfThePresets) {
@@ -48,7 +50,7 @@ TEST(CroCoNet, ParameterCountsOfThePresets) {
   EXPECT_NEAR(countParameters(*catNet) / 1e6, 111.0, 1.0);  // the paper's 111M
   CroCoNet small(presetConfig("small")), tiny(presetConfig("tiny"));
   EXPECT_LT(countParameters(*tiny), countParameters(*small));
-  EXPECT_THROW(presetConfig("huge"), Error);
+  EXPECT_ERROR_CONTAINS(presetConfig("huge"), "unknown preset 'huge'");
 }
 
 TEST(CroCoNet, StateDictHasTheOfficialNames) {
@@ -164,14 +166,15 @@ TEST(Checkpoint, StrictLoadNamesWrongKeysAndShapes) {
   }
   auto nan = sd;
   nan["enc_norm.bias"] = torch::full({192}, NAN);
-  EXPECT_THROW(loadStateDictStrict(net, nan, "z.pth"), Error);
+  EXPECT_ERROR_CONTAINS(loadStateDictStrict(net, nan, "z.pth"),
+                        "z.pth: state_dict entry 'enc_norm.bias' holds NaN or inf");
 }
 
 TEST(Checkpoint, BadFilesAreClearErrors) {
   const std::string dir = testing::scratchDir("bad");
-  EXPECT_THROW(loadCheckpoint(dir + "/none.pth"), Error);
+  EXPECT_ERROR_CONTAINS(loadCheckpoint(dir + "/none.pth"), dir + "/none.pth: no such checkpoint");
   writeFileAtomic(dir + "/junk.pth", "this is not a checkpoint");
-  EXPECT_THROW(loadCheckpoint(dir + "/junk.pth"), Error);
+  EXPECT_ERROR_CONTAINS(loadCheckpoint(dir + "/junk.pth"), dir + "/junk.pth: not a zip checkpoint");
   CroCoNet net(tinyConfig());
   saveCheckpoint(dir + "/ok.pth", net, 0);
   const std::string bytes = readFile(dir + "/ok.pth");

@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include "model/checkpoint.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -65,7 +66,7 @@ TEST(Reconstruct, BadInputNamesTheFile) {
   o.checkpoint = f.ckpt;
   o.image1 = f.a;
   o.image2 = f.dir + "/missing.png";
-  EXPECT_THROW(reconstruct(o), Error);
+  EXPECT_ERROR_CONTAINS(reconstruct(o), f.dir + "/missing.png: no such file");
   o.image2 = f.b;
   std::ofstream(f.dir + "/short.txt") << "1 0 1";
   o.maskFile = f.dir + "/short.txt";

@@ -33,10 +33,19 @@ def test_stream_is_deterministic_whatever_the_threads():
     first, again = take(4), take(4)
     for a, b in zip(first, again):
         same(a, b)
-    by_key = {(s["scene"], s["index"]): s for s in first}
-    for s in take(6, threads=2):  # order may differ between threads; the pairs may not
-        if (s["scene"], s["index"]) in by_key:
-            same(s, by_key[(s["scene"], s["index"])])
+    threaded = take(6, threads=2)  # order may differ between threads; the pairs may not
+    keys = [(s["scene"], s["index"]) for s in threaded]
+    assert len(set(keys)) == len(keys), keys  # each index is made once, by one of the threads
+    # One thread hands the pairs out in index order, and a pair is a pure function of its index, so
+    # the first last + 1 single-thread pairs hold every index up to the threaded run's last: each
+    # threaded pair is compared with its single-thread twin, whether or not it is among `first`.
+    indices = [s["index"] for s in first]
+    assert indices == sorted(set(indices)), indices
+    last = max(s["index"] for s in threaded)
+    by_key = {(s["scene"], s["index"]): s for s in take(last + 1)}
+    for s, key in zip(threaded, keys):
+        assert key in by_key, f"{key} is not in the single-thread stream's first {last + 1} pairs"
+        same(s, by_key[key])
 
 
 def test_stream_gives_generate_pairs_pixels(croco_pairs):

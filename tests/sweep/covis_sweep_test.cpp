@@ -8,6 +8,7 @@
 
 #include "model/checkpoint.h"
 #include "sweep/depth_probe.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "test_process.h"
 #include "util/atomic_file.h"
@@ -31,10 +32,12 @@ TEST(CovisSweep, BucketsAndSets) {
   EXPECT_EQ(makeSweepSet("uniform", 0.0).buckets.size(), 20u);
   EXPECT_EQ(makeSweepSet("bin", 0.15).name, "bin_0.15");
   EXPECT_EQ(makeSweepSet("bin", 0.5).buckets, (std::vector<int>{9, 10}));  // [0.45, 0.55)
-  EXPECT_THROW(makeSweepSet("bin", 0.47), Error);                          // off the 0.05 grid
-  EXPECT_THROW(makeSweepSet("bin", 1.05), Error);
-  EXPECT_THROW(makeSweepSet("uniform", 0.33), Error);
-  EXPECT_THROW(makeSweepSet("spread", 0.5), Error);
+  EXPECT_ERROR_CONTAINS(makeSweepSet("bin", 0.47),
+                        "bin centre 0.47 must be a multiple of 0.05");  // off the 0.05 grid
+  EXPECT_ERROR_CONTAINS(makeSweepSet("bin", 1.05), "bin centre 1.05 must be a multiple of 0.05");
+  EXPECT_ERROR_CONTAINS(makeSweepSet("uniform", 0.33),
+                        "uniform centre 0.33 must be a multiple of 0.05");
+  EXPECT_ERROR_CONTAINS(makeSweepSet("spread", 0.5), "unknown sweep mode 'spread'");
 }
 
 TEST(CovisSweep, SetsAreEqualInSizeAndEachPairIsInItsRange) {
@@ -93,8 +96,10 @@ TEST(DepthMetrics, HandComputedCases) {
   const DepthMetrics perfect = depthMetrics(gt, gt);
   EXPECT_EQ(perfect.delta1, 1.0);
   EXPECT_EQ(perfect.absRel, 0.0);
-  EXPECT_THROW(depthMetrics(torch::ones({2}), torch::zeros({2})), Error);
-  EXPECT_THROW(depthMetrics(torch::ones({2}), torch::ones({3})), Error);
+  EXPECT_ERROR_CONTAINS(depthMetrics(torch::ones({2}), torch::zeros({2})),
+                        "no valid ground-truth pixel");
+  EXPECT_ERROR_CONTAINS(depthMetrics(torch::ones({2}), torch::ones({3})),
+                        "prediction and ground truth differ in shape");
 }
 
 TEST(DepthProbe, FitsDepthThatIsLinearInTheFeatures) {
@@ -154,9 +159,10 @@ SweepConfig miniSweep(const std::string& out) {
 TEST(CovisSweep, HeldOutScenesMustNotBeTrainedOn) {
   SweepConfig c = miniSweep(testing::scratchDir("overlap"));
   c.heldout = {testing::sourceDir() + "/scenes/room/room.obj"};
-  EXPECT_THROW(runCovisSweep(c), Error);
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c),
+                        c.heldout[0] + ": is both a training and a held-out scene");
   c.heldout = {};
-  EXPECT_THROW(runCovisSweep(c), Error);
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "--heldout: give at least one held-out scene");
 }
 
 std::string covisSweepTool() {

@@ -13,6 +13,7 @@
 
 #include "dataset/generate_job.h"
 #include "model/checkpoint.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "test_process.h"
 #include "trainer/augment.h"
@@ -176,7 +177,8 @@ TEST(Pretrain, NonFiniteLossIsSkippedOrStops) {
   strict.maxSteps = 4;
   strict.debugNanAtStep = 2;
   strict.maxNanSkips = 0;
-  EXPECT_THROW(runPretrain(strict), Error);
+  EXPECT_ERROR_CONTAINS(runPretrain(strict),
+                        strict.out + ": loss is not finite for 1 steps in a row (step 2)");
   // The checkpoint written before the bad step is intact.
   const Checkpoint before = loadCheckpoint(strict.out + "/checkpoint-last.pth");
   EXPECT_EQ(before.extra["step"], 2);
@@ -190,21 +192,22 @@ TEST(Pretrain, CrocoLayoutAndBadSources) {
   EXPECT_EQ(runPretrain(c)["steps"], 2);
   TrainConfig none = tinyRun(testing::scratchDir("none"));
   none.shards.clear();
-  EXPECT_THROW(runPretrain(none), Error);
+  EXPECT_ERROR_CONTAINS(runPretrain(none), "give a data source");
   TrainConfig zero = tinyRun(testing::scratchDir("zero"));
   zero.crocoDir = pairsDir();
   zero.shardsWeight = zero.crocoWeight = 0;
-  EXPECT_THROW(runPretrain(zero), Error);
+  EXPECT_ERROR_CONTAINS(runPretrain(zero), "the data sources' weights sum to 0");
   TrainConfig negative = tinyRun(testing::scratchDir("negative"));
   negative.crocoDir = pairsDir();
   negative.crocoWeight = -1;
-  EXPECT_THROW(runPretrain(negative), Error);
+  EXPECT_ERROR_CONTAINS(runPretrain(negative), "the weight of --croco-dir " + pairsDir() +
+                                                   " must be a finite number >= 0");
   TrainConfig amp = tinyRun(testing::scratchDir("amp"));
   amp.amp = "fp8";
-  EXPECT_THROW(runPretrain(amp), Error);
+  EXPECT_ERROR_CONTAINS(runPretrain(amp), "--amp must be bf16, fp16 or none, not 'fp8'");
   TrainConfig missing = tinyRun(testing::scratchDir("missing"));
   missing.shards = {"/nonexistent/pairs-*.tar"};
-  EXPECT_THROW(runPretrain(missing), Error);
+  EXPECT_ERROR_CONTAINS(runPretrain(missing), "/nonexistent/pairs-*.tar: no shard matches");
 }
 
 TEST(Pretrain, MixedSourcesFollowTheWeightsAndResumeExactly) {
@@ -277,7 +280,8 @@ TEST(GradScaler, SkipsOverflowsBacksOffAndGrows) {
   GradScaler restored(true, 1.0, 2);
   restored.restore(scaler.state());
   EXPECT_EQ(restored.scale(), 1024.0);
-  EXPECT_THROW(restored.restore({{"scale", -1.0}}), Error);
+  EXPECT_ERROR_CONTAINS(restored.restore({{"scale", -1.0}}),
+                        "the checkpoint's loss scale is invalid");
   GradScaler off(false);
   EXPECT_TRUE(torch::equal(off.scaleLoss(torch::ones({1})), torch::ones({1})));
 }

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <fstream>
 
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -82,7 +83,7 @@ TEST(ImageIo, ExrKeepsFloatDepthExactly) {
 
 TEST(ImageIo, BadFilesGiveErrorsNamingThem) {
   const std::string dir = testing::scratchDir("bad");
-  EXPECT_THROW(readImage8(dir + "/none.png"), Error);
+  EXPECT_ERROR_CONTAINS(readImage8(dir + "/none.png"), dir + "/none.png: no such file");
   std::ofstream(dir + "/junk.png") << "not a png at all";
   try {
     readImage8(dir + "/junk.png");
@@ -90,8 +91,9 @@ TEST(ImageIo, BadFilesGiveErrorsNamingThem) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("junk.png"), std::string::npos);
   }
-  EXPECT_THROW(writeImage(dir + "/x.bmp2", gradient(4, 4)), Error);
-  EXPECT_THROW(decodeImage8("abc", 3, "mem.jpg"), Error);
+  EXPECT_ERROR_CONTAINS(writeImage(dir + "/x.bmp2", gradient(4, 4)),
+                        dir + "/x.bmp2: unsupported image extension");
+  EXPECT_ERROR_CONTAINS(decodeImage8("abc", 3, "mem.jpg"), "mem.jpg: cannot decode image");
 }
 
 TEST(AtomicFile, WritesWholeFilesAndLeavesNoTemporaries) {
@@ -102,7 +104,8 @@ TEST(AtomicFile, WritesWholeFilesAndLeavesNoTemporaries) {
   size_t files = 0;
   for (const auto& e : std::filesystem::directory_iterator(dir)) files += e.is_regular_file();
   EXPECT_EQ(files, 1u);
-  EXPECT_THROW(writeFileAtomic(dir + "/no/such/folder/a.txt", "x"), Error);
+  EXPECT_ERROR_CONTAINS(writeFileAtomic(dir + "/no/such/folder/a.txt", "x"),
+                        dir + "/no/such/folder/a.txt: cannot create temporary file");
 }
 
 TEST(AtomicFile, FullDiskIsAnErrorAndKeepsTheOldFile) {
