@@ -80,7 +80,8 @@ int main(int argc, char** argv) {
   app.add_option("--screen-resolution", cfg.pair.screenResolution,
                  "Screen candidates on depth at this resolution first, then at twice it while at "
                  "most a quarter of --resolution (0: off; default: a sixteenth of --resolution, "
-                 "at least 16, off below 64)");
+                 "at least 16, off below 64)")
+      ->check(CLI::NonNegativeNumber);  // -1 is the library's "automatic", not a user's value
   app.add_option("--screen-margin", cfg.pair.screenCovisMargin,
                  "Screening keeps candidates whose 32x32 covis estimate is within this of the band "
                  "(other sides: see --screen-fine-margin)");

@@ -277,15 +277,15 @@ TEST(GeneratePairs, BadArgumentsAreClearErrors) {
   const std::string dir = testing::scratchDir("args");
   GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
   c.pairsPerScene = 0;
-  EXPECT_ERROR_CONTAINS(runGenerate(c), "--pairs-per-scene must be at least 1");
+  EXPECT_ERROR_CONTAINS(runGenerate(c), "pairs per scene must be at least 1");
   c = smallConfig({writeRoom(dir)}, dir + "/out");
   c.shardIndex = 2;
-  EXPECT_ERROR_CONTAINS(runGenerate(c), "--shard-index must be in [0, --num-shards)");
+  EXPECT_ERROR_CONTAINS(runGenerate(c), "the part index must be in [0, number of parts)");
   c = smallConfig({writeRoom(dir)}, dir + "/out");
   c.pair.minCovis = 0.9;
   c.pair.maxCovis = 0.2;
   EXPECT_ERROR_CONTAINS(runGenerate(c),
-                        "the covis band must satisfy 0 <= --min-covis <= --max-covis <= 1");
+                        "the covis band must satisfy 0 <= min_covis <= max_covis <= 1");
   const std::string tool = std::string(PAIRCAST_BINARY_DIR) + "/tools/generate_pairs";
   EXPECT_NE(runCommand({tool, "--scenes", dir, "--out", dir + "/o", "--format", "zip"}, -1), 0);
   EXPECT_NE(runCommand({tool, "--scenes", dir + "/nothing", "--out", dir + "/o"}, -1), 0);

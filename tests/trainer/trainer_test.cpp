@@ -204,7 +204,7 @@ TEST(Pretrain, CrocoLayoutAndBadSources) {
                                                    " must be a finite number >= 0");
   TrainConfig amp = tinyRun(testing::scratchDir("amp"));
   amp.amp = "fp8";
-  EXPECT_ERROR_CONTAINS(runPretrain(amp), "--amp must be bf16, fp16 or none, not 'fp8'");
+  EXPECT_ERROR_CONTAINS(runPretrain(amp), "mixed precision must be bf16, fp16 or none, not 'fp8'");
   TrainConfig missing = tinyRun(testing::scratchDir("missing"));
   missing.shards = {"/nonexistent/pairs-*.tar"};
   EXPECT_ERROR_CONTAINS(runPretrain(missing), "/nonexistent/pairs-*.tar: no shard matches");
