@@ -114,17 +114,6 @@ std::vector<std::vector<std::string>> completedShards(const std::string& out,
   return shards;
 }
 
-void removeTemporaries(const std::string& dir) {
-  std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(dir, ec);
-       it != fs::recursive_directory_iterator(); it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    if (it->is_regular_file(ec) && name.size() > 1 && name[0] == '.' &&
-        name.find(".tmp.") != std::string::npos)
-      fs::remove(it->path(), ec);
-  }
-}
-
 // "[generate_pairs] 120/500 pairs  38.1 pairs/s  acceptance 6%  ETA 0m10s"
 std::string progressText(size_t done, size_t total, size_t accepted, size_t candidates,
                          double seconds) {
@@ -157,6 +146,8 @@ class GenerateRun {
   std::string outPath(const std::string& stem, const std::string& ext) const {
     return (fs::path(cfg_.out) / (stem + part_ + ext)).string();
   }
+  // Whether a file at the top of --out is this part's: its shards, index, pairs.txt, summary.
+  bool ownsFile(const std::string& name) const;
   // Workers.
   void prepareScene(SceneJob& job);
   void loadScene(SceneJob& job);
@@ -218,14 +209,31 @@ GenerateRun::GenerateRun(const GenerateConfig& cfg) : cfg_(cfg) {
       cfg.jobs > 0 ? cfg.jobs : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   planScenes();
   makeDirs(cfg.out);
-  removeStaleTemporaries(cfg.out);  // left by a killed run
-  removeTemporaries(cfg.out);
-  makeDirs((fs::path(cfg.out) / ".paircast").string());
-  journal_ = std::make_unique<Journal>(
-      (fs::path(cfg.out) / ".paircast" / ("journal" + part_ + ".jsonl")).string(), recordKey);
+  // Temporaries left by a killed run of this part, on this machine or another: only this part's
+  // files, the other parts writing into the same folder (their scene folders are theirs too).
+  removeStaleTemporaries(cfg.out, [this](const std::string& name) { return ownsFile(name); });
+  const fs::path bookkeeping = fs::path(cfg.out) / ".paircast";
+  makeDirs(bookkeeping.string());
+  const std::string journalName = "journal" + part_ + ".jsonl";
+  removeStaleTemporaries(bookkeeping.string(),
+                         [&](const std::string& name) { return name == journalName; });
+  journal_ = std::make_unique<Journal>((bookkeeping / journalName).string(), recordKey);
   if (cfg.shards) doneShards_ = completedShards(cfg.out, part_);
   for (const auto& keys : doneShards_) shardList_.push_back({{"pairs", keys.size()}});
   planItems();
+}
+
+bool GenerateRun::ownsFile(const std::string& name) const {
+  if (name == "index" + part_ + ".json" || name == "pairs" + part_ + ".txt" ||
+      name == "summary" + part_ + ".json")
+    return true;
+  // pairs<part>-NNNNNN.tar
+  const std::string prefix = "pairs" + part_ + "-", suffix = ".tar";
+  if (name.size() <= prefix.size() + suffix.size() || name.rfind(prefix, 0) != 0 ||
+      name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0)
+    return false;
+  const std::string n = name.substr(prefix.size(), name.size() - prefix.size() - suffix.size());
+  return n.find_first_not_of("0123456789") == std::string::npos;
 }
 
 // Scenes: expand, name uniquely, keep this machine's part.
@@ -249,7 +257,7 @@ void GenerateRun::planItems() {
   const std::string lastView = "_" + std::to_string(cfg_.pair.views) + ".jpeg";
   for (size_t s = 0; s < scenes_.size(); ++s) {
     SceneJob& job = *scenes_[s];
-    if (cfg_.croco) removeStaleTemporaries((fs::path(cfg_.out) / job.name).string());
+    removeStaleTemporaries((fs::path(cfg_.out) / job.name).string());  // the part's own folder
     for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
       const std::string key = sampleKey(job.name, k);
       const nlohmann::json rec = journal_->find(key);

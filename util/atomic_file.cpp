@@ -4,11 +4,13 @@
 #include <signal.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include "util/error.h"
@@ -29,6 +31,57 @@ void fsyncPath(const std::string& path, bool directory) {
   ::close(fd);
 }
 
+// This machine's host name as it appears in temporary names: no '.', so that names parse back.
+const std::string& hostTag() {
+  static const std::string tag = [] {
+    char name[256] = {};
+    std::string host = ::gethostname(name, sizeof name - 1) == 0 && name[0] ? name : "localhost";
+    for (char& c : host)
+      if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_') c = '_';
+    return host;
+  }();
+  return tag;
+}
+
+bool allDigits(const std::string& s) {
+  return !s.empty() && s.find_first_not_of("0123456789") == std::string::npos;
+}
+
+struct Temporary {
+  std::string target, host;  // the file it stands for, and the host that wrote it
+  long pid = 0;
+};
+
+// Parses ".<target>.tmp.<host>.<pid>", or the older ".<target>.tmp.<pid>" (this host's).
+std::optional<Temporary> parseTemporary(const std::string& name) {
+  const size_t dot = name.rfind('.');
+  if (name.size() < 2 || name[0] != '.' || dot == std::string::npos) return {};
+  const std::string pid = name.substr(dot + 1);
+  if (!allDigits(pid) || pid.size() > 9) return {};
+  const std::string marker = ".tmp";
+  // The target of "<rest>" when it is ".<target>.tmp", else "".
+  auto targetOf = [&](const std::string& rest) {
+    if (rest.size() <= marker.size() + 1 ||
+        rest.compare(rest.size() - marker.size(), marker.size(), marker) != 0)
+      return std::string();
+    return rest.substr(1, rest.size() - 1 - marker.size());
+  };
+  Temporary t;
+  t.pid = std::strtol(pid.c_str(), nullptr, 10);
+  const std::string rest = name.substr(0, dot);
+  const size_t hostDot = rest.rfind('.');
+  if (hostDot != std::string::npos && hostDot + 1 < rest.size()) {
+    t.target = targetOf(rest.substr(0, hostDot));
+    t.host = rest.substr(hostDot + 1);
+  }
+  if (t.target.empty()) {
+    t.target = targetOf(rest);
+    t.host = hostTag();
+  }
+  if (t.target.empty()) return {};
+  return t;
+}
+
 }  // namespace
 
 void faultPointDuringWrite(const std::string& path, int fd, std::string_view data) {
@@ -44,17 +97,16 @@ void faultPointDuringWrite(const std::string& path, int fd, std::string_view dat
   ::raise(SIGKILL);
 }
 
-int removeStaleTemporaries(const std::string& dir) {
+int removeStaleTemporaries(const std::string& dir,
+                           const std::function<bool(const std::string&)>& owned) {
   int removed = 0;
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(dir, ec)) {
-    const std::string name = e.path().filename().string();
-    const size_t at = name.rfind(".tmp.");
-    if (name.empty() || name[0] != '.' || at == std::string::npos) continue;
-    const std::string pid = name.substr(at + 5);
-    if (pid.empty() || pid.find_first_not_of("0123456789") != std::string::npos) continue;
-    const long p = std::strtol(pid.c_str(), nullptr, 10);
-    if (p == ::getpid() || (::kill(static_cast<pid_t>(p), 0) == 0 || errno != ESRCH)) continue;
+    const std::optional<Temporary> t = parseTemporary(e.path().filename().string());
+    if (!t || (owned && !owned(t->target))) continue;
+    if (t->host == hostTag() &&
+        (t->pid == ::getpid() || ::kill(static_cast<pid_t>(t->pid), 0) == 0 || errno != ESRCH))
+      continue;  // a process of this host that still runs
     if (fs::remove(e.path(), ec)) ++removed;
   }
   return removed;
@@ -62,7 +114,8 @@ int removeStaleTemporaries(const std::string& dir) {
 
 std::string tempPathFor(const std::string& path) {
   fs::path p(path);
-  return (p.parent_path() / ("." + p.filename().string() + ".tmp." + std::to_string(::getpid())))
+  return (p.parent_path() /
+          ("." + p.filename().string() + ".tmp." + hostTag() + "." + std::to_string(::getpid())))
       .string();
 }
 

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -18,12 +19,19 @@ enum class Durability { Sync, NoSync };
 void writeFileAtomic(const std::string& path, std::string_view data,
                      Durability durability = Durability::Sync);
 
-// The temporary name used for `path` by this process: "<dir>/.<name>.tmp.<pid>".
+// The temporary name used for `path` by this process: "<dir>/.<name>.tmp.<host>.<pid>", <host>
+// being this machine's host name with any character other than a letter, digit, '-' or '_' as
+// '_'. The host makes the pid mean something on a shared file system; which part of a job wrote
+// it is in <name> (pairs-1-000042.tar) or its folder.
 std::string tempPathFor(const std::string& path);
 
-// Removes the temporary files ("<dir>/.<name>.tmp.<pid>") that killed processes left in `dir`
-// (their pid no longer runs). Returns how many were removed.
-int removeStaleTemporaries(const std::string& dir);
+// Removes the temporary files in `dir` (not its subfolders) that a killed writer left of the files
+// that `owned` accepts by name ("pairs-1-000042.tar"; every file when `owned` is empty), so that
+// a caller touches only its own files in a folder that others write into. A temporary from this
+// host is kept while its pid runs; one from another host is removed, the caller owning the file.
+// The older ".<name>.tmp.<pid>" counts as this host's. Returns how many were removed.
+int removeStaleTemporaries(const std::string& dir,
+                           const std::function<bool(const std::string&)>& owned = {});
 
 // Test-only fault injection: when the environment variable PAIRCAST_FAULT_KILL_DURING_WRITE holds
 // a string that the path contains, the process writes half of the data to the temporary file

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <thread>
 
@@ -224,6 +225,17 @@ TEST(GeneratePairs, SceneListsAndShardingSplitScenesDeterministically) {
             (std::vector<std::string>{"b-00000000", "b-00000001"}));
 }
 
+// The last record of each key in a journal.
+std::map<std::string, nlohmann::json> journalRecords(const std::string& path) {
+  std::map<std::string, nlohmann::json> last;
+  std::ifstream in(path);
+  for (std::string line; std::getline(in, line);) {
+    const auto r = nlohmann::json::parse(line);
+    last[r["scene"].get<std::string>() + std::to_string(r["index"].get<int>())] = r;
+  }
+  return last;
+}
+
 int runCommand(const std::vector<std::string>& args, int killAfterMs) {
   return testing::runProcess(args, killAfterMs);
 }
@@ -256,21 +268,129 @@ TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {
   const auto a = testing::fileTree(dir + "/clean"), b = testing::fileTree(dir + "/killed");
   // The journal of the resumed run may hold a record twice (a sample redone after the kill);
   // the last record of each key is the same as the clean run's.
-  auto records = [](const std::string& out) {
-    std::map<std::string, nlohmann::json> last;
-    std::ifstream in(out + "/.paircast/journal.jsonl");
-    for (std::string line; std::getline(in, line);) {
-      const auto r = nlohmann::json::parse(line);
-      last[r["scene"].get<std::string>() + std::to_string(r["index"].get<int>())] = r;
-    }
-    return last;
-  };
-  EXPECT_EQ(records(dir + "/clean"), records(dir + "/killed"));
+  EXPECT_EQ(journalRecords(dir + "/clean/.paircast/journal.jsonl"),
+            journalRecords(dir + "/killed/.paircast/journal.jsonl"));
   ASSERT_EQ(a.size(), b.size());
   for (const auto& [name, bytes] : a) {
     ASSERT_TRUE(b.count(name)) << name << " missing after resume";
     EXPECT_TRUE(bytes == b.at(name)) << name << " differs after resume";
   }
+}
+
+// Two parts of one job (--shard-index i --num-shards 2) over the shipped scenes, as a Slurm array
+// into one folder would run them: part 0 has the apartment and the studio, part 1 the room.
+std::vector<std::string> partArgs(const std::string& out, int part) {
+  return {std::string(PAIRCAST_BINARY_DIR) + "/tools/generate_pairs",
+          "--scenes",
+          testing::sourceDir() + "/scenes",
+          "--out",
+          out,
+          "--pairs-per-scene",
+          "200",
+          "--resolution",
+          "32",
+          "--shard-size",
+          "16",
+          "--format",
+          "both",
+          "--seed",
+          "5",
+          "--jobs",
+          "1",
+          "--quiet",
+          "--shard-index",
+          std::to_string(part),
+          "--num-shards",
+          "2"};
+}
+
+// One machine's output: part 0, then part 1, into one folder (once per test process).
+const std::string& partsReference() {
+  static const std::string dir = [] {
+    const std::string out = (fs::path(::testing::TempDir()) / "paircast" /
+                             ("GeneratePairs.parts." + std::to_string(getpid())))
+                                .string();
+    fs::remove_all(out);
+    for (int part : {0, 1}) EXPECT_EQ(testing::runProcess(partArgs(out, part)), 0);
+    return out;
+  }();
+  return dir;
+}
+
+// Whether `pid` still runs (an ended child is left to waitProcess).
+bool running(pid_t pid) {
+  siginfo_t info{};
+  return waitid(P_PID, pid, &info, WEXITED | WNOHANG | WNOWAIT) == 0 && info.si_pid == 0;
+}
+
+// Whether `out` holds a temporary of a file whose name starts with `prefix` ("pairs-0-").
+bool hasTemporary(const std::string& out, const std::string& prefix) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(out, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind("." + prefix, 0) == 0 && name.find(".tmp.") != std::string::npos) return true;
+  }
+  return false;
+}
+
+// Waits until `ready`; false when `pid` ends first or a minute passes.
+bool waitWhileRunning(pid_t pid, const std::function<bool()>& ready) {
+  for (const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+       std::chrono::steady_clock::now() < end;
+       std::this_thread::sleep_for(std::chrono::milliseconds(1))) {
+    if (ready()) return true;
+    if (!running(pid)) return false;
+  }
+  return false;
+}
+
+// `out` equals the reference byte for byte (the summaries' timings aside), with no temporary.
+void expectSameAsOneMachine(const std::string& out) {
+  const std::string& ref = partsReference();
+  for (const char* journal : {"/.paircast/journal-0.jsonl", "/.paircast/journal-1.jsonl"})
+    EXPECT_EQ(journalRecords(ref + journal), journalRecords(out + journal)) << journal;
+  for (const auto& e : fs::recursive_directory_iterator(out))
+    EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos)
+        << "temporary left: " << e.path();
+  const auto a = testing::fileTree(ref), b = testing::fileTree(out);
+  EXPECT_GT(a.size(), 100u);
+  EXPECT_EQ(a.size(), b.size());
+  for (const auto& [name, bytes] : a) {
+    ASSERT_TRUE(b.count(name)) << name << " missing";
+    EXPECT_TRUE(bytes == b.at(name)) << name << " differs";
+  }
+}
+
+TEST(GeneratePairs, PartsStartedApartIntoOneFolderMakeOneMachinesOutput) {
+  partsReference();
+  const std::string out = testing::scratchDir("parts") + "/out";
+  const pid_t part0 = testing::spawnProcess(partArgs(out, 0));
+  // Part 1 starts while part 0 writes a shard: it must leave part 0's temporaries alone.
+  ASSERT_TRUE(waitWhileRunning(part0, [&] { return hasTemporary(out, "pairs-0-"); }))
+      << "part 0 ended before it wrote a shard";
+  const pid_t part1 = testing::spawnProcess(partArgs(out, 1));
+  EXPECT_EQ(testing::waitProcess(part1), 0);
+  EXPECT_EQ(testing::waitProcess(part0), 0) << "part 0 failed while part 1 ran";
+  expectSameAsOneMachine(out);
+}
+
+TEST(GeneratePairs, APartKilledAndRerunBesideAnotherMakesOneMachinesOutput) {
+  partsReference();
+  const std::string out = testing::scratchDir("parts") + "/out";
+  const pid_t part0 = testing::spawnProcess(partArgs(out, 0));
+  ASSERT_TRUE(waitWhileRunning(part0, [&] { return hasTemporary(out, "pairs-0-"); }));
+  // Part 1 is killed while it writes a shard, leaving its temporary, and rerun while part 0 goes
+  // on: the rerun removes its own leftovers and none of part 0's.
+  const pid_t part1 = testing::spawnProcess(partArgs(out, 1));
+  const bool writing = waitWhileRunning(part1, [&] { return hasTemporary(out, "pairs-1-"); });
+  kill(part1, SIGKILL);
+  EXPECT_EQ(testing::waitProcess(part1), -SIGKILL);
+  EXPECT_TRUE(writing && hasTemporary(out, "pairs-1-"))
+      << "part 1 was not killed while writing a shard: the test did not test its cleanup";
+  EXPECT_TRUE(running(part0)) << "part 0 ended before part 1 was rerun: the parts did not overlap";
+  EXPECT_EQ(testing::runProcess(partArgs(out, 1)), 0);
+  EXPECT_EQ(testing::waitProcess(part0), 0) << "part 0 failed while part 1 was killed and rerun";
+  expectSameAsOneMachine(out);
 }
 
 TEST(GeneratePairs, BadArgumentsAreClearErrors) {
