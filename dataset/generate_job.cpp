@@ -127,7 +127,6 @@ std::string progressText(size_t done, size_t total, size_t accepted, size_t cand
   return line;
 }
 
-
 // One run of the job. The constructor plans it; run() makes and writes what is missing;
 // summarise() assembles the outputs from the journal, so a resumed run reports everything.
 class GenerateRun {
@@ -154,7 +153,7 @@ class GenerateRun {
   void worker();
   Result makeItem(const Item& item);
   // Adds an attempt's generation times, and encode and write seconds, to the time split.
-  void addTimes(const PairSample& spent, double encode, double write);
+  void addTimes(const GenerationCost& spent, double encode, double write);
   void fail();
   // The writer, on the calling thread.
   void writeInOrder();
@@ -379,7 +378,7 @@ Result GenerateRun::makeItem(const Item& item) {
   Result r;
   r.done = true;
   if (!job.error.empty()) return r;
-  PairSample spent;  // what the attempt cost, with or without a sample
+  GenerationCost spent;  // what the attempt cost, with or without a sample
   std::optional<PairSample> sample = job.generator->generate(cfg_.seed, item.index, &spent);
   candidates_ += spent.candidateCovis.size();
   screened_ += spent.screened;
@@ -396,7 +395,7 @@ Result GenerateRun::makeItem(const Item& item) {
   auto t0 = Clock::now();
   EncodedPair enc = encodePair(*sample, cfg_.saveDepth, cfg_.jpegQuality);
   enc.record["candidate_covis"] = sample->candidateCovis;
-  enc.record["screened"] = sample->screened;
+  enc.record["screened"] = spent.screened;
   enc.record["up"] = job.scene->up == UpAxis::Z ? "z" : "y";  // resolved (--up auto)
   const double encode = since(t0);
   t0 = Clock::now();
@@ -411,7 +410,7 @@ Result GenerateRun::makeItem(const Item& item) {
   return r;
 }
 
-void GenerateRun::addTimes(const PairSample& spent, double encode, double write) {
+void GenerateRun::addTimes(const GenerationCost& spent, double encode, double write) {
   std::lock_guard<std::mutex> lock(timeMu_);
   tRender_ += spent.renderSeconds;
   tScreen_ += spent.screenSeconds;

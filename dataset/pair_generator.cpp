@@ -75,8 +75,7 @@ void PairOptions::validate() const {
   if (!in(hfov, kMinHfov, kMaxHfov))
     throw OptionError("hfov", "hfov must be in [1, 179] degrees, got " + std::to_string(hfov));
   if (!(minCovis >= 0 && maxCovis <= 1 && minCovis <= maxCovis))
-    throw OptionError("min_covis",
-                      "the covis band must satisfy 0 <= min_covis <= max_covis <= 1");
+    throw OptionError("min_covis", "the covis band must satisfy 0 <= min_covis <= max_covis <= 1");
   if (!in(minValidFraction, 0, 1))
     throw OptionError("min_valid", "the minimum valid fraction must be in [0, 1]");
   if (maxAttempts < 1 || maxReferences < 1)
@@ -89,12 +88,11 @@ void PairOptions::validate() const {
                       "the screening resolution must be >= 0 (0 turns screening off), got " +
                           std::to_string(screenResolution));
   if (screenResolution > resolution)
-    throw OptionError("screen_resolution", "the screening resolution (" +
-                                               std::to_string(screenResolution) +
-                                               ") must not exceed the resolution (" +
-                                               std::to_string(resolution) + ")");
-  if (!(in(screenCovisMargin, 0, 1) && in(screenFineMargin, 0, 1) &&
-        in(screenFrameMargin, 0, 1) && screenValidMargin >= 0))
+    throw OptionError("screen_resolution",
+                      "the screening resolution (" + std::to_string(screenResolution) +
+                          ") must not exceed the resolution (" + std::to_string(resolution) + ")");
+  if (!(in(screenCovisMargin, 0, 1) && in(screenFineMargin, 0, 1) && in(screenFrameMargin, 0, 1) &&
+        screenValidMargin >= 0))
     throw OptionError("screen_margin", "screening margins must be in [0, 1]");
 }
 
@@ -129,50 +127,43 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
-                                                  PairSample* attempt) const {
+                                                  GenerationCost* spent) const {
   const auto start = Clock::now();
   Rng rng(mixSeed(seed, scene_.name, index));
-  PairSample s;
-  s.scene = scene_.name;
-  s.index = index;
-  s.seed = seed;
+  GenerationCost cost;
   std::optional<PairSample> found;
   std::vector<View> views;
   views.reserve(options_.views);
   for (int ref = 0; ref < options_.maxReferences && !found; ++ref) {
     views.clear();
-    std::optional<View> first = referenceView(rng, s);
+    std::optional<View> first = referenceView(rng, cost);
     if (!first) continue;
     const Eigen::Vector3d target = meanWorldPoint(first->at.camera, first->depth);
     views.push_back(std::move(*first));
     while (static_cast<int>(views.size()) < options_.views) {
-      std::optional<View> other = otherView(views[0], target, rng, s);
+      std::optional<View> other = otherView(views[0], target, rng, cost);
       if (!other) break;
       views.push_back(std::move(*other));
     }
     if (static_cast<int>(views.size()) < options_.views) continue;
-    finish(views, s);
-    found = std::move(s);
+    found.emplace();
+    found->scene = scene_.name;
+    found->index = index;
+    found->seed = seed;
+    finish(views, *found, cost);
+    found->candidateCovis = cost.candidateCovis;
   }
-  PairSample& spent = found ? *found : s;
-  spent.totalSeconds = since(start);
-  if (attempt) {
-    attempt->candidateCovis = spent.candidateCovis;
-    attempt->screened = spent.screened;
-    attempt->falseRejections = spent.falseRejections;
-    attempt->renderSeconds = spent.renderSeconds;
-    attempt->screenSeconds = spent.screenSeconds;
-    attempt->covisSeconds = spent.covisSeconds;
-    attempt->totalSeconds = spent.totalSeconds;
-  }
+  cost.totalSeconds = since(start);
+  if (spent) *spent = std::move(cost);
   return found;
 }
 
-std::optional<PairGenerator::View> PairGenerator::referenceView(Rng& rng, PairSample& s) const {
+std::optional<PairGenerator::View> PairGenerator::referenceView(Rng& rng,
+                                                                GenerationCost& cost) const {
   View v;
   v.at = sampler_.sampleReference(intrinsics_, rng);
-  if (screenedOut(nullptr, v, s)) return std::nullopt;
-  renderFull(v, options_.screenResolution > 0, s);
+  if (screenedOut(nullptr, v, cost)) return std::nullopt;
+  renderFull(v, options_.screenResolution > 0, cost);
   v.valid = validFraction(v.depth);
   if (v.valid < options_.minValidFraction) return std::nullopt;
   return v;
@@ -180,19 +171,19 @@ std::optional<PairGenerator::View> PairGenerator::referenceView(Rng& rng, PairSa
 
 std::optional<PairGenerator::View> PairGenerator::otherView(const View& ref,
                                                             const Eigen::Vector3d& target, Rng& rng,
-                                                            PairSample& s) const {
+                                                            GenerationCost& cost) const {
   for (int attempt = 0; attempt < options_.maxAttempts; ++attempt) {
     View v;
     v.at = sampler_.sampleOther(intrinsics_, ref.at, target, rng);
-    if (screenedOut(&ref, v, s)) continue;
+    if (screenedOut(&ref, v, cost)) continue;
     // A view that passed screening is likely kept: its colour comes in the same pass.
-    renderFull(v, options_.screenResolution > 0, s);
+    renderFull(v, options_.screenResolution > 0, cost);
     v.valid = validFraction(v.depth);
     if (v.valid < options_.minValidFraction) continue;
     const auto t0 = Clock::now();
     v.covis = computeCovisibility(ref.at.camera, ref.depth, v.at.camera, v.depth, options_.covis);
-    s.covisSeconds += since(t0);
-    s.candidateCovis.push_back(static_cast<float>(v.covis.covis));
+    cost.covisSeconds += since(t0);
+    cost.candidateCovis.push_back(static_cast<float>(v.covis.covis));
     if (inBand(v.covis.covis)) return v;
   }
   return std::nullopt;
@@ -205,61 +196,61 @@ bool PairGenerator::inBand(double covis) const {
 
 // Screens v coarse to fine and says whether it cannot pass; counts it, and audits the verdict
 // when asked.
-bool PairGenerator::screenedOut(const View* ref, View& v, PairSample& s) const {
+bool PairGenerator::screenedOut(const View* ref, View& v, GenerationCost& cost) const {
   const size_t stages = ref ? screens_.size() : referenceStages_;
-  bool out = ref && outOfFrame(*ref, v, s);
-  for (size_t stage = 0; stage < stages && !out; ++stage) out = failsStage(stage, ref, v, s);
+  bool out = ref && outOfFrame(*ref, v, cost);
+  for (size_t stage = 0; stage < stages && !out; ++stage) out = failsStage(stage, ref, v, cost);
   if (!out) return false;
-  ++s.screened;
+  ++cost.screened;
   if (options_.auditScreening) {
     View full = v;
-    renderFull(full, false, s);
+    renderFull(full, false, cost);
     bool kept = validFraction(full.depth) >= options_.minValidFraction;
     if (kept && ref)
       kept = inBand(computeCovisibility(ref->at.camera, ref->depth, full.at.camera, full.depth,
                                         options_.covis)
                         .covis);
-    s.falseRejections += kept;
+    cost.falseRejections += kept;
   }
   return true;
 }
 
 // Whether too little of the reference lands inside v's frame for v to pass: no rendering, the
 // reference's pixels projected into v's camera, occlusion left out.
-bool PairGenerator::outOfFrame(const View& ref, const View& v, PairSample& s) const {
+bool PairGenerator::outOfFrame(const View& ref, const View& v, GenerationCost& cost) const {
   if (options_.accept || screens_.empty()) return false;
   CovisOptions o = options_.covis;
   o.stride = std::max(1, options_.resolution / kFrameScreenSide);
   const auto t0 = Clock::now();
   const double bound = inFrameFraction(ref.at.camera, ref.depth, v.at.camera, o);
-  s.screenSeconds += since(t0);
+  cost.screenSeconds += since(t0);
   if (bound >= options_.minCovis - options_.screenFrameMargin) return false;
-  s.candidateCovis.push_back(static_cast<float>(bound));
+  cost.candidateCovis.push_back(static_cast<float>(bound));
   return true;
 }
 
 // Renders v's depth at the stage's resolution and says whether it cannot pass: too few valid
 // pixels, or (with a reference) a covis estimate outside the band by more than the margin.
-bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, PairSample& s) const {
+bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, GenerationCost& cost) const {
   const ScreenStage& screen = screens_[stage];
-  const Camera cam = screenCamera(stage, v, s);
+  const Camera cam = screenCamera(stage, v, cost);
   if (validFraction(v.screenDepth[stage]) < options_.minValidFraction - options_.screenValidMargin)
     return true;
   if (!ref || options_.accept) return false;
-  const Camera refCam = screenCamera(stage, *ref, s);
+  const Camera refCam = screenCamera(stage, *ref, cost);
   const auto t0 = Clock::now();
   const double estimate = computeCovisibility(refCam, ref->screenDepth[stage], cam,
                                               v.screenDepth[stage], options_.covis)
                               .covis;
-  s.screenSeconds += since(t0);
+  cost.screenSeconds += since(t0);
   const bool out = estimate < options_.minCovis - screen.covisMargin ||
                    estimate > options_.maxCovis + screen.covisMargin;
-  if (out) s.candidateCovis.push_back(static_cast<float>(estimate));
+  if (out) cost.candidateCovis.push_back(static_cast<float>(estimate));
   return out;
 }
 
 // v's camera at the stage's resolution; renders v's depth there unless it has it already.
-Camera PairGenerator::screenCamera(size_t stage, const View& v, PairSample& s) const {
+Camera PairGenerator::screenCamera(size_t stage, const View& v, GenerationCost& cost) const {
   Camera cam = screens_[stage].intrinsics;
   cam.R_cam2world = v.at.camera.R_cam2world;
   cam.t_cam2world = v.at.camera.t_cam2world;
@@ -267,12 +258,12 @@ Camera PairGenerator::screenCamera(size_t stage, const View& v, PairSample& s) c
   if (v.screenDepth[stage].data.empty()) {
     const auto t0 = Clock::now();
     caster_.renderDepth(cam, v.screenDepth[stage]);
-    s.screenSeconds += since(t0);
+    cost.screenSeconds += since(t0);
   }
   return cam;
 }
 
-void PairGenerator::renderFull(View& v, bool rgb, PairSample& s) const {
+void PairGenerator::renderFull(View& v, bool rgb, GenerationCost& cost) const {
   const auto t0 = Clock::now();
   if (rgb) {
     RenderOptions ro = options_.render;
@@ -286,17 +277,17 @@ void PairGenerator::renderFull(View& v, bool rgb, PairSample& s) const {
   } else {
     caster_.renderDepth(v.at.camera, v.depth);
   }
-  s.renderSeconds += since(t0);
+  cost.renderSeconds += since(t0);
 }
 
 // Colour for views rendered depth-first, the visibility matrix, the masks, then the views move
 // into the sample.
-void PairGenerator::finish(std::vector<View>& views, PairSample& s) const {
+void PairGenerator::finish(std::vector<View>& views, PairSample& s, GenerationCost& cost) const {
   const int V = static_cast<int>(views.size());
   for (View& v : views) {
     if (!v.rgb.data.empty()) continue;
     ImageF depth = std::move(v.depth);
-    renderFull(v, true, s);
+    renderFull(v, true, cost);
     v.depth = std::move(depth);
   }
   const auto t0 = Clock::now();
@@ -318,7 +309,7 @@ void PairGenerator::finish(std::vector<View>& views, PairSample& s) const {
     }
   }
   if (options_.covisMasks) makeMasks(views, s);
-  s.covisSeconds += since(t0);
+  cost.covisSeconds += since(t0);
   for (View& v : views) {
     s.camera.push_back(v.at.camera);
     s.orientation.push_back(v.at.orientation);

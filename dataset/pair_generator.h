@@ -98,6 +98,16 @@ struct PairSample {
   // [V] [H, W, 1] when PairOptions::covisMasks: view k > 0: its pixels seen by view 0; view 0: its
   // pixels seen by at least one other view (with V = 2, the pixels of each seen by the other).
   std::vector<Image8> covisMask;
+  // covis of every candidate tried for the sample (screened ones: their estimate), as its record
+  // keeps them
+  std::vector<float> candidateCovis;
+
+  int views() const { return static_cast<int>(camera.size()); }
+};
+
+// What one generate() call spent, with or without a sample: run statistics, kept apart from the
+// sample.
+struct GenerationCost {
   std::vector<float> candidateCovis;  // covis of every candidate tried (screened ones: estimate)
   size_t screened = 0;                // candidates and references turned down by screening
   size_t falseRejections = 0;         // of those, the ones full resolution would have kept (audit)
@@ -105,8 +115,6 @@ struct PairSample {
   double screenSeconds = 0;           // screening: low-resolution renders and covis estimates
   double covisSeconds = 0;
   double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
-
-  int views() const { return static_cast<int>(camera.size()); }
 };
 
 class PairGenerator {
@@ -116,31 +124,30 @@ class PairGenerator {
                 const PairOptions& options);
 
   // The sample of `index`, or nullopt when none was found within the attempt limits.
-  // `attempt`, when given, receives what the call spent either way, without views: the covis of
-  // every candidate tried, the screening counts and the times.
+  // `spent`, when given, receives what the call cost either way.
   std::optional<PairSample> generate(uint64_t seed, uint64_t index,
-                                     PairSample* attempt = nullptr) const;
+                                     GenerationCost* spent = nullptr) const;
 
   const PairOptions& options() const { return options_; }
 
  private:
   struct View;
-  std::optional<View> referenceView(Rng& rng, PairSample& s) const;
+  std::optional<View> referenceView(Rng& rng, GenerationCost& cost) const;
   std::optional<View> otherView(const View& ref, const Eigen::Vector3d& target, Rng& rng,
-                                PairSample& s) const;
+                                GenerationCost& cost) const;
   // One screening pass: the intrinsics it renders with, and how far outside the band its covis
   // estimate may fall.
   struct ScreenStage {
     Camera intrinsics;
     double covisMargin;
   };
-  bool screenedOut(const View* ref, View& v, PairSample& s) const;
-  bool outOfFrame(const View& ref, const View& v, PairSample& s) const;
-  bool failsStage(size_t stage, const View* ref, View& v, PairSample& s) const;
-  Camera screenCamera(size_t stage, const View& v, PairSample& s) const;
-  void renderFull(View& v, bool rgb, PairSample& s) const;
+  bool screenedOut(const View* ref, View& v, GenerationCost& cost) const;
+  bool outOfFrame(const View& ref, const View& v, GenerationCost& cost) const;
+  bool failsStage(size_t stage, const View* ref, View& v, GenerationCost& cost) const;
+  Camera screenCamera(size_t stage, const View& v, GenerationCost& cost) const;
+  void renderFull(View& v, bool rgb, GenerationCost& cost) const;
   bool inBand(double covis) const;
-  void finish(std::vector<View>& views, PairSample& s) const;
+  void finish(std::vector<View>& views, PairSample& s, GenerationCost& cost) const;
   void makeMasks(const std::vector<View>& views, PairSample& s) const;
 
   const Scene& scene_;

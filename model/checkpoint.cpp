@@ -769,8 +769,7 @@ void loadStateDictStrict(CroCoNet& model, const std::map<std::string, torch::Ten
 void checkConfigAgainstState(const CroCoConfig& c,
                              const std::map<std::string, torch::Tensor>& state,
                              const std::string& source) {
-  auto expect = [&](const std::string& key, std::vector<int64_t> shape,
-                    const std::string& fields) {
+  auto expect = [&](const std::string& key, std::vector<int64_t> shape, const std::string& fields) {
     auto it = state.find(key);
     if (it == state.end()) throw Error(source, "checkpoint has no '" + key + "'");
     if (it->second.sizes() != c10::IntArrayRef(shape)) {

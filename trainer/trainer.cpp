@@ -121,8 +121,9 @@ double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs
 
 void TrainConfig::validate() const {
   if (shards.empty() && crocoDir.empty() && live.empty())
-    throw OptionError("data", "give a data source: shards, a CroCo folder or live scenes (or "
-                              "several, with weights)");
+    throw OptionError("data",
+                      "give a data source: shards, a CroCo folder or live scenes (or "
+                      "several, with weights)");
   if (amp != "bf16" && amp != "fp16" && amp != "none")
     throw OptionError("amp", "mixed precision must be bf16, fp16 or none, not '" + amp + "'");
   if (out.empty()) throw OptionError("out", "an output folder is required");
@@ -162,7 +163,6 @@ class StopSignals {
   using Handler = void (*)(int);
   Handler oldInt_, oldTerm_;
 };
-
 
 // One run of runPretrain. Its stages, in order: the constructor (device and output folder),
 // openDataSources, buildModelAndOptimizer, resumeOrStartLog, startLoaders, trainSteps and
@@ -325,8 +325,9 @@ class Pretraining {
   void restoreCheckpoint() {
     const Checkpoint ck = loadCheckpoint(ckptPath_);
     if (ck.hasArgs && configFromJson(ck.args, ckptPath_).enc_embed_dim != c_.model.enc_embed_dim)
-      throw Error(ckptPath_, "checkpoint was trained with other hyper-parameters than the model "
-                             "config");
+      throw Error(ckptPath_,
+                  "checkpoint was trained with other hyper-parameters than the model "
+                  "config");
     loadStateDictStrict(model_, ck.model, ckptPath_);
     restoreOptimizer(*opt_, ordered_, ck.extraTensors, ckptPath_);
     iter_ = ck.extra.value("step", int64_t{0});

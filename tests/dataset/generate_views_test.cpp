@@ -70,11 +70,12 @@ std::vector<double> acceptedCovis(const Scene& scene, const RayCaster& caster,
   const PairGenerator gen(scene, caster, sampler, o);
   std::vector<double> out;
   for (int i = 0; i < n; ++i) {
-    const auto s = gen.generate(11, i);
+    GenerationCost cost;
+    const auto s = gen.generate(11, i, &cost);
     if (!s) continue;
     out.push_back(s->covis[1].covis);
-    if (screened) *screened += s->screened;
-    if (falseRejections) *falseRejections += s->falseRejections;
+    if (screened) *screened += cost.screened;
+    if (falseRejections) *falseRejections += cost.falseRejections;
   }
   return out;
 }
@@ -187,22 +188,20 @@ TEST(Screening, AnIndexWithoutASampleStillReportsWhatItSpent) {
   o.maxAttempts = 10;
   o.maxReferences = 2;
   const PairGenerator gen(room.scene, room.caster, room.sampler, o);
-  PairSample spent;
+  GenerationCost spent;  // run statistics, apart from the sample
   EXPECT_FALSE(gen.generate(3, 0, &spent).has_value());
   EXPECT_GT(spent.candidateCovis.size(), 0u);
   EXPECT_GT(spent.screened, 0u);
   EXPECT_GT(spent.screenSeconds, 0.0);
   EXPECT_GE(spent.totalSeconds, spent.renderSeconds + spent.screenSeconds + spent.covisSeconds);
-  EXPECT_TRUE(spent.rgb.empty());
-  // With a sample, `spent` holds the sample's own figures.
+  // With a sample, `spent` holds what making it cost, and the sample records its candidates.
   o.minCovis = 0.5;
   const PairGenerator ok(room.scene, room.caster, room.sampler, o);
   const std::optional<PairSample> sample = ok.generate(3, 0, &spent);
   ASSERT_TRUE(sample.has_value());
   EXPECT_EQ(spent.candidateCovis, sample->candidateCovis);
-  EXPECT_EQ(spent.screened, sample->screened);
-  EXPECT_EQ(spent.renderSeconds, sample->renderSeconds);
-  EXPECT_EQ(spent.totalSeconds, sample->totalSeconds);
+  EXPECT_GT(spent.renderSeconds, 0.0);
+  EXPECT_GE(spent.totalSeconds, spent.renderSeconds + spent.screenSeconds + spent.covisSeconds);
 }
 
 TEST(Screening, AuditChangesNoOutputAndCountsFalseRejections) {
