@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstddef>
 
 #include "render/mesh.h"
 #include "render/texture_kernel.h"
@@ -161,10 +162,31 @@ PAIRCAST_AVX2 inline void transpose8(const __m256 (&r)[8], __m256 (&out)[8]) {
   }
 }
 
-// Each lane's ShadeTriangle, one vector per field. f: normal x y z, texture, colour, albedo r g b;
-// g: uv0, duv1, duv2 (x y each), texelsPerMetre, padding.
+// Where ShadeTriangle's fields lie in its 16 words (floats, or 32-bit integers read as floats),
+// as Records holds them: words 0-7 in f, 8-15 in g.
+constexpr int wordOf(size_t offset) {
+  return static_cast<int>(offset / sizeof(float));
+}
+constexpr int kNormalWord = wordOf(offsetof(ShadeTriangle, normal));          // x y z
+constexpr int kTextureWord = wordOf(offsetof(ShadeTriangle, texture));        // int32
+constexpr int kColourWord = wordOf(offsetof(ShadeTriangle, colour));          // int32
+constexpr int kAlbedoWord = wordOf(offsetof(ShadeTriangle, surface.albedo));  // r g b
+constexpr int kUv0Word = wordOf(offsetof(ShadeTriangle, surface.uv0));        // u v
+constexpr int kDuv1Word = wordOf(offsetof(ShadeTriangle, surface.duv1));      // u v
+constexpr int kDuv2Word = wordOf(offsetof(ShadeTriangle, surface.duv2));      // u v
+constexpr int kTexelsPerMetreWord = wordOf(offsetof(ShadeTriangle, surface.texelsPerMetre));
+static_assert(sizeof(ShadeTriangle) == 16 * sizeof(float));
+static_assert(sizeof(Eigen::Vector3f) == 3 * sizeof(float));
+static_assert(sizeof(int32_t) == sizeof(float) && sizeof(ShadeTriangle::Colour) == sizeof(float));
+static_assert(kNormalWord + 3 <= 8 && kTextureWord < 8 && kColourWord < 8 && kAlbedoWord + 3 <= 8,
+              "the fields that every packet reads lie in f");
+static_assert(ShadeTriangle::kFlat == 0, "packetTextures tests the colour words against 0");
+
+// Each lane's ShadeTriangle, one vector per word: f holds words 0-7, g words 8-15. Fields are
+// read as word(k...Word above), never by position.
 struct Records {
   __m256 f[8], g[8];
+  PAIRCAST_AVX2 __m256 word(int k) const { return k < 8 ? f[k] : g[k - 8]; }
 };
 
 // When the lanes that hit share one triangle (most packets), its record broadcast, and the
@@ -172,7 +194,6 @@ struct Records {
 // that missed read triangle 0.
 PAIRCAST_AVX2 inline const ShadeTriangle* loadRecords(const ShadeScene& scene, const RayLanes& p,
                                                       __m256 hit, uint32_t hits, Records& r) {
-  static_assert(sizeof(ShadeTriangle) == 16 * sizeof(float));
   alignas(32) uint32_t prim[kLanes];
   const __m256i ids = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p.prim)),
                                        _mm256_castps_si256(hit));
@@ -256,10 +277,11 @@ PAIRCAST_AVX2 inline bool packetTextures(const ShadeScene& scene, const ShadeTri
     return true;
   }
   const __m256i hit = _mm256_castps_si256(q.hit);
-  const __m256i colour = _mm256_and_si256(_mm256_castps_si256(r.f[4]), hit);
+  const __m256i colour = _mm256_and_si256(_mm256_castps_si256(r.word(kColourWord)), hit);
   if (!_mm256_testz_si256(colour, colour)) return false;  // a lane is not kFlat (0)
-  const __m256i ids = _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.f[3]), hit),
-                                      _mm256_andnot_si256(hit, _mm256_set1_epi32(-1)));
+  const __m256i ids =
+      _mm256_or_si256(_mm256_and_si256(_mm256_castps_si256(r.word(kTextureWord)), hit),
+                      _mm256_andnot_si256(hit, _mm256_set1_epi32(-1)));
   textured = _mm256_castsi256_ps(_mm256_cmpgt_epi32(ids, _mm256_set1_epi32(-1)));
   splitTextures(scene, ids, _mm256_movemask_ps(textured), q);
   return true;
@@ -280,14 +302,15 @@ PAIRCAST_AVX2 bool prepare(const ShadeScene& scene, const RayLanes& p, const Pac
   if (!packetTextures(scene, triangle, r, hits, q, textured)) return false;
   for (int k = 0; k < q.textures; ++k)
     if (!avx2::fitsTextureKernel(*q.texture[k])) return false;
-  for (int c = 0; c < 3; ++c) q.albedo[c] = r.f[5 + c];
-  const __m256 n[3] = {r.f[0], r.f[1], r.f[2]};
-  q.lit = lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
-                    _mm256_loadu_ps(p.t), _mm256_and_ps(r.g[6], textured), light);
+  for (int c = 0; c < 3; ++c) q.albedo[c] = r.word(kAlbedoWord + c);
+  const __m256 n[3] = {r.word(kNormalWord), r.word(kNormalWord + 1), r.word(kNormalWord + 2)};
+  q.lit =
+      lightAvx2(n, _mm256_loadu_ps(p.dirX), _mm256_loadu_ps(p.dirY), _mm256_loadu_ps(p.dirZ),
+                _mm256_loadu_ps(p.t), _mm256_and_ps(r.word(kTexelsPerMetreWord), textured), light);
   if (!q.textures) return true;
   const __m256 bu = _mm256_loadu_ps(p.u), bv = _mm256_loadu_ps(p.v);
-  q.u = interpolate(r.g[0], r.g[2], r.g[4], bu, bv);
-  q.v = interpolate(r.g[1], r.g[3], r.g[5], bu, bv);
+  q.u = interpolate(r.word(kUv0Word), r.word(kDuv1Word), r.word(kDuv2Word), bu, bv);
+  q.v = interpolate(r.word(kUv0Word + 1), r.word(kDuv1Word + 1), r.word(kDuv2Word + 1), bu, bv);
   return true;
 }
 
