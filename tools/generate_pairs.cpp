@@ -120,8 +120,6 @@ int main(int argc, char** argv) {
     cfg.pair.covis.normalize =
         normalize == "all" ? CovisOptions::Normalize::All : CovisOptions::Normalize::Valid;
     cfg.progress = !quiet;
-    if (cfg.pair.minCovis > cfg.pair.maxCovis)
-      throw Error("--min-covis must not exceed --max-covis");
     nlohmann::json summary = runGenerate(cfg);
     if (report) {
       ReportOptions ro;

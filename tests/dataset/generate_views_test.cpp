@@ -2,8 +2,11 @@
 // journal, and the command's exit status.
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
@@ -371,6 +374,41 @@ TEST(Journal, ShardRunsLeaveFewFilesAndResumeFromATornLine) {
 
 int run(const std::vector<std::string>& args) {
   return testing::waitProcess(testing::spawnProcess(args));
+}
+
+TEST(GeneratePairsCli, OptionErrorsNameTheFlagAndTheRuleOnce) {
+  const std::string dir = testing::scratchDir("flagnames");
+  const std::string room = writeRoom(dir);
+  auto stderrOf = [&](const std::string& extra, int* status) {
+    const std::string log = dir + "/stderr.txt";
+    const std::string cmd =
+        tool() + " --scenes " + room + " --out " + dir + "/o --quiet " + extra + " 2> " + log;
+    *status = WEXITSTATUS(std::system(cmd.c_str()));
+    return readFile(log);
+  };
+  int status = 0;
+  // The library's rule (PairOptions::validate) with the command's flag in front of it.
+  std::string err = stderrOf("--resolution 8", &status);
+  EXPECT_EQ(status, 2);
+  EXPECT_NE(err.find("generate_pairs: error: --resolution: resolution must be in 16..4096 pixels, "
+                     "got 8"),
+            std::string::npos)
+      << err;
+  err = stderrOf("--min-covis 0.9 --max-covis 0.2", &status);
+  EXPECT_EQ(status, 2);
+  EXPECT_NE(err.find("--min-covis: the covis band must satisfy 0 <= min_covis <= max_covis <= 1"),
+            std::string::npos)
+      << err;
+  // The library's own message names no flag.
+  PairOptions o;
+  o.resolution = 8;
+  EXPECT_ERROR_CONTAINS(o.validate(), "resolution must be in 16..4096 pixels, got 8");
+  try {
+    o.validate();
+  } catch (const OptionError& e) {
+    EXPECT_EQ(e.field(), "resolution");
+    EXPECT_EQ(std::string(e.what()).find("--"), std::string::npos) << e.what();
+  }
 }
 
 TEST(GeneratePairsCli, ExitStatusSaysWhenScenesWereSkipped) {

@@ -58,6 +58,11 @@ def test_depth_that_does_not_fit_its_camera(random_views):
 def test_bad_stream_options():
     with pytest.raises(paircast.Error, match="covis band"):
         paircast.PairStream([str(ROOM)], min_covis=0.8, max_covis=0.2)
+    # The same rule as generate_pairs' (PairOptions::validate), in keyword terms, no flags.
+    with pytest.raises(paircast.Error, match=r"^resolution must be in 16\.\.4096 pixels, got 8$"):
+        paircast.PairStream([str(ROOM)], resolution=8)
+    with pytest.raises(paircast.Error, match=r"^hfov must be in \[1, 179\] degrees"):
+        paircast.PairStream([str(ROOM)], hfov=0.5)
     with pytest.raises(paircast.Error, match="part"):
         paircast.PairStream([str(ROOM)], start=2, step=2)
 
