@@ -10,11 +10,11 @@
 #include <filesystem>
 #include <string>
 
-#include <jpeglib.h>
 
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
+#include "util/jpeg_errors.h"
 
 namespace paircast {
 namespace {
@@ -25,30 +25,13 @@ const char* const kFullBuild =
     "needs the full build (this one was configured with PAIRCAST_WITH_RENDER=OFF)";
 
 
-// libjpeg reports errors through error_exit, which must not return: it longjmps back here.
-struct JpegError {
-  jpeg_error_mgr mgr;
-  std::jmp_buf jump;
-  char message[JMSG_LENGTH_MAX];
-};
-
-void onJpegError(j_common_ptr cinfo) {
-  auto* err = reinterpret_cast<JpegError*>(cinfo->err);
-  (*cinfo->err->format_message)(cinfo, err->message);
-  std::longjmp(err->jump, 1);
-}
-
-void onJpegWarning(j_common_ptr, int) {}  // corrupt-data warnings: the decode goes on
-
 // Decodes into a malloc'd buffer (no C++ object lives across setjmp). Returns an empty string on
 // success, else libjpeg's message.
 std::string decodeJpeg(const unsigned char* data, size_t size, int channels, int* width,
                        int* height, unsigned char** pixels) {
   jpeg_decompress_struct cinfo;
-  JpegError err;
-  cinfo.err = jpeg_std_error(&err.mgr);
-  err.mgr.error_exit = onJpegError;
-  err.mgr.emit_message = onJpegWarning;
+  jpeg::ErrorManager err;
+  cinfo.err = jpeg::install(err, jpeg::onMessageLenient);  // corrupt data: decode what is there
   unsigned char* volatile out = nullptr;
   if (setjmp(err.jump)) {
     std::free(out);
@@ -90,9 +73,8 @@ std::string decodeJpeg(const unsigned char* data, size_t size, int channels, int
 std::string encodeJpeg(const Image8& image, int quality, unsigned char** bytes,
                        unsigned long* size) {
   jpeg_compress_struct cinfo;
-  JpegError err;
-  cinfo.err = jpeg_std_error(&err.mgr);
-  err.mgr.error_exit = onJpegError;
+  jpeg::ErrorManager err;
+  cinfo.err = jpeg::install(err, jpeg::onMessageLenient);
   if (setjmp(err.jump)) {
     jpeg_destroy_compress(&cinfo);
     return err.message;

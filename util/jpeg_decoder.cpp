@@ -1,14 +1,11 @@
 #include "util/jpeg_decoder.h"
 
 #include <algorithm>
-#include <csetjmp>
-#include <cstdio>  // before jpeglib.h, which uses FILE
 #include <cstdlib>
 #include <cstring>
 
-#include <jpeglib.h>
-
 #include "util/error.h"
+#include "util/jpeg_errors.h"
 
 namespace paircast {
 namespace {
@@ -16,26 +13,6 @@ namespace {
 // The most pixels a JPEG may claim: a few bytes of header can claim any size, and shards come
 // from downloads.
 constexpr uint64_t kMaxPixels = uint64_t(1) << 28;
-
-// libjpeg reports errors through error_exit, which must not return: it longjmps back to the
-// setjmp of the function that decodes, where no C++ object with a destructor is alive.
-struct JpegError {
-  jpeg_error_mgr mgr;
-  std::jmp_buf jump;
-  char message[JMSG_LENGTH_MAX];
-};
-
-void onJpegError(j_common_ptr cinfo) {
-  auto* err = reinterpret_cast<JpegError*>(cinfo->err);
-  (*cinfo->err->format_message)(cinfo, err->message);
-  std::longjmp(err->jump, 1);
-}
-
-// libjpeg's warnings are corrupt data (a premature end fills the rest with grey): errors here,
-// so that a damaged view is refused rather than trained on. Trace messages (level > 0) pass.
-void onJpegMessage(j_common_ptr cinfo, int level) {
-  if (level < 0) onJpegError(cinfo);
-}
 
 // (x / 255 - mean) / std in float32, as torchvision's ToTensor and Normalize compute it.
 struct NormalizeTable {
@@ -76,10 +53,8 @@ void storeRow(const uint8_t* src, int y, const CropBox& box, PixelLayout layout,
 std::string decode(const uint8_t* data, size_t size, const CropBox* box, PixelLayout layout,
                    void* out, JpegSize* headerOnly) {
   jpeg_decompress_struct cinfo;
-  JpegError err;
-  cinfo.err = jpeg_std_error(&err.mgr);
-  err.mgr.error_exit = onJpegError;
-  err.mgr.emit_message = onJpegMessage;
+  jpeg::ErrorManager err;
+  cinfo.err = jpeg::install(err, jpeg::onMessageStrict);
   uint8_t* volatile rowBuffer = nullptr;
   if (setjmp(err.jump)) {
     std::free(rowBuffer);
