@@ -13,6 +13,7 @@
 #include "dataset/shard.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/html.h"
 #include "util/plot.h"
 
 namespace paircast {
@@ -76,35 +77,65 @@ struct Samples {
   }
 };
 
-std::vector<PairRecord> readRecords(const std::string& dir, const std::string& keysFile,
-                                    Samples* samples) {
+// The pairs of tar shards (samples with two views), in file order.
+std::vector<PairRecord> readShardRecords(const std::vector<std::string>& shards,
+                                         const std::set<std::string>& keys, Samples* samples) {
   std::vector<PairRecord> out;
-  const std::set<std::string> keys = readKeys(keysFile);
-  const auto shards = globFiles((fs::path(dir) / "*.tar").string());
-  if (!shards.empty()) {
-    for (const auto& shard : shards) {
-      readShard(
-          shard,
-          [&](ShardSample&& s) {
-            if (!keys.empty() && !keys.count(s.key)) return;
-            if (!s.record.contains("camera2")) return;  // a one-view sample is no pair
-            PairRecord r;
-            r.key = s.key;
-            r.scene = s.record.value("scene", std::string("?"));
-            r.covis = s.record.value("covis", 0.0);
-            r.camera[0] = cameraFromJson(s.record.at("camera1"), shard + ":" + s.key);
-            r.camera[1] = cameraFromJson(s.record.at("camera2"), shard + ":" + s.key);
-            if (samples && samples->wants(r.key, r.covis))
-              samples->add(r, std::string(s.jpeg[0].begin(), s.jpeg[0].end()),
-                           std::string(s.jpeg[1].begin(), s.jpeg[1].end()));
-            out.push_back(std::move(r));
-          },
-          [&](const std::string& why) {
-            std::fprintf(stderr, "dataset_report: warning: %s\n", why.c_str());
-          });
-    }
-    return out;
+  for (const auto& shard : shards) {
+    readShard(
+        shard,
+        [&](ShardSample&& s) {
+          if (!keys.empty() && !keys.count(s.key)) return;
+          if (!s.record.contains("camera2")) return;  // a one-view sample is no pair
+          PairRecord r;
+          r.key = s.key;
+          r.scene = s.record.value("scene", std::string("?"));
+          r.covis = s.record.value("covis", 0.0);
+          r.camera[0] = cameraFromJson(s.record.at("camera1"), shard + ":" + s.key);
+          r.camera[1] = cameraFromJson(s.record.at("camera2"), shard + ":" + s.key);
+          if (samples && samples->wants(r.key, r.covis))
+            samples->add(r, std::string(s.jpeg[0].begin(), s.jpeg[0].end()),
+                         std::string(s.jpeg[1].begin(), s.jpeg[1].end()));
+          out.push_back(std::move(r));
+        },
+        [&](const std::string& why) {
+          std::fprintf(stderr, "dataset_report: warning: %s\n", why.c_str());
+        });
   }
+  return out;
+}
+
+// Pair `index` of a CroCo metadata.json's multiviews entry `v`. Throws paircast::Error naming
+// the scene's metadata.json when a field is missing.
+PairRecord crocoRecord(const std::string& dir, const std::string& scene, const std::string& index,
+                       const nlohmann::json& v) {
+  PairRecord r;
+  r.scene = scene;
+  r.key = scene + "/" + index;
+  try {
+    r.covis = v.at("covisibility_ratios").at(1).get<double>();
+    for (int k = 0; k < 2; ++k) {
+      const auto& p = v.at("positions").at(k);
+      const auto& q = v.at("orientations").at(k);
+      const Eigen::Quaterniond h(q.at(0).get<double>(), q.at(1).get<double>(),
+                                 q.at(2).get<double>(), q.at(3).get<double>());
+      // Habitat's camera axes (x right, y up, z back) back to OpenCV's.
+      r.camera[k].R_cam2world =
+          h.normalized().toRotationMatrix() * Eigen::Vector3d(1, -1, -1).asDiagonal();
+      r.camera[k].t_cam2world = {p.at(0).get<double>(), p.at(1).get<double>(),
+                                 p.at(2).get<double>()};
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw Error((fs::path(dir) / scene / "metadata.json").string(),
+                "pair " + index + ": " + e.what());
+  }
+  return r;
+}
+
+// The pairs of CroCo's folder layout: pairs.txt, and each scene's metadata.json.
+std::vector<PairRecord> readCrocoRecords(const std::string& dir, const std::set<std::string>& keys,
+                                         Samples* samples) {
+  std::vector<PairRecord> out;
   const std::string pairsTxt = (fs::path(dir) / "pairs.txt").string();
   if (!fs::exists(pairsTxt))
     throw Error(dir, "holds neither *.tar shards nor a CroCo layout (pairs.txt)");
@@ -126,27 +157,7 @@ std::vector<PairRecord> readRecords(const std::string& dir, const std::string& k
     }
     const auto& mv = meta[scene].value("multiviews", nlohmann::json::object());
     if (!mv.contains(index)) continue;
-    const auto& v = mv[index];
-    PairRecord r;
-    r.scene = scene;
-    r.key = scene + "/" + index;
-    try {
-      r.covis = v.at("covisibility_ratios").at(1).get<double>();
-      for (int k = 0; k < 2; ++k) {
-        const auto& p = v.at("positions").at(k);
-        const auto& q = v.at("orientations").at(k);
-        const Eigen::Quaterniond h(q.at(0).get<double>(), q.at(1).get<double>(),
-                                   q.at(2).get<double>(), q.at(3).get<double>());
-        // Habitat's camera axes (x right, y up, z back) back to OpenCV's.
-        r.camera[k].R_cam2world =
-            h.normalized().toRotationMatrix() * Eigen::Vector3d(1, -1, -1).asDiagonal();
-        r.camera[k].t_cam2world = {p.at(0).get<double>(), p.at(1).get<double>(),
-                                   p.at(2).get<double>()};
-      }
-    } catch (const nlohmann::json::exception& e) {
-      throw Error((fs::path(dir) / scene / "metadata.json").string(),
-                  "pair " + index + ": " + e.what());
-    }
+    PairRecord r = crocoRecord(dir, scene, index, mv[index]);
     if (!keys.empty() && !keys.count(r.key)) continue;
     if (samples && samples->wants(r.key, r.covis))
       samples->add(r, readFile((fs::path(dir) / a).string()),
@@ -156,10 +167,130 @@ std::vector<PairRecord> readRecords(const std::string& dir, const std::string& k
   return out;
 }
 
+// Shards when the folder has any, else CroCo's layout.
+std::vector<PairRecord> readRecords(const std::string& dir, const std::string& keysFile,
+                                    Samples* samples) {
+  const std::set<std::string> keys = readKeys(keysFile);
+  const auto shards = globFiles((fs::path(dir) / "*.tar").string());
+  if (!shards.empty()) return readShardRecords(shards, keys, samples);
+  return readCrocoRecords(dir, keys, samples);
+}
+
 std::string fmt(double v, const char* f = "%.3f") {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
+  return html::number(v, f);
+}
+
+// Pairs and the sum of their covis, per scene (in name order).
+using PerScene = std::map<std::string, std::pair<int64_t, double>>;
+
+PerScene countPerScene(const std::vector<PairRecord>& pairs) {
+  PerScene perScene;
+  for (const auto& p : pairs) perScene[p.scene].first++, perScene[p.scene].second += p.covis;
+  return perScene;
+}
+
+// The covis histogram (20 bins), as files/covis_histogram.svg; returns the counts.
+std::vector<double> writeCovisHistogram(const std::vector<PairRecord>& pairs,
+                                        const fs::path& files) {
+  std::vector<double> edges, counts(20, 0.0);
+  for (int i = 0; i <= 20; ++i) edges.push_back(i / 20.0);
+  for (const auto& p : pairs) counts[binOf(p.covis, 20)] += 1;
+  writeFileAtomic((files / "covis_histogram.svg").string(),
+                  plot::histogram(edges, counts, {"Co-visibility", "covis", "pairs"}));
+  return counts;
+}
+
+// The joint distribution of distance and angle between the views, as files/distance_angle.svg.
+void writeDistanceAngle(const std::vector<PairRecord>& pairs, const fs::path& files) {
+  double maxDist = 0.5;
+  for (const auto& p : pairs) maxDist = std::max(maxDist, viewDistance(p));
+  maxDist = std::ceil(maxDist * 2) / 2;
+  const int nx = 24, ny = 18;
+  std::vector<double> xe, ye;
+  for (int i = 0; i <= nx; ++i) xe.push_back(maxDist * i / nx);
+  for (int i = 0; i <= ny; ++i) ye.push_back(180.0 * i / ny);
+  std::vector<std::vector<double>> joint(ny, std::vector<double>(nx, 0.0));
+  for (const auto& p : pairs) {
+    const int cx = std::clamp(static_cast<int>(viewDistance(p) / maxDist * nx), 0, nx - 1);
+    const int cy = std::clamp(static_cast<int>(viewAngleDegrees(p) / 180.0 * ny), 0, ny - 1);
+    joint[cy][cx] += 1;
+  }
+  writeFileAtomic((files / "distance_angle.svg").string(),
+                  plot::heatmap(xe, ye, joint,
+                                {"Distribution of viewpoint pairs", "distance between views (m)",
+                                 "angle between optical axes (deg)"}));
+}
+
+// The second views relative to the first on the floor plane, as files/relative_positions.svg.
+void writeRelativePositions(const std::vector<PairRecord>& pairs, const fs::path& files) {
+  std::vector<plot::Arrow> arrows;
+  const size_t step = std::max<size_t>(1, pairs.size() / 2000);  // at most ~2000 marks
+  for (size_t i = 0; i < pairs.size(); i += step) {
+    const FloorRelative r = floorRelative(pairs[i]);
+    arrows.push_back({r.x, r.y, r.headingX, r.headingY, pairs[i].covis});
+  }
+  writeFileAtomic((files / "relative_positions.svg").string(),
+                  plot::cameraPlot(arrows, {"Second view relative to the first (floor plane)",
+                                            "right (m)", "forward (m)", 460, 460}));
+}
+
+// The page's styles beyond the shared ones: the sample grid and the figures.
+constexpr const char* kReportStyle =
+    ".grid td{text-align:center;vertical-align:top}.grid "
+    "img{width:96px;height:auto;display:inline-block;margin:1px}figure{display:inline-block;"
+    "margin:6px}";
+
+// Marks the page once every image has loaded (data-images="ok/total"), for automated checks.
+constexpr const char* kImagesLoadedScript =
+    "<script>\n// Marks the page once every image has loaded, for automated "
+    "checks.\nwindow.addEventListener('load', function () {\n  var imgs = "
+    "document.images, ok = 0;\n  for (var i = 0; i < imgs.length; i++) if (imgs[i].complete && "
+    "imgs[i].naturalWidth > 0) ok++;\n  document.body.setAttribute('data-images', ok + '/' + "
+    "imgs.length);\n});\n</script>\n";
+
+// The three figures written by the functions above.
+std::string figures() {
+  return "<figure>" + html::image("report_files/covis_histogram.svg", "covis histogram") +
+         "</figure>\n<figure>" +
+         html::image("report_files/distance_angle.svg", "distance and angle") +
+         "</figure>\n<figure>" +
+         html::image("report_files/relative_positions.svg", "relative positions") +
+         "<figcaption>Red: the first view, looking up. Dots: second views, with their heading, "
+         "coloured by covis (dark low, yellow high).</figcaption></figure>\n";
+}
+
+std::string perSceneTable(const PerScene& perScene) {
+  std::string s =
+      html::heading(2, "Pairs per scene") + html::tableStart({"scene", "pairs", "mean covis"});
+  for (const auto& [scene, v] : perScene)
+    s += html::labelledRow(plot::escape(scene), {std::to_string(v.first), fmt(v.second / v.first)});
+  return s + html::tableEnd();
+}
+
+// The sample grid: a row per covis bin, a cell per sample pair with its two views, whose JPEGs
+// it writes into `files` (sample_<i>_<view>.jpg). Counts the pairs shown in `images`.
+std::string sampleGrid(const Samples& samples, const fs::path& files, int* images) {
+  std::string s = html::heading(2, "Sample pairs by co-visibility") + "<table class='grid'>\n";
+  int& image = *images;
+  for (int b = 0; b < samples.bins; ++b) {
+    s += "<tr><th>" + fmt(double(b) / samples.bins, "%.2f") + "&ndash;" +
+         fmt(double(b + 1) / samples.bins, "%.2f") + "</th>";
+    if (samples.byBin[b].empty()) s += "<td>(none)</td>";
+    for (const auto& sample : samples.byBin[b]) {
+      s += "<td>";
+      for (int k = 0; k < 2; ++k) {
+        const std::string name =
+            "sample_" + std::to_string(image) + "_" + std::to_string(k + 1) + ".jpg";
+        writeFileAtomic((files / name).string(), sample.jpeg[k], Durability::NoSync);
+        s += html::image("report_files/" + name, "view " + std::to_string(k + 1));
+      }
+      ++image;
+      s += "<br>covis " + fmt(sample.record.covis) + "<br><small>" +
+           plot::escape(sample.record.key) + "</small></td>";
+    }
+    s += "</tr>\n";
+  }
+  return s + html::tableEnd();
 }
 
 }  // namespace
@@ -205,104 +336,28 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
   const std::string title =
       o.title.empty() ? fs::absolute(o.dir).lexically_normal().filename().string() : o.title;
 
-  // Covis histogram (20 bins).
-  std::vector<double> edges, counts(20, 0.0);
-  for (int i = 0; i <= 20; ++i) edges.push_back(i / 20.0);
+  const std::vector<double> counts = writeCovisHistogram(pairs, files);
+  writeDistanceAngle(pairs, files);
+  writeRelativePositions(pairs, files);
+  const PerScene perScene = countPerScene(pairs);
   double covisSum = 0;
-  for (const auto& p : pairs) counts[binOf(p.covis, 20)] += 1, covisSum += p.covis;
-  writeFileAtomic((files / "covis_histogram.svg").string(),
-                  plot::histogram(edges, counts, {"Co-visibility", "covis", "pairs"}));
+  for (const auto& p : pairs) covisSum += p.covis;
 
-  // Distance x angle.
-  double maxDist = 0.5;
-  for (const auto& p : pairs) maxDist = std::max(maxDist, viewDistance(p));
-  maxDist = std::ceil(maxDist * 2) / 2;
-  const int nx = 24, ny = 18;
-  std::vector<double> xe, ye;
-  for (int i = 0; i <= nx; ++i) xe.push_back(maxDist * i / nx);
-  for (int i = 0; i <= ny; ++i) ye.push_back(180.0 * i / ny);
-  std::vector<std::vector<double>> joint(ny, std::vector<double>(nx, 0.0));
-  for (const auto& p : pairs) {
-    const int cx = std::clamp(static_cast<int>(viewDistance(p) / maxDist * nx), 0, nx - 1);
-    const int cy = std::clamp(static_cast<int>(viewAngleDegrees(p) / 180.0 * ny), 0, ny - 1);
-    joint[cy][cx] += 1;
-  }
-  writeFileAtomic((files / "distance_angle.svg").string(),
-                  plot::heatmap(xe, ye, joint,
-                                {"Distribution of viewpoint pairs", "distance between views (m)",
-                                 "angle between optical axes (deg)"}));
-
-  // Relative positions on the floor plane.
-  std::vector<plot::Arrow> arrows;
-  const size_t step = std::max<size_t>(1, pairs.size() / 2000);  // at most ~2000 marks
-  for (size_t i = 0; i < pairs.size(); i += step) {
-    const FloorRelative r = floorRelative(pairs[i]);
-    arrows.push_back({r.x, r.y, r.headingX, r.headingY, pairs[i].covis});
-  }
-  writeFileAtomic((files / "relative_positions.svg").string(),
-                  plot::cameraPlot(arrows, {"Second view relative to the first (floor plane)",
-                                            "right (m)", "forward (m)", 460, 460}));
-
-  // Per scene.
-  std::map<std::string, std::pair<int64_t, double>> perScene;
-  for (const auto& p : pairs) perScene[p.scene].first++, perScene[p.scene].second += p.covis;
-
-  // The page.
-  std::string html =
-      "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>" + plot::escape(title) +
-      " - paircast dataset report</title>\n<style>body{font-family:sans-serif;margin:24px;"
-      "max-width:1200px}table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px "
-      "8px;text-align:right}th{background:#f3f3f3}.grid td{text-align:center;vertical-align:top}"
-      ".grid "
-      "img{width:96px;height:auto;display:inline-block;margin:1px}figure{display:inline-block;"
-      "margin:6px}"
-      "</style></head><body>\n<h1>" +
-      plot::escape(title) + "</h1>\n<p>" + std::to_string(pairs.size()) + " pairs from " +
-      std::to_string(perScene.size()) + " scene(s); mean co-visibility " +
-      fmt(covisSum / pairs.size()) + ". Source: <code>" + plot::escape(o.dir) + "</code>" +
-      (o.keysFile.empty() ? "" : " (keys from <code>" + plot::escape(o.keysFile) + "</code>)") +
-      ".</p>\n";
-  html += "<figure><img src='report_files/covis_histogram.svg' alt='covis histogram'></figure>\n";
-  html += "<figure><img src='report_files/distance_angle.svg' alt='distance and angle'></figure>\n";
-  html +=
-      "<figure><img src='report_files/relative_positions.svg' alt='relative positions'>"
-      "<figcaption>Red: the first view, looking up. Dots: second views, with their heading, "
-      "coloured by covis (dark low, yellow high).</figcaption></figure>\n";
-  html +=
-      "<h2>Pairs per scene</h2>\n<table><tr><th>scene</th><th>pairs</th><th>mean "
-      "covis</th></tr>\n";
-  for (const auto& [scene, v] : perScene)
-    html += "<tr><td style='text-align:left'>" + plot::escape(scene) + "</td><td>" +
-            std::to_string(v.first) + "</td><td>" + fmt(v.second / v.first) + "</td></tr>\n";
-  html += "</table>\n<h2>Sample pairs by co-visibility</h2>\n<table class='grid'>\n";
+  // The page (a line break before the styles, as it always had).
+  std::string page =
+      html::pageStart(plot::escape(title) + " - paircast dataset report",
+                      "\n" + html::style(1200, kReportStyle)) +
+      html::heading(1, plot::escape(title)) +
+      html::paragraph(
+          std::to_string(pairs.size()) + " pairs from " + std::to_string(perScene.size()) +
+          " scene(s); mean co-visibility " + fmt(covisSum / pairs.size()) + ". Source: <code>" +
+          plot::escape(o.dir) + "</code>" +
+          (o.keysFile.empty() ? "" : " (keys from <code>" + plot::escape(o.keysFile) + "</code>)") +
+          ".");
+  page += figures() + perSceneTable(perScene);
   int image = 0;
-  for (int b = 0; b < bins; ++b) {
-    html += "<tr><th>" + fmt(double(b) / bins, "%.2f") + "&ndash;" +
-            fmt(double(b + 1) / bins, "%.2f") + "</th>";
-    if (samples.byBin[b].empty()) html += "<td>(none)</td>";
-    for (const auto& sample : samples.byBin[b]) {
-      const PairRecord& rec = sample.record;
-      const auto& jpegs = sample.jpeg;
-      html += "<td>";
-      for (int k = 0; k < 2; ++k) {
-        const std::string name =
-            "sample_" + std::to_string(image) + "_" + std::to_string(k + 1) + ".jpg";
-        writeFileAtomic((files / name).string(), jpegs[k], Durability::NoSync);
-        html += "<img src='report_files/" + name + "' alt='view " + std::to_string(k + 1) + "'>";
-      }
-      ++image;
-      html +=
-          "<br>covis " + fmt(rec.covis) + "<br><small>" + plot::escape(rec.key) + "</small></td>";
-    }
-    html += "</tr>\n";
-  }
-  html +=
-      "</table>\n<script>\n// Marks the page once every image has loaded, for automated "
-      "checks.\nwindow.addEventListener('load', function () {\n  var imgs = "
-      "document.images, ok = 0;\n  for (var i = 0; i < imgs.length; i++) if (imgs[i].complete && "
-      "imgs[i].naturalWidth > 0) ok++;\n  document.body.setAttribute('data-images', ok + '/' + "
-      "imgs.length);\n});\n</script>\n</body></html>\n";
-  writeFileAtomic((fs::path(out) / "report.html").string(), html);
+  page += sampleGrid(samples, files, &image) + kImagesLoadedScript + html::pageEnd();
+  writeFileAtomic((fs::path(out) / "report.html").string(), page);
 
   nlohmann::json scenes = nlohmann::json::object();
   for (const auto& [scene, v] : perScene) scenes[scene] = v.first;

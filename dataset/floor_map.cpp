@@ -109,87 +109,99 @@ std::vector<bool> enclosedPoints(const std::vector<Candidate>& points, const Ray
   return enclosed;
 }
 
-}  // namespace
+// The grid of columns over the scene's horizontal extent.
+struct Grid {
+  Axes axes;
+  double cell;             // metres
+  Eigen::Vector2d origin;  // (a, b) of cell (0, 0)'s corner
+  int nA, nB;
+  float top;  // 1 m above the highest vertex, where the columns' rays start
+  size_t cells() const { return static_cast<size_t>(nA) * nB; }
+};
 
-FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptions& o) {
-  PAIRCAST_CHECK(o.cellSize > 0);
-  up_ = scene.upVector();
-  axisA_ = Eigen::Vector3f::UnitX();  // both up axes (y, z) are perpendicular to x
-  axisB_ = up_.cross(axisA_);         // right-handed (a, b, up)
-  cell_ = o.cellSize;
+Grid gridOver(const Scene& scene, const FloorOptions& o) {
+  Grid g;
+  g.axes.up = scene.upVector();
+  g.axes.a = Eigen::Vector3f::UnitX();   // both up axes (y, z) are perpendicular to x
+  g.axes.b = g.axes.up.cross(g.axes.a);  // right-handed (a, b, up)
   double aMin = 1e30, aMax = -1e30, bMin = 1e30, bMax = -1e30, hMax = -1e30;
   for (const auto& p : scene.mesh.positions) {
-    const double a = p.dot(axisA_), b = p.dot(axisB_), h = p.dot(up_);
+    const double a = p.dot(g.axes.a), b = p.dot(g.axes.b), h = p.dot(g.axes.up);
     aMin = std::min(aMin, a), aMax = std::max(aMax, a);
     bMin = std::min(bMin, b), bMax = std::max(bMax, b);
     hMax = std::max(hMax, h);
   }
   const double extent = std::max(aMax - aMin, bMax - bMin);
   // Keep the grid bounded on huge scenes: at most ~4M columns.
-  cell_ = std::max(cell_, extent / 2000.0);
-  origin_ = {aMin, bMin};
-  nA_ = std::max(1, static_cast<int>(std::ceil((aMax - aMin) / cell_)));
-  nB_ = std::max(1, static_cast<int>(std::ceil((bMax - bMin) / cell_)));
-  const size_t cells = static_cast<size_t>(nA_) * nB_;
-  const float top = static_cast<float>(hMax + 1.0);
-  const Axes axes{up_, axisA_, axisB_};
+  g.cell = std::max(o.cellSize, extent / 2000.0);
+  g.origin = {aMin, bMin};
+  g.nA = std::max(1, static_cast<int>(std::ceil((aMax - aMin) / g.cell)));
+  g.nB = std::max(1, static_cast<int>(std::ceil((bMax - bMin) / g.cell)));
+  g.top = static_cast<float>(hMax + 1.0);
+  return g;
+}
 
-  // 1. Peel each column from the top: every surface hit is a candidate.
+// Peels each column from the top: every surface a downward ray hits is a candidate, up to
+// kMaxLayers per column.
+std::vector<Candidate> peelColumns(const Grid& g, const RayCaster& caster) {
+  const size_t cells = g.cells();
+  const Eigen::Vector3f& up = g.axes.up;
   std::vector<Candidate> candidates;
-  {
-    std::vector<Ray> rays(cells);
-    std::vector<float> tStart(cells, 0.0f);
-    std::vector<Hit> hits(cells);
-    std::vector<Eigen::Vector3f> origins(cells);
-    for (int i = 0; i < nA_; ++i) {
-      for (int j = 0; j < nB_; ++j) {
-        const float a = static_cast<float>(origin_.x() + (i + 0.5) * cell_);
-        const float b = static_cast<float>(origin_.y() + (j + 0.5) * cell_);
-        origins[static_cast<size_t>(i) * nB_ + j] = a * axisA_ + b * axisB_ + top * up_;
-      }
-    }
-    std::vector<int> active(cells);
-    std::iota(active.begin(), active.end(), 0);
-    for (int layer = 0; layer < kMaxLayers && !active.empty(); ++layer) {
-      rays.resize(active.size());
-      hits.resize(active.size());
-      for (size_t k = 0; k < active.size(); ++k)
-        rays[k] = Ray{origins[active[k]], -up_, tStart[active[k]], 1e30f};
-      caster.intersect(rays.data(), hits.data(), rays.size());
-      std::vector<int> next;
-      for (size_t k = 0; k < active.size(); ++k) {
-        if (hits[k].triangle < 0) continue;
-        const int c = active[k];
-        candidates.push_back({c, origins[c] - hits[k].t * up_, 0.0f});
-        tStart[c] = hits[k].t + 1e-3f;
-        next.push_back(c);
-      }
-      active.swap(next);
+  std::vector<Ray> rays(cells);
+  std::vector<float> tStart(cells, 0.0f);
+  std::vector<Hit> hits(cells);
+  std::vector<Eigen::Vector3f> origins(cells);
+  for (int i = 0; i < g.nA; ++i) {
+    for (int j = 0; j < g.nB; ++j) {
+      const float a = static_cast<float>(g.origin.x() + (i + 0.5) * g.cell);
+      const float b = static_cast<float>(g.origin.y() + (j + 0.5) * g.cell);
+      origins[static_cast<size_t>(i) * g.nB + j] = a * g.axes.a + b * g.axes.b + g.top * up;
     }
   }
-  candidates = flatCandidates(candidates, caster, o, axes);
-  if (candidates.empty()) return;
+  std::vector<int> active(cells);
+  std::iota(active.begin(), active.end(), 0);
+  for (int layer = 0; layer < kMaxLayers && !active.empty(); ++layer) {
+    rays.resize(active.size());
+    hits.resize(active.size());
+    for (size_t k = 0; k < active.size(); ++k)
+      rays[k] = Ray{origins[active[k]], -up, tStart[active[k]], 1e30f};
+    caster.intersect(rays.data(), hits.data(), rays.size());
+    std::vector<int> next;
+    for (size_t k = 0; k < active.size(); ++k) {
+      if (hits[k].triangle < 0) continue;
+      const int c = active[k];
+      candidates.push_back({c, origins[c] - hits[k].t * up, 0.0f});
+      tStart[c] = hits[k].t + 1e-3f;
+      next.push_back(c);
+    }
+    active.swap(next);
+  }
+  return candidates;
+}
 
-  // 2. Headroom and wall clearance, by rays from each candidate.
+// The candidates with headroom and wall clearance, by rays from each: one up (its distance to
+// the first hit is the candidate's headroom), and 8 horizontal ones at 0.5 and 1.5 m that must
+// not hit within the clearance.
+std::vector<Candidate> openCandidates(std::vector<Candidate> candidates, const RayCaster& caster,
+                                      const FloorOptions& o, const Axes& axes) {
   const int kDirs = 8;
   const float heights[2] = {0.5f, 1.5f};
   const size_t perCand = 1 + 2 * kDirs;
   std::vector<Ray> rays(candidates.size() * perCand);
   std::vector<Hit> hits(rays.size());
   for (size_t k = 0; k < candidates.size(); ++k) {
-    const Eigen::Vector3f p = candidates[k].point + 0.02f * up_;
-    rays[k * perCand] = Ray{p, up_, 0.0f, 1e30f};
+    const Eigen::Vector3f p = candidates[k].point + 0.02f * axes.up;
+    rays[k * perCand] = Ray{p, axes.up, 0.0f, 1e30f};
     for (int h = 0; h < 2; ++h) {
       for (int d = 0; d < kDirs; ++d) {
         rays[k * perCand + 1 + h * kDirs + d] =
-            Ray{candidates[k].point + heights[h] * up_, axes.horizontal(d, kDirs), 0.0f,
+            Ray{candidates[k].point + heights[h] * axes.up, axes.horizontal(d, kDirs), 0.0f,
                 static_cast<float>(o.wallClearance)};
       }
     }
   }
   caster.intersect(rays.data(), hits.data(), rays.size());
   std::vector<Candidate> open;
-  size_t covered = 0;
   for (size_t k = 0; k < candidates.size(); ++k) {
     const Hit& above = hits[k * perCand];
     const float headroom = above.triangle >= 0 ? above.t : std::numeric_limits<float>::infinity();
@@ -198,39 +210,51 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
     for (size_t r = 1; r < perCand && clear; ++r) clear = hits[k * perCand + r].triangle < 0;
     if (!clear) continue;
     candidates[k].headroom = headroom;
-    covered += std::isfinite(headroom);
     open.push_back(candidates[k]);
   }
-  // A scene with a ceiling over a room's worth of open floor (minRegionArea) is an interior: then
-  // a standing point with nothing above is inside only when walls surround it (a gap in a scan's
-  // ceiling), not on a roof or the ground outside. No share of the open floor would do: a roof
-  // is about as large as the floors under it, and the ground around a house can be far larger.
-  hasCeiling_ = covered * cell_ * cell_ >= o.minRegionArea;
-  if (hasCeiling_) {
-    std::vector<Candidate> uncovered;
-    for (const Candidate& c : open)
-      if (!std::isfinite(c.headroom)) uncovered.push_back(c);
-    const std::vector<bool> enclosed = enclosedPoints(uncovered, caster, axes);
-    std::vector<Candidate> inside;
-    for (size_t k = 0, u = 0; k < open.size(); ++k) {
-      if (std::isfinite(open[k].headroom) || enclosed[u++]) inside.push_back(open[k]);
-    }
-    open.swap(inside);
-  }
-  if (open.empty()) return;
+  return open;
+}
 
-  // 3. Connected regions over 4-neighbouring cells whose floors differ less than a step.
-  std::vector<std::vector<int>> byCell(cells);
+// A scene with a ceiling over a room's worth of open floor (minRegionArea) is an interior: then
+// a standing point with nothing above is inside only when walls surround it (a gap in a scan's
+// ceiling), not on a roof or the ground outside. No share of the open floor would do: a roof
+// is about as large as the floors under it, and the ground around a house can be far larger.
+bool hasCeilingOver(const std::vector<Candidate>& open, double cell, const FloorOptions& o) {
+  size_t covered = 0;
+  for (const Candidate& c : open) covered += std::isfinite(c.headroom);
+  return covered * cell * cell >= o.minRegionArea;
+}
+
+// The points under a ceiling, and those without one that walls surround.
+std::vector<Candidate> insidePoints(const std::vector<Candidate>& open, const RayCaster& caster,
+                                    const Axes& axes) {
+  std::vector<Candidate> uncovered;
+  for (const Candidate& c : open)
+    if (!std::isfinite(c.headroom)) uncovered.push_back(c);
+  const std::vector<bool> enclosed = enclosedPoints(uncovered, caster, axes);
+  std::vector<Candidate> inside;
+  for (size_t k = 0, u = 0; k < open.size(); ++k) {
+    if (std::isfinite(open[k].headroom) || enclosed[u++]) inside.push_back(open[k]);
+  }
+  return inside;
+}
+
+// Which points lie in a region large enough to walk in: regions connect 4-neighbouring cells
+// whose floors differ less than a step, and are kept when they cover minRegionArea and
+// minRegionShare of the largest.
+std::vector<bool> inLargeRegions(const std::vector<Candidate>& open, const Grid& g,
+                                 const FloorOptions& o) {
+  std::vector<std::vector<int>> byCell(g.cells());
   for (size_t k = 0; k < open.size(); ++k) byCell[open[k].cell].push_back(static_cast<int>(k));
   std::vector<int> parent(open.size());
   std::iota(parent.begin(), parent.end(), 0);
   for (size_t k = 0; k < open.size(); ++k) {
-    const int c = open[k].cell, i = c / nB_, j = c % nB_;
+    const int c = open[k].cell, i = c / g.nB, j = c % g.nB;
     const int nbrs[2][2] = {{i + 1, j}, {i, j + 1}};
     for (const auto& n : nbrs) {
-      if (n[0] >= nA_ || n[1] >= nB_) continue;
-      for (int m : byCell[static_cast<size_t>(n[0]) * nB_ + n[1]]) {
-        if (std::abs((open[m].point - open[k].point).dot(up_)) < o.stepHeight)
+      if (n[0] >= g.nA || n[1] >= g.nB) continue;
+      for (int m : byCell[static_cast<size_t>(n[0]) * g.nB + n[1]]) {
+        if (std::abs((open[m].point - open[k].point).dot(g.axes.up)) < o.stepHeight)
           parent[findRoot(parent, m)] = findRoot(parent, static_cast<int>(k));
       }
     }
@@ -238,13 +262,44 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
   std::vector<int> regionSize(open.size(), 0);
   for (size_t k = 0; k < open.size(); ++k) ++regionSize[findRoot(parent, static_cast<int>(k))];
   const int largest = *std::max_element(regionSize.begin(), regionSize.end());
-  const double cellArea = cell_ * cell_;
+  const double cellArea = g.cell * g.cell;
   const double minCells =
       std::max(o.minRegionArea / cellArea, o.minRegionShare * static_cast<double>(largest));
+  std::vector<bool> keep(open.size());
+  for (size_t k = 0; k < open.size(); ++k)
+    keep[k] = !(regionSize[findRoot(parent, static_cast<int>(k))] < minCells);
+  return keep;
+}
 
-  cellPoints_.assign(cells, {});
+}  // namespace
+
+FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptions& o) {
+  PAIRCAST_CHECK(o.cellSize > 0);
+  const Grid grid = gridOver(scene, o);
+  up_ = grid.axes.up;
+  axisA_ = grid.axes.a;
+  axisB_ = grid.axes.b;
+  cell_ = grid.cell;
+  origin_ = grid.origin;
+  nA_ = grid.nA;
+  nB_ = grid.nB;
+
+  // 1. Every surface down each column, of which the flat ones.
+  const std::vector<Candidate> flat =
+      flatCandidates(peelColumns(grid, caster), caster, o, grid.axes);
+  if (flat.empty()) return;
+
+  // 2. Headroom and wall clearance; inside only, in an interior.
+  std::vector<Candidate> open = openCandidates(flat, caster, o, grid.axes);
+  hasCeiling_ = hasCeilingOver(open, cell_, o);
+  if (hasCeiling_) open = insidePoints(open, caster, grid.axes);
+  if (open.empty()) return;
+
+  // 3. Connected regions large enough to walk in.
+  const std::vector<bool> keep = inLargeRegions(open, grid, o);
+  cellPoints_.assign(grid.cells(), {});
   for (size_t k = 0; k < open.size(); ++k) {
-    if (regionSize[findRoot(parent, static_cast<int>(k))] < minCells) continue;
+    if (!keep[k]) continue;
     cellPoints_[open[k].cell].push_back(static_cast<int>(points_.size()));
     points_.push_back(open[k].point);
   }

@@ -328,29 +328,44 @@ void lamp(Builder& b, const Placement& p, int metal, int shade) {
   box(b, p, 0, 0, 1.4f, 0.4f, 0.3f, 0.4f, shade, 2.0f);
 }
 
-}  // namespace
+// ---- the stages of buildLayout ----
 
-Mesh buildLayout(const LayoutSpec& L) {
-  Builder b(L.seed);
-  const float H = L.height, T = 0.1f;  // wall thickness
-  const int wallMats[3] = {b.textured("plaster", 1), b.textured("wallpaper", 2),
-                           b.textured("brick", 3)};
-  const int ceiling = b.textured("plaster", 4, V3(1.0f, 1.0f, 1.0f));
-  const int wood = b.textured("wood", 5), darkWood = b.textured("wood", 6, V3(0.55f, 0.45f, 0.4f));
-  const int fabric = b.textured("fabric", 7), fabric2 = b.textured("fabric", 8);
-  const int sheet = b.textured("fabric", 9, V3(0.95f, 0.95f, 0.9f));
-  const int marble = b.textured("marble", 10);
-  const int metal = b.plain(V3(0.3f, 0.3f, 0.32f));
-  const int shade = b.textured("paper", 11, V3(1.0f, 0.95f, 0.8f));
+constexpr float kWallThickness = 0.1f;
+
+// The materials the rooms share, made first and in this order (their textures' indices and
+// seeds are part of the mesh).
+struct Materials {
+  int walls[3];  // by room index, modulo 3
+  int ceiling, wood, darkWood, fabric, fabric2, sheet, marble, metal, shade;
+};
+
+Materials sharedMaterials(Builder& b) {
+  Materials m;
+  m.walls[0] = b.textured("plaster", 1);
+  m.walls[1] = b.textured("wallpaper", 2);
+  m.walls[2] = b.textured("brick", 3);
+  m.ceiling = b.textured("plaster", 4, V3(1.0f, 1.0f, 1.0f));
+  m.wood = b.textured("wood", 5);
+  m.darkWood = b.textured("wood", 6, V3(0.55f, 0.45f, 0.4f));
+  m.fabric = b.textured("fabric", 7);
+  m.fabric2 = b.textured("fabric", 8);
+  m.sheet = b.textured("fabric", 9, V3(0.95f, 0.95f, 0.9f));
+  m.marble = b.textured("marble", 10);
+  m.metal = b.plain(V3(0.3f, 0.3f, 0.32f));
+  m.shade = b.textured("paper", 11, V3(1.0f, 0.95f, 0.8f));
+  return m;
+}
+
+// A floor per room, of its kind's texture, and one ceiling slab over the whole plan.
+void addFloorsAndCeiling(Builder& b, const LayoutSpec& L, int ceiling) {
+  const float H = L.height, T = kWallThickness;
   const std::string floorKinds[5] = {"wood", "carpet", "tiles", "wood", "tiles"};
-
   // Bounds of the whole plan.
   float minX = 1e9f, minZ = 1e9f, maxX = -1e9f, maxZ = -1e9f;
   for (const auto& r : L.rooms) {
     minX = std::min(minX, r.x0), minZ = std::min(minZ, r.z0);
     maxX = std::max(maxX, r.x1), maxZ = std::max(maxZ, r.z1);
   }
-  // Floors per room, one ceiling slab over all.
   for (size_t i = 0; i < L.rooms.size(); ++i) {
     const RoomSpec& r = L.rooms[i];
     const int kind = static_cast<int>(r.kind);
@@ -358,92 +373,133 @@ Mesh buildLayout(const LayoutSpec& L) {
     addBox(b.mesh, V3(r.x0, -0.1f, r.z0), V3(r.x1, 0.0f, r.z1), floorMat, 0.5f);
   }
   addBox(b.mesh, V3(minX - T, H, minZ - T), V3(maxX + T, H + 0.1f, maxZ + T), ceiling, 0.5f);
+}
 
-  // Walls: every room edge, split where a door or an already-built shared edge is. Shared edges
-  // are built once (by the room with the lower index); door gaps get a lintel.
-  struct Gap {
-    float a, b;
+// An interval [a, b] along a wall.
+struct Gap {
+  float a, b;
+};
+
+void sortGaps(std::vector<Gap>& gaps) {
+  std::sort(gaps.begin(), gaps.end(), [](const Gap& a, const Gap& c) { return a.a < c.a; });
+}
+
+// Edge `index` of a room (0: z = z0, 1: z = z1, 2: x = x0, 3: x = x1): on the line `fixed`,
+// from lo to hi along x (alongX) or z.
+struct RoomEdge {
+  int index;
+  bool alongX;
+  float fixed, lo, hi;
+};
+
+RoomEdge roomEdge(const RoomSpec& r, int edge) {
+  const bool alongX = edge < 2;
+  const float fixed = edge == 0 ? r.z0 : edge == 1 ? r.z1 : edge == 2 ? r.x0 : r.x1;
+  return {edge, alongX, fixed, alongX ? r.x0 : r.z0, alongX ? r.x1 : r.z1};
+}
+
+// The parts of room `room`'s edge that no lower-indexed room built (a shared edge is built once,
+// by the room with the lower index).
+std::vector<Gap> unbuiltParts(const LayoutSpec& L, size_t room, const RoomEdge& e) {
+  std::vector<Gap> covered;
+  for (size_t j = 0; j < room; ++j) {
+    const RoomSpec& o = L.rooms[j];
+    const float a = e.alongX ? o.x0 : o.z0, c = e.alongX ? o.x1 : o.z1;
+    const bool sameLine =
+        e.alongX ? (std::abs(o.z0 - e.fixed) < 1e-3f || std::abs(o.z1 - e.fixed) < 1e-3f)
+                 : (std::abs(o.x0 - e.fixed) < 1e-3f || std::abs(o.x1 - e.fixed) < 1e-3f);
+    if (sameLine && c > e.lo && a < e.hi) covered.push_back({std::max(a, e.lo), std::min(c, e.hi)});
+  }
+  sortGaps(covered);
+  std::vector<Gap> open;
+  float start = e.lo;
+  for (const Gap& g : covered) {
+    if (g.a > start + 1e-3f) open.push_back({start, g.a});
+    start = std::max(start, g.b);
+  }
+  if (e.hi > start + 1e-3f) open.push_back({start, e.hi});
+  return open;
+}
+
+// The door openings in a room's edge, in order along it.
+std::vector<Gap> doorGaps(const LayoutSpec& L, int room, int edge) {
+  std::vector<Gap> gaps;
+  for (const auto& d : L.doors) {
+    if (d.roomA != room && d.roomB != room) continue;
+    const RoomSpec& r = L.rooms[room];
+    const RoomSpec& o = L.rooms[d.roomA == room ? d.roomB : d.roomA];
+    const bool shares = (edge == 0 && std::abs(r.z0 - o.z1) < 1e-3f) ||
+                        (edge == 1 && std::abs(r.z1 - o.z0) < 1e-3f) ||
+                        (edge == 2 && std::abs(r.x0 - o.x1) < 1e-3f) ||
+                        (edge == 3 && std::abs(r.x1 - o.x0) < 1e-3f);
+    if (shares) gaps.push_back({d.at - d.width / 2, d.at + d.width / 2});
+  }
+  sortGaps(gaps);
+  return gaps;
+}
+
+// The wall over `open` (extended by half a wall at the edge's ends), floor to ceiling but for
+// the doors' `gaps`, which get a lintel.
+void addWallParts(Builder& b, const RoomEdge& e, const std::vector<Gap>& open,
+                  const std::vector<Gap>& gaps, int wall, float H) {
+  const float T = kWallThickness;
+  auto segment = [&](float a, float c, float y0, float y1) {
+    if (c - a < 1e-3f) return;
+    if (e.alongX)
+      addBox(b.mesh, V3(a, y0, e.fixed - T / 2), V3(c, y1, e.fixed + T / 2), wall, 1.0f);
+    else
+      addBox(b.mesh, V3(e.fixed - T / 2, y0, a), V3(e.fixed + T / 2, y1, c), wall, 1.0f);
   };
-  auto doorGaps = [&](int room, int edge) {
-    std::vector<Gap> gaps;
-    for (const auto& d : L.doors) {
-      if (d.roomA != room && d.roomB != room) continue;
-      const RoomSpec& r = L.rooms[room];
-      const RoomSpec& o = L.rooms[d.roomA == room ? d.roomB : d.roomA];
-      const bool shares = (edge == 0 && std::abs(r.z0 - o.z1) < 1e-3f) ||
-                          (edge == 1 && std::abs(r.z1 - o.z0) < 1e-3f) ||
-                          (edge == 2 && std::abs(r.x0 - o.x1) < 1e-3f) ||
-                          (edge == 3 && std::abs(r.x1 - o.x0) < 1e-3f);
-      if (shares) gaps.push_back({d.at - d.width / 2, d.at + d.width / 2});
+  for (const Gap& part : open) {
+    const float from = part.a - (std::abs(part.a - e.lo) < 1e-3f ? T / 2 : 0.0f);
+    const float to = part.b + (std::abs(part.b - e.hi) < 1e-3f ? T / 2 : 0.0f);
+    float cursor = from;
+    for (const Gap& g : gaps) {
+      if (g.b <= from || g.a >= to) continue;
+      segment(cursor, g.a, 0.0f, H);
+      segment(g.a, g.b, 2.1f, H);  // lintel
+      cursor = g.b;
     }
-    return gaps;
-  };
+    segment(cursor, to, 0.0f, H);
+  }
+}
+
+// A painting in the middle of room `room`'s edge, on its inner face.
+void addPainting(Builder& b, size_t room, const RoomEdge& e) {
+  const float T = kWallThickness;
+  const int edge = e.index;
+  const int art = b.textured("paper", 100 + room * 4 + edge);
+  const float mid = 0.5f * (e.lo + e.hi), inward = (edge == 0 || edge == 2) ? 1.0f : -1.0f;
+  const float w = 0.6f + 0.5f * b.rnd(room, edge + 9), off = e.fixed + inward * (T / 2 + 0.015f);
+  if (e.alongX)
+    addBox(b.mesh, V3(mid - w / 2, 1.3f, off - 0.015f),
+           V3(mid + w / 2, 1.3f + 0.7f * w, off + 0.015f), art, 1.0f / w);
+  else
+    addBox(b.mesh, V3(off - 0.015f, 1.3f, mid - w / 2),
+           V3(off + 0.015f, 1.3f + 0.7f * w, mid + w / 2), art, 1.0f / w);
+}
+
+// Walls: every room edge, split where a door or an already-built shared edge is; door gaps get
+// a lintel, and walls without doors sometimes a painting.
+void addWalls(Builder& b, const LayoutSpec& L, const int (&wallMats)[3]) {
   for (size_t i = 0; i < L.rooms.size(); ++i) {
-    const RoomSpec& r = L.rooms[i];
     const int wall = wallMats[i % 3];
     for (int edge = 0; edge < 4; ++edge) {
-      // Parts of the edge shared with a lower-indexed room were built by that room.
-      const bool alongX = edge < 2;
-      const float fixed = edge == 0 ? r.z0 : edge == 1 ? r.z1 : edge == 2 ? r.x0 : r.x1;
-      const float lo = alongX ? r.x0 : r.z0, hi = alongX ? r.x1 : r.z1;
-      std::vector<Gap> covered;
-      for (size_t j = 0; j < i; ++j) {
-        const RoomSpec& o = L.rooms[j];
-        const float a = alongX ? o.x0 : o.z0, c = alongX ? o.x1 : o.z1;
-        const bool sameLine =
-            alongX ? (std::abs(o.z0 - fixed) < 1e-3f || std::abs(o.z1 - fixed) < 1e-3f)
-                   : (std::abs(o.x0 - fixed) < 1e-3f || std::abs(o.x1 - fixed) < 1e-3f);
-        if (sameLine && c > lo && a < hi) covered.push_back({std::max(a, lo), std::min(c, hi)});
-      }
-      std::sort(covered.begin(), covered.end(),
-                [](const Gap& a, const Gap& c) { return a.a < c.a; });
-      std::vector<Gap> open;  // uncovered parts, extended by half a wall at the edge's ends
-      float start = lo;
-      for (const Gap& g : covered) {
-        if (g.a > start + 1e-3f) open.push_back({start, g.a});
-        start = std::max(start, g.b);
-      }
-      if (hi > start + 1e-3f) open.push_back({start, hi});
+      const RoomEdge e = roomEdge(L.rooms[i], edge);
+      const std::vector<Gap> open = unbuiltParts(L, i, e);
       if (open.empty()) continue;
-      std::vector<Gap> gaps = doorGaps(static_cast<int>(i), edge);
-      std::sort(gaps.begin(), gaps.end(), [](const Gap& a, const Gap& c) { return a.a < c.a; });
-      auto segment = [&](float a, float c, float y0, float y1) {
-        if (c - a < 1e-3f) return;
-        if (alongX)
-          addBox(b.mesh, V3(a, y0, fixed - T / 2), V3(c, y1, fixed + T / 2), wall, 1.0f);
-        else
-          addBox(b.mesh, V3(fixed - T / 2, y0, a), V3(fixed + T / 2, y1, c), wall, 1.0f);
-      };
-      for (const Gap& part : open) {
-        const float from = part.a - (std::abs(part.a - lo) < 1e-3f ? T / 2 : 0.0f);
-        const float to = part.b + (std::abs(part.b - hi) < 1e-3f ? T / 2 : 0.0f);
-        float cursor = from;
-        for (const Gap& g : gaps) {
-          if (g.b <= from || g.a >= to) continue;
-          segment(cursor, g.a, 0.0f, H);
-          segment(g.a, g.b, 2.1f, H);  // lintel
-          cursor = g.b;
-        }
-        segment(cursor, to, 0.0f, H);
-      }
-      const float from = lo, to = hi;
-      // A painting on walls without doors.
-      if (gaps.empty() && b.rnd(i, edge) < 0.6f) {
-        const int art = b.textured("paper", 100 + i * 4 + edge);
-        const float mid = 0.5f * (from + to), inward = (edge == 0 || edge == 2) ? 1.0f : -1.0f;
-        const float w = 0.6f + 0.5f * b.rnd(i, edge + 9), off = fixed + inward * (T / 2 + 0.015f);
-        if (alongX)
-          addBox(b.mesh, V3(mid - w / 2, 1.3f, off - 0.015f),
-                 V3(mid + w / 2, 1.3f + 0.7f * w, off + 0.015f), art, 1.0f / w);
-        else
-          addBox(b.mesh, V3(off - 0.015f, 1.3f, mid - w / 2),
-                 V3(off + 0.015f, 1.3f + 0.7f * w, mid + w / 2), art, 1.0f / w);
-      }
+      const std::vector<Gap> gaps = doorGaps(L, static_cast<int>(i), edge);
+      addWallParts(b, e, open, gaps, wall, L.height);
+      if (gaps.empty() && b.rnd(i, edge) < 0.6f) addPainting(b, i, e);
     }
   }
+}
 
-  // Furniture per room kind, mostly in the room's far half, and never in front of a door.
-  for (const auto& d : L.clearDoorways ? L.doors : std::vector<DoorSpec>{}) {
+// With clearDoorways, the floor before each door (0.8 m deep on both sides, 0.1 m wider than
+// the door) becomes a keep-out rectangle for furniture.
+void keepDoorwaysClear(Builder& b, const LayoutSpec& L) {
+  if (!L.clearDoorways) return;
+  for (const auto& d : L.doors) {
     const SharedWall w = sharedWall(L.rooms[d.roomA], L.rooms[d.roomB]);
     const float half = d.width / 2 + 0.1f, depth = 0.8f;
     if (w.atX)
@@ -451,60 +507,105 @@ Mesh buildLayout(const LayoutSpec& L) {
     else
       b.keepOut.emplace_back(d.at - half, w.at - depth, d.at + half, w.at + depth);
   }
-  for (size_t i = 0; i < L.rooms.size(); ++i) {
-    const RoomSpec& r = L.rooms[i];
-    const float cx = 0.5f * (r.x0 + r.x1), cz = 0.5f * (r.z0 + r.z1);
-    const float w = r.x1 - r.x0, d = r.z1 - r.z0;
-    const uint64_t salt = 1000 + i * 50;
-    switch (r.kind) {
-      case RoomKind::Living: {
-        addBox(b.mesh, V3(cx - 1.2f, 0.0f, cz - 0.8f), V3(cx + 1.2f, 0.012f, cz + 0.8f),
-               b.textured("carpet", salt), 0.7f);
-        sofa(b, {cx, r.z1 - 0.55f, false}, fabric);
-        table(b, {cx, cz - 0.1f, false}, darkWood, 1.1f, 0.6f);
-        shelf(b, {r.x0 + 0.25f, cz + 0.3f * d * (b.rnd(salt) - 0.5f), true}, wood, salt);
-        lamp(b, {r.x1 - 0.4f, r.z1 - 0.4f, false}, metal, shade);
-        cabinet(b, {cx, r.z0 + 0.35f, false}, darkWood, marble, std::min(1.6f, w - 2.0f), 0.55f);
-        break;
-      }
-      case RoomKind::Bedroom: {
-        bed(b, {cx, r.z0 + 1.1f, false}, wood, fabric2, sheet);
-        cabinet(b, {r.x1 - 0.35f, cz + 0.8f, true}, darkWood, wood, 1.0f, 1.8f);
-        cabinet(b, {cx - 1.1f, r.z0 + 0.3f, false}, wood, marble, 0.45f, 0.5f);
-        lamp(b, {r.x0 + 0.35f, r.z1 - 0.35f, false}, metal, shade);
-        break;
-      }
-      case RoomKind::Kitchen: {
-        // Counters along two walls, a table with chairs.
-        {
-          Piece counters(b);
-          addBox(b.mesh, V3(r.x0 + 0.05f, 0.0f, r.z0 + 0.05f),
-                 V3(r.x1 - 0.05f, 0.88f, r.z0 + 0.65f), darkWood, 2.0f);
-          addBox(b.mesh, V3(r.x0 + 0.03f, 0.88f, r.z0 + 0.03f),
-                 V3(r.x1 - 0.03f, 0.92f, r.z0 + 0.68f), marble, 1.0f);
-          addBox(b.mesh, V3(r.x0 + 0.05f, 1.5f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 2.2f, r.z0 + 0.4f),
-                 wood, 2.0f);
-        }
-        table(b, {cx, cz + 0.4f, false}, wood, 1.2f, 0.8f);
-        chair(b, {cx - 0.35f, cz + 1.05f, false}, wood, fabric, true);
-        chair(b, {cx + 0.35f, cz - 0.25f, false}, wood, fabric, false);
-        break;
-      }
-      case RoomKind::Office: {
-        table(b, {cx, r.z0 + 0.5f, false}, wood, 1.4f, 0.7f);
-        chair(b, {cx, r.z0 + 1.05f, false}, metal, fabric2, true);
-        shelf(b, {r.x1 - 0.25f, cz, true}, darkWood, salt);
-        shelf(b, {r.x0 + 0.25f, cz + 0.4f, true}, wood, salt + 7);
-        break;
-      }
-      case RoomKind::Hall: {
-        cabinet(b, {cx, r.z1 - 0.35f, false}, darkWood, marble, std::min(1.2f, w - 0.8f), 0.9f);
-        addBox(b.mesh, V3(cx - 0.6f, 0.0f, cz - 0.9f), V3(cx + 0.6f, 0.012f, cz + 0.9f),
-               b.textured("carpet", salt), 0.7f);
-        break;
-      }
-    }
+}
+
+// A room to furnish: its floor, centre and size, and the salt of its random draws.
+struct RoomFrame {
+  const RoomSpec& r;
+  float cx, cz;  // centre
+  float w, d;    // extent along x and z
+  uint64_t salt;
+};
+
+void furnishLiving(Builder& b, const RoomFrame& f, const Materials& m) {
+  const RoomSpec& r = f.r;
+  const float cx = f.cx, cz = f.cz, w = f.w, d = f.d;
+  addBox(b.mesh, V3(cx - 1.2f, 0.0f, cz - 0.8f), V3(cx + 1.2f, 0.012f, cz + 0.8f),
+         b.textured("carpet", f.salt), 0.7f);
+  sofa(b, {cx, r.z1 - 0.55f, false}, m.fabric);
+  table(b, {cx, cz - 0.1f, false}, m.darkWood, 1.1f, 0.6f);
+  shelf(b, {r.x0 + 0.25f, cz + 0.3f * d * (b.rnd(f.salt) - 0.5f), true}, m.wood, f.salt);
+  lamp(b, {r.x1 - 0.4f, r.z1 - 0.4f, false}, m.metal, m.shade);
+  cabinet(b, {cx, r.z0 + 0.35f, false}, m.darkWood, m.marble, std::min(1.6f, w - 2.0f), 0.55f);
+}
+
+void furnishBedroom(Builder& b, const RoomFrame& f, const Materials& m) {
+  const RoomSpec& r = f.r;
+  const float cx = f.cx, cz = f.cz;
+  bed(b, {cx, r.z0 + 1.1f, false}, m.wood, m.fabric2, m.sheet);
+  cabinet(b, {r.x1 - 0.35f, cz + 0.8f, true}, m.darkWood, m.wood, 1.0f, 1.8f);
+  cabinet(b, {cx - 1.1f, r.z0 + 0.3f, false}, m.wood, m.marble, 0.45f, 0.5f);
+  lamp(b, {r.x0 + 0.35f, r.z1 - 0.35f, false}, m.metal, m.shade);
+}
+
+void furnishKitchen(Builder& b, const RoomFrame& f, const Materials& m) {
+  const RoomSpec& r = f.r;
+  const float cx = f.cx, cz = f.cz;
+  // Counters along two walls, a table with chairs.
+  {
+    Piece counters(b);
+    addBox(b.mesh, V3(r.x0 + 0.05f, 0.0f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 0.88f, r.z0 + 0.65f),
+           m.darkWood, 2.0f);
+    addBox(b.mesh, V3(r.x0 + 0.03f, 0.88f, r.z0 + 0.03f), V3(r.x1 - 0.03f, 0.92f, r.z0 + 0.68f),
+           m.marble, 1.0f);
+    addBox(b.mesh, V3(r.x0 + 0.05f, 1.5f, r.z0 + 0.05f), V3(r.x1 - 0.05f, 2.2f, r.z0 + 0.4f),
+           m.wood, 2.0f);
   }
+  table(b, {cx, cz + 0.4f, false}, m.wood, 1.2f, 0.8f);
+  chair(b, {cx - 0.35f, cz + 1.05f, false}, m.wood, m.fabric, true);
+  chair(b, {cx + 0.35f, cz - 0.25f, false}, m.wood, m.fabric, false);
+}
+
+void furnishOffice(Builder& b, const RoomFrame& f, const Materials& m) {
+  const RoomSpec& r = f.r;
+  const float cx = f.cx, cz = f.cz;
+  table(b, {cx, r.z0 + 0.5f, false}, m.wood, 1.4f, 0.7f);
+  chair(b, {cx, r.z0 + 1.05f, false}, m.metal, m.fabric2, true);
+  shelf(b, {r.x1 - 0.25f, cz, true}, m.darkWood, f.salt);
+  shelf(b, {r.x0 + 0.25f, cz + 0.4f, true}, m.wood, f.salt + 7);
+}
+
+void furnishHall(Builder& b, const RoomFrame& f, const Materials& m) {
+  const RoomSpec& r = f.r;
+  const float cx = f.cx, cz = f.cz, w = f.w;
+  cabinet(b, {cx, r.z1 - 0.35f, false}, m.darkWood, m.marble, std::min(1.2f, w - 0.8f), 0.9f);
+  addBox(b.mesh, V3(cx - 0.6f, 0.0f, cz - 0.9f), V3(cx + 0.6f, 0.012f, cz + 0.9f),
+         b.textured("carpet", f.salt), 0.7f);
+}
+
+// Furniture by the room's kind, mostly in the room's far half.
+void furnishRoom(Builder& b, const RoomSpec& r, size_t index, const Materials& m) {
+  const RoomFrame f{r,           0.5f * (r.x0 + r.x1), 0.5f * (r.z0 + r.z1),
+                    r.x1 - r.x0, r.z1 - r.z0,          1000 + index * 50};
+  switch (r.kind) {
+    case RoomKind::Living:
+      furnishLiving(b, f, m);
+      break;
+    case RoomKind::Bedroom:
+      furnishBedroom(b, f, m);
+      break;
+    case RoomKind::Kitchen:
+      furnishKitchen(b, f, m);
+      break;
+    case RoomKind::Office:
+      furnishOffice(b, f, m);
+      break;
+    case RoomKind::Hall:
+      furnishHall(b, f, m);
+      break;
+  }
+}
+
+}  // namespace
+
+Mesh buildLayout(const LayoutSpec& L) {
+  Builder b(L.seed);
+  const Materials materials = sharedMaterials(b);
+  addFloorsAndCeiling(b, L, materials.ceiling);
+  addWalls(b, L, materials.walls);
+  // Furniture per room kind, never in front of a door.
+  keepDoorwaysClear(b, L);
+  for (size_t i = 0; i < L.rooms.size(); ++i) furnishRoom(b, L.rooms[i], i, materials);
   b.mesh.validate(L.name);
   return std::move(b.mesh);
 }

@@ -23,12 +23,12 @@
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
 #include "sweep/depth_probe.h"
+#include "sweep/sweep_report.h"
 #include "trainer/distributed.h"
 #include "trainer/pair_dataset.h"
 #include "trainer/trainer.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
-#include "util/plot.h"
 #include "util/random.h"
 #include "util/timer.h"
 
@@ -40,18 +40,18 @@ int covisBucket(double covis) {
                     kCovisBuckets - 1);
 }
 
+std::string centerName(double c) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.2f", c);
+  return b;
+}
+
 namespace {
 
 // k if x is k * 0.05 (within 1e-6), else -1.
 int gridIndex(double x) {
   const double k = x * kCovisBuckets;
   return std::abs(k - std::round(k)) < 1e-6 ? static_cast<int>(std::round(k)) : -1;
-}
-
-std::string centerName(double c) {
-  char b[32];
-  std::snprintf(b, sizeof b, "%.2f", c);
-  return b;
 }
 
 nlohmann::json readJson(const std::string& path) {
@@ -106,41 +106,134 @@ struct Pool {
   std::vector<double> covis;
 };
 
-Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
-               const std::vector<int>& demand) {
-  const fs::path dir = fs::path(c.out) / "pool";
-  makeDirs(dir.string());
-  const std::string statePath = (dir / "pool.json").string();
+// What pool.json holds: the pool so far, and where its sampling goes on.
+struct PoolProgress {
   Pool pool;
-  uint64_t nextIndex = 0;
-  int round = 0;
-  std::vector<int> have(kCovisBuckets, 0);
-  const nlohmann::json settings = {{"scenes", sceneFiles},
-                                   {"seed", c.seed},
-                                   {"resolution", c.resolution},
-                                   {"demand", demand},
-                                   {"min_walk_scale", c.minWalkScale}};
+  uint64_t nextIndex = 0;  // of the next pair to sample
+  int rounds = 0;
+  std::vector<int> have = std::vector<int>(kCovisBuckets, 0);  // pairs per bucket
+
+  void add(const std::string& key, double covis) {
+    pool.keys.push_back(key);
+    pool.covis.push_back(covis);
+    have[covisBucket(pool.covis.back())]++;
+  }
+  // Pairs still needed per bucket.
+  std::vector<int> deficit(const std::vector<int>& demand) const {
+    std::vector<int> d(kCovisBuckets);
+    for (int b = 0; b < kCovisBuckets; ++b) d[b] = std::max(0, demand[b] - have[b]);
+    return d;
+  }
+};
+
+int total(const std::vector<int>& counts) {
+  int n = 0;
+  for (int v : counts) n += v;
+  return n;
+}
+
+// The settings a pool was sampled with: a pool.json of other settings is not resumed.
+nlohmann::json poolSettings(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
+                            const std::vector<int>& demand) {
+  return {{"scenes", sceneFiles},
+          {"seed", c.seed},
+          {"resolution", c.resolution},
+          {"demand", demand},
+          {"min_walk_scale", c.minWalkScale}};
+}
+
+// pool.json's progress; none (an empty pool) when there is no such file.
+PoolProgress readPoolProgress(const std::string& statePath, const nlohmann::json& settings) {
+  PoolProgress p;
   if (const nlohmann::json state = readJson(statePath); state.is_object()) {
     if (state.value("settings", nlohmann::json()) != settings)
       throw Error(statePath,
                   "was sampled with other settings (scenes, seed, resolution or set sizes); use "
                   "another --out or delete the pool folder");
-    for (const auto& p : state.at("pairs")) {
-      pool.keys.push_back(p.at("key").get<std::string>());
-      pool.covis.push_back(p.at("covis").get<double>());
-      have[covisBucket(pool.covis.back())]++;
-    }
-    nextIndex = state.at("next_index").get<uint64_t>();
-    round = state.at("rounds").get<int>();
+    for (const auto& pair : state.at("pairs"))
+      p.add(pair.at("key").get<std::string>(), pair.at("covis").get<double>());
+    p.nextIndex = state.at("next_index").get<uint64_t>();
+    p.rounds = state.at("rounds").get<int>();
   }
-  auto deficit = [&] {
-    std::vector<int> d(kCovisBuckets);
-    for (int b = 0; b < kCovisBuckets; ++b) d[b] = std::max(0, demand[b] - have[b]);
-    return d;
-  };
-  int total = 0;
-  for (int d : deficit()) total += d;
-  if (total == 0) return pool;
+  return p;
+}
+
+void writePoolProgress(const std::string& statePath, const nlohmann::json& settings,
+                       const PoolProgress& p) {
+  nlohmann::json pairs = nlohmann::json::array();
+  for (size_t i = 0; i < p.pool.keys.size(); ++i)
+    pairs.push_back({{"key", p.pool.keys[i]}, {"covis", p.pool.covis[i]}});
+  writeFileAtomic(statePath, nlohmann::json({{"settings", settings},
+                                             {"pairs", pairs},
+                                             {"next_index", p.nextIndex},
+                                             {"rounds", p.rounds}})
+                                     .dump() +
+                                 "\n");
+}
+
+// One sampling round: pairs nextIndex .. nextIndex + m - 1, each from the scenes in turn, of which
+// those whose bucket still needs them (`need`) are kept, in index order, in pool-<round>.tar.
+// Returns the kept pairs' keys and covis.
+nlohmann::json samplePoolRound(const SweepConfig& c,
+                               const std::vector<std::unique_ptr<PoolScene>>& scenes,
+                               const SamplerOptions& so, const std::vector<int>& need, int m,
+                               uint64_t nextIndex, int round, const fs::path& dir) {
+  PairOptions po;
+  po.resolution = c.resolution;
+  po.keepDepth = false;
+  po.sampler = so;
+  po.maxReferences = 4;  // rare buckets: many cheap tries over more indices
+  po.maxAttempts = 25;
+  po.accept = [need](double v) { return need[covisBucket(v)] > 0; };
+  std::vector<std::unique_ptr<PairGenerator>> gens;
+  for (auto& s : scenes)
+    gens.push_back(std::make_unique<PairGenerator>(*s->scene, *s->caster, *s->sampler, po));
+  std::vector<std::optional<PairSample>> got(m);
+  const int threads = c.jobs > 0 ? c.jobs : omp_get_num_procs();
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int i = 0; i < m; ++i) {
+    const uint64_t idx = nextIndex + i;
+    got[i] = gens[idx % gens.size()]->generate(c.seed, idx);
+  }
+  // Keep, in index order, the pairs whose bucket still needs them.
+  char name[64];
+  std::snprintf(name, sizeof name, "pool-%06d.tar", round);
+  ShardWriter writer((dir / name).string());
+  std::vector<int> left = need;
+  nlohmann::json added = nlohmann::json::array();
+  for (int i = 0; i < m; ++i) {
+    if (!got[i]) continue;
+    const int b = covisBucket(got[i]->covis[1].covis);
+    if (left[b] <= 0) continue;
+    --left[b];
+    const EncodedPair enc = encodePair(*got[i], false, 90);
+    writer.add(enc);
+    added.push_back({{"key", enc.key}, {"covis", got[i]->covis[1].covis}});
+  }
+  if (!added.empty()) writer.close();  // an empty round leaves no shard
+  return added;
+}
+
+// The buckets still short, with what they have of what they need: " [0.05,0.10): 3/16".
+std::string shortBuckets(const PoolProgress& p, const std::vector<int>& demand) {
+  const std::vector<int> after = p.deficit(demand);
+  std::string shortList;
+  for (int b = 0; b < kCovisBuckets; ++b)
+    if (after[b] > 0)
+      shortList += " [" + centerName(b * 0.05) + "," + centerName((b + 1) * 0.05) +
+                   "): " + std::to_string(p.have[b]) + "/" + std::to_string(demand[b]);
+  return shortList;
+}
+
+// Samples rounds until every bucket holds its demand, resuming from pool.json.
+Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
+               const std::vector<int>& demand) {
+  const fs::path dir = fs::path(c.out) / "pool";
+  makeDirs(dir.string());
+  const std::string statePath = (dir / "pool.json").string();
+  const nlohmann::json settings = poolSettings(c, sceneFiles, demand);
+  PoolProgress p = readPoolProgress(statePath, settings);
+  if (total(p.deficit(demand)) == 0) return p.pool;
 
   SamplerOptions so;
   so.minWalkScale = c.minWalkScale;
@@ -148,79 +241,26 @@ Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
   const auto start = SteadyClock::now();
   int idle = 0;
   while (true) {
-    const std::vector<int> need = deficit();
-    int missing = 0;
-    for (int d : need) missing += d;
+    const std::vector<int> need = p.deficit(demand);
+    const int missing = total(need);
     if (missing == 0) break;
-    PairOptions po;
-    po.resolution = c.resolution;
-    po.keepDepth = false;
-    po.sampler = so;
-    po.maxReferences = 4;  // rare buckets: many cheap tries over more indices
-    po.maxAttempts = 25;
-    po.accept = [need](double v) { return need[covisBucket(v)] > 0; };
-    std::vector<std::unique_ptr<PairGenerator>> gens;
-    for (auto& s : scenes)
-      gens.push_back(std::make_unique<PairGenerator>(*s->scene, *s->caster, *s->sampler, po));
     const int m = std::max(8, missing + missing / 4);
-    std::vector<std::optional<PairSample>> got(m);
-    const int threads = c.jobs > 0 ? c.jobs : omp_get_num_procs();
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-    for (int i = 0; i < m; ++i) {
-      const uint64_t idx = nextIndex + i;
-      got[i] = gens[idx % gens.size()]->generate(c.seed, idx);
-    }
-    // Keep, in index order, the pairs whose bucket still needs them.
-    char name[64];
-    std::snprintf(name, sizeof name, "pool-%06d.tar", round);
-    ShardWriter writer((dir / name).string());
-    std::vector<int> left = need;
-    nlohmann::json added = nlohmann::json::array();
-    for (int i = 0; i < m; ++i) {
-      if (!got[i]) continue;
-      const int b = covisBucket(got[i]->covis[1].covis);
-      if (left[b] <= 0) continue;
-      --left[b];
-      const EncodedPair enc = encodePair(*got[i], false, 90);
-      writer.add(enc);
-      added.push_back({{"key", enc.key}, {"covis", got[i]->covis[1].covis}});
-    }
-    if (!added.empty()) writer.close();  // an empty round leaves no shard
-    nextIndex += m;
-    ++round;
-    for (const auto& a : added) {
-      pool.keys.push_back(a["key"]);
-      pool.covis.push_back(a["covis"]);
-      have[covisBucket(pool.covis.back())]++;
-    }
-    nlohmann::json pairs = nlohmann::json::array();
-    for (size_t i = 0; i < pool.keys.size(); ++i)
-      pairs.push_back({{"key", pool.keys[i]}, {"covis", pool.covis[i]}});
-    writeFileAtomic(statePath, nlohmann::json({{"settings", settings},
-                                               {"pairs", pairs},
-                                               {"next_index", nextIndex},
-                                               {"rounds", round}})
-                                       .dump() +
-                                   "\n");
-    const std::vector<int> after = deficit();
-    int stillMissing = 0;
-    std::string shortList;
-    for (int b = 0; b < kCovisBuckets; ++b) {
-      stillMissing += after[b];
-      if (after[b] > 0)
-        shortList += " [" + centerName(b * 0.05) + "," + centerName((b + 1) * 0.05) +
-                     "): " + std::to_string(have[b]) + "/" + std::to_string(demand[b]);
-    }
-    say(c, "pool round " + std::to_string(round) + ": " + std::to_string(pool.keys.size()) +
-               " pairs, " + std::to_string(stillMissing) + " still needed (" +
+    const nlohmann::json added =
+        samplePoolRound(c, scenes, so, need, m, p.nextIndex, p.rounds, dir);
+    p.nextIndex += m;
+    ++p.rounds;
+    for (const auto& a : added) p.add(a["key"], a["covis"]);
+    writePoolProgress(statePath, settings, p);
+    say(c, "pool round " + std::to_string(p.rounds) + ": " + std::to_string(p.pool.keys.size()) +
+               " pairs, " + std::to_string(total(p.deficit(demand))) + " still needed (" +
                std::to_string(static_cast<int>(secondsSince(start))) + " s)");
     idle = added.empty() ? idle + 1 : 0;
-    if (idle >= 3 || round >= 400)
-      throw Error(statePath, "cannot fill the covis buckets:" + shortList +
+    if (idle >= 3 || p.rounds >= 400)
+      throw Error(statePath, "cannot fill the covis buckets:" + shortBuckets(p, demand) +
                                  " (the scenes rarely give such pairs; drop those centres or "
                                  "lower --pairs-per-set)");
   }
-  return pool;
+  return p.pool;
 }
 
 // Held-out views for the depth probe: a reference view each, with RGB and depth at the
@@ -280,54 +320,6 @@ CroCoConfig modelConfig(const SweepConfig& c) {
   m.patch_size = c.patchSize;
   m.validate();
   return m;
-}
-
-void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann::json& random) {
-  const fs::path out(c.out);
-  const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd"};
-  struct Metric {
-    const char* key;
-    const char* label;
-  } metrics[] = {{"xv_loss", "held-out completion loss (covis ~0.5), lower is better"},
-                 {"probe_delta1", "depth probe delta1, higher is better"},
-                 {"probe_absrel", "depth probe AbsRel, lower is better"},
-                 {"probe_rmse", "depth probe RMSE (m), lower is better"}};
-  for (const auto& m : metrics) {
-    std::vector<plot::Series> series;
-    int k = 0;
-    for (const auto& mode : c.modes) {
-      plot::Series s;
-      s.label = mode;
-      s.color = colors[k++ % 4];
-      for (const auto& r : rows)
-        if (r["mode"] == mode) s.x.push_back(r["center"]), s.y.push_back(r[m.key]);
-      series.push_back(s);
-    }
-    // The random encoder as a dashed line, unless it lies so far from the sets that the line
-    // would flatten them (as the completion loss's can, far above every set's); then in the title.
-    const double baseline = random[m.key].get<double>();
-    double lo = INFINITY, hi = -INFINITY;
-    for (const auto& s : series)
-      for (double y : s.y) lo = std::min(lo, y), hi = std::max(hi, y);
-    std::string title = m.label;
-    if (lo <= hi && (baseline < lo - 3 * (hi - lo) || baseline > hi + 3 * (hi - lo))) {
-      char note[96];
-      std::snprintf(note, sizeof note, "; random encoder %.3f", baseline);
-      title += note;
-    } else {
-      plot::Series base;
-      base.label = "random encoder";
-      base.color = "#7f7f7f";
-      base.dashed = true;
-      base.markers = false;
-      base.x = {c.centers.front(), c.centers.back()};
-      base.y = {baseline, baseline};
-      series.push_back(base);
-    }
-    writeFileAtomic(
-        (out / (std::string("plot_") + m.key + ".svg")).string(),
-        plot::lines(series, {title, "covis centre of the training set", m.key, 620, 340}));
-  }
 }
 
 // Pre-trains (or resumes) the model of one set, unless its run is complete. Every rank of a
@@ -404,6 +396,225 @@ nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
   return {{"rank", rank}, {"sets_trained", sets.size()}};
 }
 
+// ---- the stages of runCovisSweep, in order ----
+
+void checkConfig(const SweepConfig& c) {
+  if (c.out.empty()) throw Error("--out is required");
+  if (c.scenes.empty()) throw Error("--scenes: give the training scenes");
+  if (c.heldout.empty()) throw Error("--heldout: give at least one held-out scene");
+  if (c.modes.empty() || c.centers.empty()) throw Error("give at least one mode and one centre");
+  if (c.pairsPerSet < c.batchSize)
+    throw Error("--pairs-per-set must be at least one batch (" + std::to_string(c.batchSize) + ")");
+  if (c.steps < 1 || c.evalPairs < 1 || c.probeViews < 4)
+    throw Error("--steps, --eval-pairs must be >= 1 and --probe-views >= 4");
+}
+
+// Every mode at every centre, mode by mode.
+std::vector<SweepSet> planSets(const SweepConfig& c) {
+  std::vector<SweepSet> sets;
+  for (const auto& mode : c.modes)
+    for (double x : c.centers) sets.push_back(makeSweepSet(mode, x));
+  return sets;
+}
+
+// The scene files, expanded from the lists; no held-out scene is a training scene.
+struct SceneFiles {
+  std::vector<std::string> train, heldout;
+};
+
+SceneFiles sceneFiles(const SweepConfig& c) {
+  SceneFiles f{expandSceneList(c.scenes), expandSceneList(c.heldout)};
+  // Held-out scenes never appear in training: by file and by scene name.
+  std::set<std::string> trainIds;
+  for (const auto& t : f.train) {
+    trainIds.insert(fs::weakly_canonical(t).string());
+    trainIds.insert("name:" + sanitizeName(fs::path(t).stem().string()));
+  }
+  for (const auto& h : f.heldout)
+    if (trainIds.count(fs::weakly_canonical(h).string()) ||
+        trainIds.count("name:" + sanitizeName(fs::path(h).stem().string())))
+      throw Error(h, "is both a training and a held-out scene");
+  return f;
+}
+
+// A check on the pool as sampled: none of its pairs comes from a held-out scene.
+void checkPoolExcludes(const Pool& pool, const std::vector<std::string>& heldout) {
+  std::set<std::string> heldNames;
+  for (const auto& f : heldout) heldNames.insert(sanitizeName(fs::path(f).stem().string()));
+  for (const auto& key : pool.keys)
+    PAIRCAST_CHECK_MSG(
+        !heldNames.count(key.substr(0, key.rfind('-'))),  // sampleKey's "<scene>-<index>"
+        "a held-out scene's pair is in the training pool");
+}
+
+// sets/<name>/report.html, the dataset report of one set, unless a previous run wrote it.
+void writeSetReport(const SweepConfig& c, const SweepSet& set, const std::string& keysFile) {
+  const fs::path out(c.out), reportDir = out / "sets" / set.name;
+  if (fs::exists(reportDir / "report.html")) return;
+  ReportOptions ro;
+  ro.dir = (out / "pool").string();
+  ro.keysFile = keysFile;
+  ro.out = reportDir.string();
+  ro.title = "covis_sweep set " + set.name;
+  ro.samplesPerBin = 3;
+  writeDatasetReport(ro);
+}
+
+// Draws the sets from the pool and writes their keys (sets/<name>.keys) and, with `reports`,
+// their dataset reports. Returns each set's pairs and mean covis, by name.
+nlohmann::json writeSets(const SweepConfig& c, const std::vector<SweepSet>& sets,
+                         const Pool& pool) {
+  const fs::path out(c.out);
+  const auto drawn = drawSets(pool.covis, sets, c.pairsPerSet);
+  makeDirs((out / "sets").string());
+  nlohmann::json setInfo = nlohmann::json::object();
+  for (size_t s = 0; s < sets.size(); ++s) {
+    std::string keys;
+    double mean = 0;
+    for (size_t i : drawn[s]) keys += pool.keys[i] + "\n", mean += pool.covis[i];
+    const std::string keysFile = (out / "sets" / (sets[s].name + ".keys")).string();
+    writeFileAtomic(keysFile, keys);
+    setInfo[sets[s].name] = {{"pairs", drawn[s].size()}, {"mean_covis", mean / drawn[s].size()}};
+    if (c.reports) writeSetReport(c, sets[s], keysFile);
+  }
+  say(c, std::to_string(sets.size()) + " sets of " + std::to_string(c.pairsPerSet) +
+             " pairs from a pool of " + std::to_string(pool.keys.size()));
+  return setInfo;
+}
+
+// The held-out pairs at covis ~0.5, generated once into heldout/xv; returns that folder.
+std::string generateHeldOutPairs(const SweepConfig& c, const std::vector<std::string>& heldout) {
+  const fs::path out(c.out);
+  GenerateConfig g;
+  g.scenes = heldout;
+  g.out = (out / "heldout" / "xv").string();
+  g.pairsPerScene =
+      (c.evalPairs + static_cast<int>(heldout.size()) - 1) / static_cast<int>(heldout.size());
+  g.seed = c.seed + 1;
+  g.jobs = c.jobs;
+  g.pair.resolution = c.resolution;
+  g.pair.minCovis = 0.45;
+  g.pair.maxCovis = 0.55;
+  g.shardSize = 100000;
+  g.progress = false;
+  if (!fs::exists(out / "heldout" / "xv" / "summary.json")) runGenerate(g);
+  return g.out;
+}
+
+// The evaluation data: the first evalPairs held-out pairs with one mask for every model, and
+// the probe's views in two halves.
+HeldOut loadHeldOut(const SweepConfig& c, const CroCoConfig& mc,
+                    const std::vector<std::string>& heldout) {
+  const std::string xvDir = generateHeldOutPairs(c, heldout);
+  HeldOut h;
+  {
+    const PairDataset xv = PairDataset::fromShards({xvDir + "/pairs-*.tar"});
+    std::vector<torch::Tensor> a, b;
+    for (size_t i = 0; i < xv.size() && static_cast<int>(i) < c.evalPairs; ++i) {
+      auto [x, y] = xv.load(i);
+      a.push_back(imageTensor(x, c.imgSize));
+      b.push_back(imageTensor(y, c.imgSize));
+    }
+    h.img1 = torch::cat(a);
+    h.img2 = torch::cat(b);
+  }
+  auto gen = at::make_generator<at::CPUGeneratorImpl>(c.seed + 7);
+  h.mask = torch::argsort(torch::rand({h.img1.size(0), mc.numPatches()}, gen), 1, false) <
+           mc.numMasked();
+  auto heldScenes = loadScenes(heldout, SamplerOptions(), "held-out");
+  const int half = c.probeViews / 2;
+  h.probeA = probeViews(c, heldScenes, 0, half);
+  h.probeB = probeViews(c, heldScenes, half, c.probeViews - half);
+  return h;
+}
+
+// A floor for the probe: one half's mean log depth, everywhere in the other half (and back).
+nlohmann::json constantDepthBaseline(const HeldOut& h) {
+  auto meanDepth = [](const torch::Tensor& d) {
+    return std::exp(torch::log(d.masked_select(d > 0)).mean().item<double>());
+  };
+  const DepthMetrics m =
+      depthMetrics(torch::cat({torch::full_like(h.probeB.depth, meanDepth(h.probeA.depth)),
+                               torch::full_like(h.probeA.depth, meanDepth(h.probeB.depth))}),
+                   torch::cat({h.probeB.depth, h.probeA.depth}));
+  return {{"probe_delta1", m.delta1}, {"probe_absrel", m.absRel}, {"probe_rmse", m.rmse}};
+}
+
+// The random-encoder baseline: the weights every run starts from (runs/random/eval.json).
+nlohmann::json randomEncoderBaseline(const SweepConfig& c, const CroCoConfig& mc,
+                                     const HeldOut& h) {
+  const fs::path randomEval = fs::path(c.out) / "runs" / "random" / "eval.json";
+  nlohmann::json random = readJson(randomEval.string());
+  if (!random.is_object()) {
+    torch::manual_seed(c.seed);
+    CroCoNet model(mc);
+    random = evaluate(model, h);
+    makeDirs(randomEval.parent_path().string());
+    writeFileAtomic(randomEval.string(), random.dump(1) + "\n");
+  }
+  return random;
+}
+
+// Tells the other ranks (WORLD_SIZE > 1) that the sets are ready: they start training from
+// here, in one process group for all sets.
+void releaseOtherRanks(const SweepConfig& c) {
+  writeFileAtomic((fs::path(c.out) / "ready.json").string(),
+                  nlohmann::json({{"settings", rankSettings(c)}}).dump(1) + "\n");
+}
+
+// One set's evaluation (runs/<name>/eval.json), after training it, unless a previous run did.
+nlohmann::json trainAndEvaluate(const SweepConfig& c, const CroCoConfig& mc, const SweepSet& set,
+                                const HeldOut& h, Distributed* dist) {
+  const fs::path run = fs::path(c.out) / "runs" / set.name;
+  nlohmann::json ev = readJson((run / "eval.json").string());
+  if (ev.is_object()) return ev;
+  trainSet(c, mc, set, dist);
+  CroCoNet model(mc);
+  const Checkpoint ck = loadCheckpoint((run / "checkpoint-last.pth").string());
+  loadStateDictStrict(model, ck.model, (run / "checkpoint-last.pth").string());
+  ev = evaluate(model, h);
+  const nlohmann::json sum = readJson((run / "summary.json").string());
+  ev["train_loss"] = sum.is_object() ? sum.value("loss", NAN) : NAN;
+  writeFileAtomic((run / "eval.json").string(), ev.dump(1) + "\n");
+  return ev;
+}
+
+// A row of the results: the set, its size and mean covis, and its evaluation.
+nlohmann::json resultRow(const SweepSet& set, const nlohmann::json& setInfo,
+                         const nlohmann::json& ev) {
+  nlohmann::json row = {{"mode", set.mode},
+                        {"center", set.center},
+                        {"set", set.name},
+                        {"pairs", setInfo.at(set.name).at("pairs")},
+                        {"mean_covis", setInfo.at(set.name).at("mean_covis")}};
+  row.update(ev);
+  return row;
+}
+
+// results.json's content: the rows, both baselines, and what the sweep was run with.
+nlohmann::json collectResults(const SweepConfig& c, const SceneFiles& scenes, const Pool& pool,
+                              const HeldOut& h, const nlohmann::json& rows,
+                              const nlohmann::json& random, const nlohmann::json& constant) {
+  return {{"rows", rows},
+          {"random_encoder", random},
+          {"constant_depth", constant},
+          {"config",
+           {{"scenes", scenes.train},
+            {"heldout", scenes.heldout},
+            {"modes", c.modes},
+            {"centers", c.centers},
+            {"pairs_per_set", c.pairsPerSet},
+            {"steps", c.steps},
+            {"preset", c.preset},
+            {"img_size", c.imgSize},
+            {"batch_size", c.batchSize},
+            {"blr", c.blr},
+            {"seed", c.seed},
+            {"eval_pairs", h.img1.size(0)},
+            {"probe_views", c.probeViews}}},
+          {"pool_pairs", pool.keys.size()}};
+}
+
 }  // namespace
 
 SweepSet makeSweepSet(const std::string& mode, double center) {
@@ -463,229 +674,42 @@ std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
 }
 
 nlohmann::json runCovisSweep(const SweepConfig& c) {
-  if (c.out.empty()) throw Error("--out is required");
-  if (c.scenes.empty()) throw Error("--scenes: give the training scenes");
-  if (c.heldout.empty()) throw Error("--heldout: give at least one held-out scene");
-  if (c.modes.empty() || c.centers.empty()) throw Error("give at least one mode and one centre");
-  if (c.pairsPerSet < c.batchSize)
-    throw Error("--pairs-per-set must be at least one batch (" + std::to_string(c.batchSize) + ")");
-  if (c.steps < 1 || c.evalPairs < 1 || c.probeViews < 4)
-    throw Error("--steps, --eval-pairs must be >= 1 and --probe-views >= 4");
+  checkConfig(c);
   const CroCoConfig mc = modelConfig(c);
-  std::vector<SweepSet> sets;
-  for (const auto& mode : c.modes)
-    for (double x : c.centers) sets.push_back(makeSweepSet(mode, x));
-
-  // Held-out scenes never appear in training: by file and by scene name.
-  const auto train = expandSceneList(c.scenes), held = expandSceneList(c.heldout);
-  std::set<std::string> trainIds;
-  for (const auto& f : train) {
-    trainIds.insert(fs::weakly_canonical(f).string());
-    trainIds.insert("name:" + sanitizeName(fs::path(f).stem().string()));
-  }
-  for (const auto& f : held)
-    if (trainIds.count(fs::weakly_canonical(f).string()) ||
-        trainIds.count("name:" + sanitizeName(fs::path(f).stem().string())))
-      throw Error(f, "is both a training and a held-out scene");
+  const std::vector<SweepSet> sets = planSets(c);
+  const SceneFiles scenes = sceneFiles(c);
   const int rank = environmentRole().rank;
   if (rank != 0) return followSweep(c, mc, sets, rank);
   makeDirs(c.out);
-  const fs::path out(c.out);
   const auto start = SteadyClock::now();
 
   // 1. One pool, bucketed; equal sets drawn from it.
-  const Pool pool = buildPool(c, train, bucketDemand(sets, c.pairsPerSet));
-  std::set<std::string> heldNames;
-  for (const auto& f : held) heldNames.insert(sanitizeName(fs::path(f).stem().string()));
-  for (const auto& key : pool.keys)
-    PAIRCAST_CHECK_MSG(
-        !heldNames.count(key.substr(0, key.rfind('-'))),  // sampleKey's "<scene>-<index>"
-        "a held-out scene's pair is in the training pool");
-  const auto drawn = drawSets(pool.covis, sets, c.pairsPerSet);
-  makeDirs((out / "sets").string());
-  nlohmann::json setInfo = nlohmann::json::object();
-  for (size_t s = 0; s < sets.size(); ++s) {
-    std::string keys;
-    double mean = 0;
-    for (size_t i : drawn[s]) keys += pool.keys[i] + "\n", mean += pool.covis[i];
-    const std::string keysFile = (out / "sets" / (sets[s].name + ".keys")).string();
-    writeFileAtomic(keysFile, keys);
-    setInfo[sets[s].name] = {{"pairs", drawn[s].size()}, {"mean_covis", mean / drawn[s].size()}};
-    const fs::path reportDir = out / "sets" / sets[s].name;
-    if (c.reports && !fs::exists(reportDir / "report.html")) {
-      ReportOptions ro;
-      ro.dir = (out / "pool").string();
-      ro.keysFile = keysFile;
-      ro.out = reportDir.string();
-      ro.title = "covis_sweep set " + sets[s].name;
-      ro.samplesPerBin = 3;
-      writeDatasetReport(ro);
-    }
-  }
-  say(c, std::to_string(sets.size()) + " sets of " + std::to_string(c.pairsPerSet) +
-             " pairs from a pool of " + std::to_string(pool.keys.size()));
+  const Pool pool = buildPool(c, scenes.train, bucketDemand(sets, c.pairsPerSet));
+  checkPoolExcludes(pool, scenes.heldout);
+  const nlohmann::json setInfo = writeSets(c, sets, pool);
 
-  // 2. Held-out data: pairs at covis ~0.5, and views with depth for the probe.
-  GenerateConfig g;
-  g.scenes = held;
-  g.out = (out / "heldout" / "xv").string();
-  g.pairsPerScene =
-      (c.evalPairs + static_cast<int>(held.size()) - 1) / static_cast<int>(held.size());
-  g.seed = c.seed + 1;
-  g.jobs = c.jobs;
-  g.pair.resolution = c.resolution;
-  g.pair.minCovis = 0.45;
-  g.pair.maxCovis = 0.55;
-  g.shardSize = 100000;
-  g.progress = false;
-  if (!fs::exists(out / "heldout" / "xv" / "summary.json")) runGenerate(g);
-  HeldOut h;
-  {
-    const PairDataset xv = PairDataset::fromShards({g.out + "/pairs-*.tar"});
-    std::vector<torch::Tensor> a, b;
-    for (size_t i = 0; i < xv.size() && static_cast<int>(i) < c.evalPairs; ++i) {
-      auto [x, y] = xv.load(i);
-      a.push_back(imageTensor(x, c.imgSize));
-      b.push_back(imageTensor(y, c.imgSize));
-    }
-    h.img1 = torch::cat(a);
-    h.img2 = torch::cat(b);
-    auto gen = at::make_generator<at::CPUGeneratorImpl>(c.seed + 7);
-    h.mask = torch::argsort(torch::rand({h.img1.size(0), mc.numPatches()}, gen), 1, false) <
-             mc.numMasked();
-    auto heldScenes = loadScenes(held, SamplerOptions(), "held-out");
-    const int half = c.probeViews / 2;
-    h.probeA = probeViews(c, heldScenes, 0, half);
-    h.probeB = probeViews(c, heldScenes, half, c.probeViews - half);
-  }
+  // 2. Held-out data: pairs at covis ~0.5, views with depth for the probe, and the probe's floor.
+  const HeldOut h = loadHeldOut(c, mc, scenes.heldout);
+  const nlohmann::json constant = constantDepthBaseline(h);
 
-  // A floor for the probe: one half's mean log depth, everywhere in the other half (and back).
-  nlohmann::json constant;
-  {
-    auto meanDepth = [](const torch::Tensor& d) {
-      return std::exp(torch::log(d.masked_select(d > 0)).mean().item<double>());
-    };
-    const DepthMetrics m =
-        depthMetrics(torch::cat({torch::full_like(h.probeB.depth, meanDepth(h.probeA.depth)),
-                                 torch::full_like(h.probeA.depth, meanDepth(h.probeB.depth))}),
-                     torch::cat({h.probeB.depth, h.probeA.depth}));
-    constant = {{"probe_delta1", m.delta1}, {"probe_absrel", m.absRel}, {"probe_rmse", m.rmse}};
-  }
+  // 3. The random-encoder baseline.
+  nlohmann::json random = randomEncoderBaseline(c, mc, h);
 
-  // 3. The random-encoder baseline: the weights every run starts from.
-  const fs::path randomEval = out / "runs" / "random" / "eval.json";
-  nlohmann::json random = readJson(randomEval.string());
-  if (!random.is_object()) {
-    torch::manual_seed(c.seed);
-    CroCoNet model(mc);
-    random = evaluate(model, h);
-    makeDirs(randomEval.parent_path().string());
-    writeFileAtomic(randomEval.string(), random.dump(1) + "\n");
-  }
-  // Other ranks (WORLD_SIZE > 1) start training from here, in one process group for all sets.
-  writeFileAtomic((out / "ready.json").string(),
-                  nlohmann::json({{"settings", rankSettings(c)}}).dump(1) + "\n");
+  // 4. Train and evaluate each set, with the other ranks.
+  releaseOtherRanks(c);
   const auto dist = Distributed::fromEnvironment(c.device);
-
-  // 4. Train and evaluate each set.
   nlohmann::json rows = nlohmann::json::array();
-  for (size_t s = 0; s < sets.size(); ++s) {
-    const fs::path run = out / "runs" / sets[s].name;
-    nlohmann::json ev = readJson((run / "eval.json").string());
-    if (!ev.is_object()) {
-      trainSet(c, mc, sets[s], dist.get());
-      CroCoNet model(mc);
-      const Checkpoint ck = loadCheckpoint((run / "checkpoint-last.pth").string());
-      loadStateDictStrict(model, ck.model, (run / "checkpoint-last.pth").string());
-      ev = evaluate(model, h);
-      const nlohmann::json sum = readJson((run / "summary.json").string());
-      ev["train_loss"] = sum.is_object() ? sum.value("loss", NAN) : NAN;
-      writeFileAtomic((run / "eval.json").string(), ev.dump(1) + "\n");
-    }
-    nlohmann::json row = {{"mode", sets[s].mode},
-                          {"center", sets[s].center},
-                          {"set", sets[s].name},
-                          {"pairs", setInfo[sets[s].name]["pairs"]},
-                          {"mean_covis", setInfo[sets[s].name]["mean_covis"]}};
-    row.update(ev);
-    rows.push_back(row);
-    say(c, sets[s].name + ": xv_loss " + std::to_string(ev["xv_loss"].get<double>()) +
+  for (const SweepSet& set : sets) {
+    nlohmann::json ev = trainAndEvaluate(c, mc, set, h, dist.get());
+    rows.push_back(resultRow(set, setInfo, ev));
+    say(c, set.name + ": xv_loss " + std::to_string(ev["xv_loss"].get<double>()) +
                ", probe delta1 " + std::to_string(ev["probe_delta1"].get<double>()) +
                " (random encoder " + std::to_string(random["probe_delta1"].get<double>()) + ")");
   }
 
-  // 5. Results.
-  std::string csv =
-      "mode,center,set,pairs,mean_covis,train_loss,xv_loss,probe_delta1,probe_absrel,probe_rmse\n";
-  auto num = [](const nlohmann::json& v) {
-    char b[64];
-    std::snprintf(b, sizeof b, "%.6g", v.is_number() ? v.get<double>() : NAN);
-    return std::string(b);
-  };
-  for (const auto& r : rows)
-    csv += r["mode"].get<std::string>() + "," + centerName(r["center"]) + "," +
-           r["set"].get<std::string>() + "," + std::to_string(r["pairs"].get<int>()) + "," +
-           num(r["mean_covis"]) + "," + num(r["train_loss"]) + "," + num(r["xv_loss"]) + "," +
-           num(r["probe_delta1"]) + "," + num(r["probe_absrel"]) + "," + num(r["probe_rmse"]) +
-           "\n";
-  csv += "random,,random_encoder,0,," + std::string(",") + num(random["xv_loss"]) + "," +
-         num(random["probe_delta1"]) + "," + num(random["probe_absrel"]) + "," +
-         num(random["probe_rmse"]) + "\n";
-  writeFileAtomic((out / "results.csv").string(), csv);
-  nlohmann::json results = {{"rows", rows},
-                            {"random_encoder", random},
-                            {"constant_depth", constant},
-                            {"config",
-                             {{"scenes", train},
-                              {"heldout", held},
-                              {"modes", c.modes},
-                              {"centers", c.centers},
-                              {"pairs_per_set", c.pairsPerSet},
-                              {"steps", c.steps},
-                              {"preset", c.preset},
-                              {"img_size", c.imgSize},
-                              {"batch_size", c.batchSize},
-                              {"blr", c.blr},
-                              {"seed", c.seed},
-                              {"eval_pairs", h.img1.size(0)},
-                              {"probe_views", c.probeViews}}},
-                            {"pool_pairs", pool.keys.size()}};
-  writeFileAtomic((out / "results.json").string(), results.dump(1) + "\n");
-  writePlots(c, rows, random);
-
-  std::string html =
-      "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'><title>covis_sweep "
-      "results</title><style>body{font-family:sans-serif;margin:24px;max-width:1300px}"
-      "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:"
-      "right}th{background:#f3f3f3}</style></head><body>\n<h1>Co-visibility sweep</h1>\n<p>" +
-      std::to_string(sets.size()) + " training sets of " + std::to_string(c.pairsPerSet) +
-      " pairs (" + plot::escape(c.preset) + " model, " + std::to_string(c.steps) + " steps of " +
-      std::to_string(c.batchSize) + " at " + std::to_string(c.imgSize) +
-      " px), evaluated on held-out scenes. Data: <a href='results.csv'>results.csv</a>, <a "
-      "href='results.json'>results.json</a>.</p>\n";
-  for (const char* m : {"xv_loss", "probe_delta1", "probe_absrel", "probe_rmse"})
-    html += "<img src='plot_" + std::string(m) + ".svg' alt='" + m + "'>\n";
-  html +=
-      "<table><tr><th>set</th><th>mean covis</th><th>train loss</th><th>xv loss</th><th>"
-      "delta1</th><th>AbsRel</th><th>RMSE</th><th>dataset</th></tr>\n";
-  for (const auto& r : rows)
-    html += "<tr><td style='text-align:left'>" + r["set"].get<std::string>() + "</td><td>" +
-            num(r["mean_covis"]) + "</td><td>" + num(r["train_loss"]) + "</td><td>" +
-            num(r["xv_loss"]) + "</td><td>" + num(r["probe_delta1"]) + "</td><td>" +
-            num(r["probe_absrel"]) + "</td><td>" + num(r["probe_rmse"]) + "</td><td>" +
-            (c.reports ? "<a href='sets/" + r["set"].get<std::string>() + "/report.html'>report</a>"
-                       : std::string("-")) +
-            "</td></tr>\n";
-  html += "<tr><td style='text-align:left'>random encoder</td><td></td><td></td><td>" +
-          num(random["xv_loss"]) + "</td><td>" + num(random["probe_delta1"]) + "</td><td>" +
-          num(random["probe_absrel"]) + "</td><td>" + num(random["probe_rmse"]) +
-          "</td><td></td></tr>\n<tr><td style='text-align:left'>constant depth (no encoder)</td>"
-          "<td></td><td></td><td></td><td>" +
-          num(constant["probe_delta1"]) + "</td><td>" + num(constant["probe_absrel"]) +
-          "</td><td>" + num(constant["probe_rmse"]) +
-          "</td><td></td></tr>\n</table>\n"
-          "</body></html>\n";
-  writeFileAtomic((out / "summary.html").string(), html);
+  // 5. Results: results.csv, results.json, the plots and summary.html.
+  nlohmann::json results = collectResults(c, scenes, pool, h, rows, random, constant);
+  writeSweepReport(c, results);
   results["seconds_this_run"] = secondsSince(start);
   return results;
 }

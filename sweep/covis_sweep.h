@@ -15,6 +15,8 @@ namespace paircast {
 
 constexpr int kCovisBuckets = 20;  // of width 0.05
 int covisBucket(double covis);
+// A centre or a bucket's edge as the sets' names and the results write it: "0.45".
+std::string centerName(double center);
 
 struct SweepSet {
   std::string name;  // e.g. bin_0.45, uniform_0.25
