@@ -63,8 +63,9 @@ struct Samples {
   }
   // Whether a pair with this key and covis would be kept (so its images are worth reading).
   bool wants(const std::string& key, double covis) const {
+    if (perBin <= 0) return false;  // no sample grid
     const auto& v = byBin[binOf(covis, bins)];
-    if (static_cast<int>(v.size()) < perBin) return perBin > 0;
+    if (static_cast<int>(v.size()) < perBin) return true;
     return hashOf(key) < v.back().hash;
   }
   void add(const PairRecord& r, std::string a, std::string b) {

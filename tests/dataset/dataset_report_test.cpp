@@ -111,6 +111,17 @@ TEST(DatasetReport, ShardsAndCrocoLayoutGiveTheSameCounts) {
   expectValidPage(readFile(croco + "/report.html"), croco);
 }
 
+TEST(DatasetReport, NoSampleGridWithZeroSamplesPerBin) {
+  ReportOptions o;
+  o.dir = generated();
+  o.out = testing::scratchDir("report_no_grid");
+  o.samplesPerBin = 0;
+  const nlohmann::json r = writeDatasetReport(o);
+  EXPECT_EQ(r["pairs"], 24);
+  EXPECT_EQ(r["sample_pairs"], 0);
+  EXPECT_NE(readFile(o.out + "/report.html").find("</html>"), std::string::npos);
+}
+
 TEST(DatasetReport, KeysSelectPairsAndBadInputIsRefused) {
   const std::string out = testing::scratchDir("keys");
   const auto records = readPairRecords(generated());
