@@ -398,17 +398,6 @@ nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
 
 // ---- the stages of runCovisSweep, in order ----
 
-void checkConfig(const SweepConfig& c) {
-  if (c.out.empty()) throw Error("--out is required");
-  if (c.scenes.empty()) throw Error("--scenes: give the training scenes");
-  if (c.heldout.empty()) throw Error("--heldout: give at least one held-out scene");
-  if (c.modes.empty() || c.centers.empty()) throw Error("give at least one mode and one centre");
-  if (c.pairsPerSet < c.batchSize)
-    throw Error("--pairs-per-set must be at least one batch (" + std::to_string(c.batchSize) + ")");
-  if (c.steps < 1 || c.evalPairs < 1 || c.probeViews < 4)
-    throw Error("--steps, --eval-pairs must be >= 1 and --probe-views >= 4");
-}
-
 // Every mode at every centre, mode by mode.
 std::vector<SweepSet> planSets(const SweepConfig& c) {
   std::vector<SweepSet> sets;
@@ -674,7 +663,7 @@ std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
 }
 
 nlohmann::json runCovisSweep(const SweepConfig& c) {
-  checkConfig(c);
+  c.validate();
   const CroCoConfig mc = modelConfig(c);
   const std::vector<SweepSet> sets = planSets(c);
   const SceneFiles scenes = sceneFiles(c);
@@ -712,6 +701,20 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   writeSweepReport(c, results);
   results["seconds_this_run"] = secondsSince(start);
   return results;
+}
+
+void SweepConfig::validate() const {
+  if (out.empty()) throw OptionError("out", "an output folder is required");
+  if (scenes.empty()) throw OptionError("scenes", "give the training scenes");
+  if (heldout.empty()) throw OptionError("heldout", "give at least one held-out scene");
+  if (modes.empty() || centers.empty())
+    throw OptionError("modes", "give at least one mode and one centre");
+  if (pairsPerSet < batchSize)
+    throw OptionError("pairs_per_set", "pairs per set must be at least one batch (" +
+                                           std::to_string(batchSize) + ")");
+  if (steps < 1) throw OptionError("steps", "training steps must be >= 1");
+  if (evalPairs < 1) throw OptionError("eval_pairs", "held-out pairs must be >= 1");
+  if (probeViews < 4) throw OptionError("probe_views", "the depth probe needs at least 4 views");
 }
 
 }  // namespace paircast

@@ -39,6 +39,9 @@ std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
                                           const std::vector<SweepSet>& sets, int n);
 
 struct SweepConfig {
+  // Checks what a user sets; throws OptionError naming the field.
+  void validate() const;
+
   std::vector<std::string> scenes;   // training scenes (files, folders or .txt lists)
   std::vector<std::string> heldout;  // evaluation scenes; never in training (checked)
   std::string out;

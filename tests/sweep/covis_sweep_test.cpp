@@ -162,7 +162,7 @@ TEST(CovisSweep, HeldOutScenesMustNotBeTrainedOn) {
   EXPECT_ERROR_CONTAINS(runCovisSweep(c),
                         c.heldout[0] + ": is both a training and a held-out scene");
   c.heldout = {};
-  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "--heldout: give at least one held-out scene");
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "give at least one held-out scene");
 }
 
 std::string covisSweepTool() {
