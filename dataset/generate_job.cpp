@@ -238,7 +238,7 @@ bool GenerateRun::ownsFile(const std::string& name) const {
 // Scenes: expand, name uniquely, keep this machine's part.
 void GenerateRun::planScenes() {
   const std::vector<std::string> all = expandSceneList(cfg_.scenes);
-  if (all.empty()) throw Error("no scene files found in --scenes");
+  if (all.empty()) throw OptionError("scenes", "no scene files found in the scene list");
   const std::vector<std::string> names = uniqueSceneNames(all);
   for (size_t i = 0; i < all.size(); ++i) {
     if (static_cast<int>(i % cfg_.numShards) != cfg_.shardIndex) continue;
