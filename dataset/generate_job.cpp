@@ -206,6 +206,7 @@ class GenerateRun {
   // Summary.
   void summariseScene(const SceneJob& job, nlohmann::json& perScene, std::string& pairsTxt);
   void tallyCandidates(const nlohmann::json& note);
+  std::map<uint64_t, nlohmann::json> readEntries(const SceneJob& job) const;
   nlohmann::json summaryJson(double seconds) const;
 
   const GenerateConfig& cfg_;
@@ -594,13 +595,29 @@ void GenerateRun::tallyCandidates(const nlohmann::json& note) {
   }
 }
 
+// The metadata entries of a scene's CroCo samples by index, read once in order (the last line of
+// an index wins). Planning opened the file as a journal, which cut a torn last line.
+std::map<uint64_t, nlohmann::json> GenerateRun::readEntries(const SceneJob& job) const {
+  std::map<uint64_t, nlohmann::json> entries;
+  std::ifstream in(entriesPath(job));
+  for (std::string line; std::getline(in, line);) {
+    nlohmann::json r = nlohmann::json::parse(line, nullptr, false);
+    if (!r.is_object() || !r.contains("entry") || !r.contains("index") ||
+        !r["index"].is_number_unsigned())
+      continue;
+    entries[r["index"].get<uint64_t>()] = std::move(r["entry"]);
+  }
+  return entries;
+}
+
 // Tallies one scene's records, and writes its metadata.json and pairs.txt lines (CroCo layout).
 void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
                                  std::string& pairsTxt) {
   nlohmann::json multiviews = nlohmann::json::object();
   uint64_t scenePairs = 0;
   std::string up = cfg_.load.up == UpAxis::Z ? "z" : "y";
-  const std::unique_ptr<Journal> entries = cfg_.croco ? openEntries(job) : nullptr;
+  std::map<uint64_t, nlohmann::json> entries;
+  if (cfg_.croco) entries = readEntries(job);
   for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
     const std::string key = sampleKey(job.name, k);
     const nlohmann::json rec = journal_->find(key);
@@ -612,10 +629,9 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
     if (rec.contains("covis")) histogramAdd(histogram_, rec["covis"].get<double>());
     up = rec.value("up", up);
     if (!cfg_.croco) continue;
-    const nlohmann::json entry = entries->find(key);
-    if (!entry.is_object() || !entry.contains("entry"))
-      throw Error(entries->path(), "no metadata entry for " + key);
-    multiviews[crocoIndex(k)] = entry["entry"];
+    const auto entry = entries.find(k);
+    if (entry == entries.end()) throw Error(entriesPath(job), "no metadata entry for " + key);
+    multiviews[crocoIndex(k)] = std::move(entry->second);
     pairsTxt += crocoPairLines(job.name, crocoIndex(k), cfg_.pair.views);
   }
   perScene[job.name] = scenePairs;
