@@ -526,7 +526,7 @@ void GenerateRun::writeResult(const Item& item, const Result& r) {
     }
     entries_->append({{"scene", scenes_[item.scene]->name},
                       {"index", item.index},
-                      {"entry", r.entry}});
+                      {"entry", r.entry.dump()}});  // as text: a quick line to index
   }
   if (!r.note.is_null()) journal_->append(r.note);
   if (r.pair) addToShard(*r.pair);
@@ -602,10 +602,11 @@ std::map<uint64_t, nlohmann::json> GenerateRun::readEntries(const SceneJob& job)
   std::ifstream in(entriesPath(job));
   for (std::string line; std::getline(in, line);) {
     nlohmann::json r = nlohmann::json::parse(line, nullptr, false);
-    if (!r.is_object() || !r.contains("entry") || !r.contains("index") ||
-        !r["index"].is_number_unsigned())
+    if (!r.is_object() || !r.contains("entry") || !r["entry"].is_string() ||
+        !r.contains("index") || !r["index"].is_number_unsigned())
       continue;
-    entries[r["index"].get<uint64_t>()] = std::move(r["entry"]);
+    entries[r["index"].get<uint64_t>()] =
+        nlohmann::json::parse(r["entry"].get_ref<const std::string&>(), nullptr, false);
   }
   return entries;
 }
