@@ -19,6 +19,7 @@
 #include <optional>
 #include <set>
 #include <thread>
+#include <unordered_set>
 
 #include "dataset/croco_layout.h"
 #include "dataset/habitat_frame.h"
@@ -40,9 +41,20 @@ constexpr auto since = secondsSince;
 
 constexpr int kHistogramBins = 20;
 
+int histogramBin(double covis) {
+  return std::clamp(static_cast<int>(covis * kHistogramBins), 0, kHistogramBins - 1);
+}
+
 void histogramAdd(std::vector<uint64_t>& h, double covis) {
-  int b = static_cast<int>(covis * kHistogramBins);
-  h[std::clamp(b, 0, kHistogramBins - 1)]++;
+  h[histogramBin(covis)]++;
+}
+
+// The candidates' covis as the journal keeps them: their histogram bins, a letter each ('A' is
+// bin 0), all that the summary needs.
+std::string candidateBins(const std::vector<float>& covis) {
+  std::string bins;
+  for (float c : covis) bins += static_cast<char>('A' + histogramBin(static_cast<double>(c)));
+  return bins;
 }
 
 // The journal's key of a record: its sample key, or "" for a line that is not a record.
@@ -51,6 +63,11 @@ std::string recordKey(const nlohmann::json& r) {
   if (scene == r.end() || !scene->is_string() || index == r.end() || !index->is_number_unsigned())
     return "";
   return sampleKey(scene->get<std::string>(), index->get<uint64_t>());
+}
+
+// Whether a journal record is of an index known to have no sample.
+bool recordFailed(const nlohmann::json& r) {
+  return r.value("failed", false);
 }
 
 // Resident memory of the process, bytes (0 when /proc is not there).
@@ -90,10 +107,26 @@ struct Item {
 };
 
 struct Result {
-  bool done = false;      // slot filled
-  nlohmann::json record;  // for the journal; null when nothing is recorded (skipped scene)
+  bool done = false;              // slot filled
+  nlohmann::json note;            // for the journal; null when nothing is recorded (skipped scene)
+  nlohmann::json entry;           // its CroCo metadata entry, when its CroCo files were written
   std::optional<EncodedPair> pair;  // for the shard
 };
+
+// CroCo's metadata entry of one sample, from its record.
+nlohmann::json multiviewEntry(const nlohmann::json& rec, const std::string& source) {
+  nlohmann::json positions = nlohmann::json::array();
+  for (const auto& c : rec.at("cameras")) {
+    const Camera cam = cameraFromJson(c, source);
+    positions.push_back({cam.t_cam2world.x(), cam.t_cam2world.y(), cam.t_cam2world.z()});
+  }
+  const nlohmann::json& orientations = rec.at("orientations");
+  return {{"positions", positions},
+          {"orientations", orientations},
+          {"covisibility_ratios", rec.at("covisibility_ratios")},
+          {"valid_fractions", rec.at("valid_fractions")},
+          {"pairwise_visibility_ratios", rec.at("pairwise_visibility_ratios")}};
+}
 
 // "pairs-000042.tar", or "pairs-<part>-000042.tar" for part "-<part>" of several machines.
 std::string shardName(const std::string& part, size_t n) {
@@ -102,16 +135,20 @@ std::string shardName(const std::string& part, size_t n) {
   return name;
 }
 
-// Reads the keys of the shards that already exist, in order, stopping at the first gap.
-std::vector<std::vector<std::string>> completedShards(const std::string& out,
-                                                      const std::string& part) {
-  std::vector<std::vector<std::string>> shards;
+// The keys of the shards that already exist, stopping at the first gap; each shard is listed in
+// `list`. A shard under its final name is whole (it is renamed into place): its headers are
+// enough.
+std::unordered_set<std::string> completedShards(const std::string& out, const std::string& part,
+                                                std::vector<nlohmann::json>& list) {
+  std::unordered_set<std::string> keys;
   for (size_t s = 0;; ++s) {
     const std::string path = (fs::path(out) / shardName(part, s)).string();
     if (!fs::exists(path)) break;
-    shards.push_back(shardKeys(path));
+    const std::vector<std::string> shard = ShardIndex::keys(path);
+    keys.insert(shard.begin(), shard.end());
+    list.push_back({{"pairs", shard.size()}});
   }
-  return shards;
+  return keys;
 }
 
 // "[generate_pairs] 120/500 pairs  38.1 pairs/s  acceptance 6%  ETA 0m10s"
@@ -145,6 +182,12 @@ class GenerateRun {
   std::string outPath(const std::string& stem, const std::string& ext) const {
     return (fs::path(cfg_.out) / (stem + part_ + ext)).string();
   }
+  // The journal of a scene's CroCo metadata entries, .paircast/metadata<part>/<scene>.jsonl.
+  std::string entriesPath(const SceneJob& s) const {
+    return (fs::path(cfg_.out) / ".paircast" / ("metadata" + part_) / (s.name + ".jsonl"))
+        .string();
+  }
+  std::unique_ptr<Journal> openEntries(const SceneJob& s) const;
   // Whether a file at the top of --out is this part's: its shards, index, pairs.txt, summary.
   bool ownsFile(const std::string& name) const;
   // Workers.
@@ -157,10 +200,13 @@ class GenerateRun {
   void fail();
   // The writer, on the calling thread.
   void writeInOrder();
+  void writeResult(const Item& item, const Result& r);
   void addToShard(const EncodedPair& pair);
   void closeShard();
   // Summary.
   void summariseScene(const SceneJob& job, nlohmann::json& perScene, std::string& pairsTxt);
+  void tallyCandidates(const nlohmann::json& note);
+  std::map<uint64_t, nlohmann::json> readEntries(const SceneJob& job) const;
   nlohmann::json summaryJson(double seconds) const;
 
   const GenerateConfig& cfg_;
@@ -168,7 +214,7 @@ class GenerateRun {
   std::string part_;  // "-<shard index>" with several machines, else ""
   std::vector<std::unique_ptr<SceneJob>> scenes_;
   std::unique_ptr<Journal> journal_;
-  std::vector<std::vector<std::string>> doneShards_;
+  std::unordered_set<std::string> inShards_;  // keys of the completed shards
   std::vector<Item> items_;
   int jobs_ = 1;
 
@@ -194,6 +240,9 @@ class GenerateRun {
   // Shards being written.
   std::unique_ptr<ShardWriter> shard_;
   std::vector<nlohmann::json> shardList_;
+  // The CroCo metadata entries of the scene being written.
+  std::unique_ptr<Journal> entries_;
+  size_t entriesScene_ = 0;
 
   // Summary tallies.
   std::vector<uint64_t> histogram_ = std::vector<uint64_t>(kHistogramBins, 0);
@@ -216,9 +265,9 @@ GenerateRun::GenerateRun(const GenerateConfig& cfg) : cfg_(cfg) {
   const std::string journalName = "journal" + part_ + ".jsonl";
   removeStaleTemporaries(bookkeeping.string(),
                          [&](const std::string& name) { return name == journalName; });
-  journal_ = std::make_unique<Journal>((bookkeeping / journalName).string(), recordKey);
-  if (cfg.shards) doneShards_ = completedShards(cfg.out, part_);
-  for (const auto& keys : doneShards_) shardList_.push_back({{"pairs", keys.size()}});
+  journal_ =
+      std::make_unique<Journal>((bookkeeping / journalName).string(), recordKey, recordFailed);
+  if (cfg.shards) inShards_ = completedShards(cfg.out, part_, shardList_);
   planItems();
 }
 
@@ -251,24 +300,30 @@ void GenerateRun::planScenes() {
 
 // What is left: samples in neither a completed shard nor the journal (with their files).
 void GenerateRun::planItems() {
-  std::set<std::string> inShards;
-  for (const auto& keys : doneShards_) inShards.insert(keys.begin(), keys.end());
   const std::string lastView = "_" + std::to_string(cfg_.pair.views) + ".jpeg";
   for (size_t s = 0; s < scenes_.size(); ++s) {
     SceneJob& job = *scenes_[s];
     removeStaleTemporaries((fs::path(cfg_.out) / job.name).string());  // the part's own folder
+    const std::unique_ptr<Journal> entries =
+        cfg_.croco && fs::exists(entriesPath(job)) ? openEntries(job) : nullptr;
     for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
       const std::string key = sampleKey(job.name, k);
-      const nlohmann::json rec = journal_->find(key);
-      if (rec.is_object() && rec.value("failed", false)) continue;  // known to have no sample
-      const bool shardDone = !cfg_.shards || inShards.count(key);
-      const bool crocoDone =
-          !cfg_.croco || (rec.is_object() && fs::exists(crocoStem(job, k) + lastView));
+      const Journal::Has noted = journal_->has(key);
+      if (noted == Journal::Has::kMarked) continue;  // known to have no sample
+      const bool shardDone = !cfg_.shards || inShards_.count(key);
+      const bool crocoDone = !cfg_.croco || (noted == Journal::Has::kYes && entries && entries->contains(key) &&
+                                             fs::exists(crocoStem(job, k) + lastView));
       if (shardDone && crocoDone) continue;
       items_.push_back({s, k, !shardDone, !crocoDone});
       job.pending++;
     }
   }
+  inShards_ = {};  // no longer needed
+}
+
+std::unique_ptr<Journal> GenerateRun::openEntries(const SceneJob& s) const {
+  makeDirs(fs::path(entriesPath(s)).parent_path().string());
+  return std::make_unique<Journal>(entriesPath(s), recordKey);
 }
 
 void GenerateRun::run() {
@@ -281,6 +336,8 @@ void GenerateRun::run() {
     fail();
   }
   for (auto& t : threads) t.join();
+  if (entries_) entries_->sync();
+  entries_.reset();
   journal_->sync();
   if (failure_) std::rethrow_exception(failure_);
 }
@@ -386,10 +443,10 @@ Result GenerateRun::makeItem(const Item& item) {
   if (!sample) {
     addTimes(spent, 0.0, 0.0);
     ++failedPairs_;
-    r.record = {{"failed", true},
-                {"scene", job.name},
-                {"index", item.index},
-                {"candidate_covis", spent.candidateCovis}};
+    r.note = {{"failed", true},
+              {"scene", job.name},
+              {"index", item.index},
+              {"candidates", candidateBins(spent.candidateCovis)}};
     return r;
   }
   auto t0 = Clock::now();
@@ -405,7 +462,12 @@ Result GenerateRun::makeItem(const Item& item) {
   }
   addTimes(spent, encode, since(t0));
   ++accepted_;
-  r.record = enc.record;
+  r.note = {{"scene", job.name},
+            {"index", item.index},
+            {"candidates", candidateBins(sample->candidateCovis)},
+            {"up", enc.record["up"]}};
+  if (enc.record.contains("covis")) r.note["covis"] = enc.record["covis"];
+  if (item.forCroco) r.entry = multiviewEntry(enc.record, sampleKey(job.name, item.index));
   if (item.forShard) r.pair = std::move(enc);
   return r;
 }
@@ -443,8 +505,7 @@ void GenerateRun::writeInOrder() {
       consumed_.notify_all();
     }
     const auto t0 = Clock::now();
-    if (!r.record.is_null()) journal_->append(r.record);
-    if (r.pair) addToShard(*r.pair);
+    writeResult(items_[i], r);
     {
       std::lock_guard<std::mutex> lock(timeMu_);
       tWrite_ += since(t0);
@@ -453,6 +514,22 @@ void GenerateRun::writeInOrder() {
   }
   if (shard_ && !stop_) closeShard();
   show(items_.size(), true);
+}
+
+// The sample's metadata entry, then its journal note, then its shard entry.
+void GenerateRun::writeResult(const Item& item, const Result& r) {
+  if (!r.entry.is_null()) {
+    if (!entries_ || entriesScene_ != item.scene) {
+      if (entries_) entries_->sync();
+      entries_ = openEntries(*scenes_[item.scene]);
+      entriesScene_ = item.scene;
+    }
+    entries_->append({{"scene", scenes_[item.scene]->name},
+                      {"index", item.index},
+                      {"entry", r.entry.dump()}});  // as text: a quick line to index
+  }
+  if (!r.note.is_null()) journal_->append(r.note);
+  if (r.pair) addToShard(*r.pair);
 }
 
 void GenerateRun::addToShard(const EncodedPair& pair) {
@@ -466,6 +543,7 @@ void GenerateRun::addToShard(const EncodedPair& pair) {
 }
 
 void GenerateRun::closeShard() {
+  if (entries_) entries_->sync();
   journal_->sync();
   shard_->close();
   shardList_.push_back({{"pairs", shard_->samples()}});
@@ -502,19 +580,35 @@ nlohmann::json GenerateRun::summarise() {
   return summary;
 }
 
-// CroCo's metadata entry of one sample, from its journal record.
-nlohmann::json multiviewEntry(const nlohmann::json& rec, const std::string& source) {
-  nlohmann::json positions = nlohmann::json::array();
-  for (const auto& c : rec.at("cameras")) {
-    const Camera cam = cameraFromJson(c, source);
-    positions.push_back({cam.t_cam2world.x(), cam.t_cam2world.y(), cam.t_cam2world.z()});
+// Adds a journal note's candidates to the candidate histogram (their covis, in a journal that
+// an older generate_pairs wrote).
+void GenerateRun::tallyCandidates(const nlohmann::json& note) {
+  for (const auto& c : note.value("candidate_covis", nlohmann::json::array())) {
+    histogramAdd(candidateHistogram_, c.get<double>());
+    ++tried_;
   }
-  const nlohmann::json& orientations = rec.at("orientations");
-  return {{"positions", positions},
-          {"orientations", orientations},
-          {"covisibility_ratios", rec.at("covisibility_ratios")},
-          {"valid_fractions", rec.at("valid_fractions")},
-          {"pairwise_visibility_ratios", rec.at("pairwise_visibility_ratios")}};
+  const auto bins = note.find("candidates");
+  if (bins == note.end() || !bins->is_string()) return;
+  for (const char b : bins->get_ref<const std::string&>()) {
+    candidateHistogram_[std::clamp(b - 'A', 0, kHistogramBins - 1)]++;
+    ++tried_;
+  }
+}
+
+// The metadata entries of a scene's CroCo samples by index, read once in order (the last line of
+// an index wins). Planning opened the file as a journal, which cut a torn last line.
+std::map<uint64_t, nlohmann::json> GenerateRun::readEntries(const SceneJob& job) const {
+  std::map<uint64_t, nlohmann::json> entries;
+  std::ifstream in(entriesPath(job));
+  for (std::string line; std::getline(in, line);) {
+    nlohmann::json r = nlohmann::json::parse(line, nullptr, false);
+    if (!r.is_object() || !r.contains("entry") || !r["entry"].is_string() ||
+        !r.contains("index") || !r["index"].is_number_unsigned())
+      continue;
+    entries[r["index"].get<uint64_t>()] =
+        nlohmann::json::parse(r["entry"].get_ref<const std::string&>(), nullptr, false);
+  }
+  return entries;
 }
 
 // Tallies one scene's records, and writes its metadata.json and pairs.txt lines (CroCo layout).
@@ -523,20 +617,22 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
   nlohmann::json multiviews = nlohmann::json::object();
   uint64_t scenePairs = 0;
   std::string up = cfg_.load.up == UpAxis::Z ? "z" : "y";
+  std::map<uint64_t, nlohmann::json> entries;
+  if (cfg_.croco) entries = readEntries(job);
   for (uint64_t k = 0; k < static_cast<uint64_t>(cfg_.pairsPerScene); ++k) {
-    const nlohmann::json rec = journal_->find(sampleKey(job.name, k));
+    const std::string key = sampleKey(job.name, k);
+    const nlohmann::json rec = journal_->find(key);
     if (!rec.is_object()) continue;
-    for (const auto& c : rec.value("candidate_covis", nlohmann::json::array())) {
-      histogramAdd(candidateHistogram_, c.get<double>());
-      ++tried_;
-    }
+    tallyCandidates(rec);
     if (rec.value("failed", false)) continue;
     ++pairs_;
     ++scenePairs;
     if (rec.contains("covis")) histogramAdd(histogram_, rec["covis"].get<double>());
     up = rec.value("up", up);
     if (!cfg_.croco) continue;
-    multiviews[crocoIndex(k)] = multiviewEntry(rec, journal_->path() + ": " + recordKey(rec));
+    const auto entry = entries.find(k);
+    if (entry == entries.end()) throw Error(entriesPath(job), "no metadata entry for " + key);
+    multiviews[crocoIndex(k)] = std::move(entry->second);
     pairsTxt += crocoPairLines(job.name, crocoIndex(k), cfg_.pair.views);
   }
   perScene[job.name] = scenePairs;

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 
@@ -14,6 +15,10 @@ namespace {
 // fsync after this many appended lines, or this many seconds, whichever comes first.
 constexpr size_t kSyncLines = 256;
 constexpr double kSyncSeconds = 2.0;
+// Opening reads the journal this many bytes at a time (a line longer than that grows the block).
+constexpr size_t kReadBlock = size_t(1) << 22;
+// Bytes of a short record, to size the index before reading.
+constexpr size_t kTypicalLine = 96;
 
 std::string lastError() {
   return std::strerror(errno);
@@ -21,8 +26,9 @@ std::string lastError() {
 
 }  // namespace
 
-Journal::Journal(const std::string& path, std::string (*keyOf)(const nlohmann::json&))
-    : path_(path), keyOf_(keyOf), lastSync_(SteadyClock::now()) {
+Journal::Journal(const std::string& path, std::string (*keyOf)(const nlohmann::json&),
+                 bool (*mark)(const nlohmann::json&))
+    : path_(path), keyOf_(keyOf), mark_(mark), lastSync_(SteadyClock::now()) {
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) throw Error(path, "cannot open the journal: " + lastError());
   load();
@@ -34,28 +40,47 @@ Journal::~Journal() {
   ::close(fd_);
 }
 
-// Reads every whole line; a torn tail (no newline) is cut off so that appends start clean.
+// Reads every whole line, a block at a time; a torn tail (no newline) is cut off so that appends
+// start clean.
 void Journal::load() {
   index_.clear();
   const off_t end = ::lseek(fd_, 0, SEEK_END);
   if (end < 0) throw Error(path_, "cannot read the journal: " + lastError());
-  std::string data(static_cast<size_t>(end), '\0');
-  size_t got = 0;
-  while (got < data.size()) {
-    const ssize_t n = ::pread(fd_, data.data() + got, data.size() - got, static_cast<off_t>(got));
+  index_.reserve(static_cast<size_t>(end) / kTypicalLine);
+  std::string block;
+  uint64_t pos = 0;  // start of the first line not yet indexed
+  while (pos + block.size() < static_cast<uint64_t>(end)) {
+    const size_t want = std::min<uint64_t>(kReadBlock, end - pos - block.size());
+    const size_t had = block.size();
+    block.resize(had + want);
+    const ssize_t n = ::pread(fd_, block.data() + had, want, static_cast<off_t>(pos + had));
     if (n <= 0) throw Error(path_, "cannot read the journal: " + lastError());
-    got += static_cast<size_t>(n);
+    block.resize(had + static_cast<size_t>(n));
+    const size_t used = indexLines(block, pos);
+    block.erase(0, used);
+    pos += used;
   }
-  size_t pos = 0;
-  for (size_t nl; (nl = data.find('\n', pos)) != std::string::npos; pos = nl + 1) {
-    const auto record =
-        nlohmann::json::parse(data.begin() + pos, data.begin() + nl, nullptr, false);
-    const std::string key = record.is_object() ? keyOf_(record) : std::string();
-    if (!key.empty()) index_[key] = {pos, static_cast<uint32_t>(nl - pos)};
-  }
-  size_ = pos;
-  if (size_ != data.size() && ::ftruncate(fd_, static_cast<off_t>(size_)) != 0)
+  size_ = indexed_ = pos;
+  if (size_ != static_cast<uint64_t>(end) && ::ftruncate(fd_, static_cast<off_t>(size_)) != 0)
     throw Error(path_, "cannot cut the journal's torn last line: " + lastError());
+}
+
+size_t Journal::indexLines(const std::string& block, uint64_t offset) {
+  size_t pos = 0;
+  for (size_t nl; (nl = block.find('\n', pos)) != std::string::npos; pos = nl + 1) {
+    const auto record =
+        nlohmann::json::parse(block.begin() + pos, block.begin() + nl, nullptr, false);
+    const std::string key = record.is_object() ? keyOf_(record) : std::string();
+    if (!key.empty())
+      index_[key] = {offset + pos, static_cast<uint32_t>(nl - pos), mark_ && mark_(record)};
+  }
+  return pos;
+}
+
+Journal::Has Journal::has(const std::string& key) const {
+  const auto it = index_.find(key);
+  if (it == index_.end()) return Has::kNo;
+  return it->second.marked ? Has::kMarked : Has::kYes;
 }
 
 nlohmann::json Journal::find(const std::string& key) const {
@@ -95,7 +120,7 @@ void Journal::sync() {
 
 void Journal::reopen() {
   sync();
-  load();
+  if (size_ != indexed_) load();
 }
 
 }  // namespace paircast

@@ -306,6 +306,20 @@ ShardIndex ShardIndex::open(const std::string& path, const Warn& warn,
   return index;
 }
 
+std::vector<std::string> ShardIndex::keys(const std::string& path) {
+  Fd f(path);
+  struct stat st {};
+  if (f.fd < 0 || ::fstat(f.fd, &st) != 0 || !S_ISREG(st.st_mode))
+    throw Error(path, errno == ENOENT ? "no such shard" : "cannot read shard");
+  std::vector<std::string> keys;
+  HeaderWalker walker(path, f.fd, static_cast<uint64_t>(st.st_size), {}, {});
+  const std::string damage = walker.walk([&](PendingSample&& p) {
+    if (p.hasRecord && p.record.size > 0 && !p.member[0].empty()) keys.push_back(std::move(p.key));
+  });
+  if (!damage.empty()) throw Error(path, "shard is truncated or corrupt: " + damage);
+  return keys;
+}
+
 Bytes ShardIndex::read(const Extent& e) const {
   return readFileRange(path_, e.offset, e.size);
 }

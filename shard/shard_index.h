@@ -48,6 +48,11 @@ class ShardIndex {
   // paircast_shard_version.
   static ShardIndex open(const std::string& path, const Warn& warn = {},
                          const ShardIndexOptions& options = {});
+  // The keys of the samples of the shard at `path` that have a record and images, in order, from
+  // the headers alone: no record is read or checked. For a shard known to be whole (one that
+  // generate_pairs renamed into place), where open() would parse every record. Throws
+  // paircast::Error naming the shard when it cannot be read or is truncated or corrupt.
+  static std::vector<std::string> keys(const std::string& path);
 
   const std::string& path() const { return path_; }
   size_t size() const { return samples_.size(); }

@@ -45,6 +45,16 @@ TEST(Shard, RoundTrip) {
                                                        "my_scene-00000002"}));
 }
 
+// generate_pairs learns a complete shard's pairs from its headers alone; a cut one throws.
+TEST(Shard, KeysFromTheHeadersAloneMatchTheCheckedOnes) {
+  const std::string dir = testing::scratchDir("keys");
+  const std::string path = writeShard(dir, 4, true);
+  EXPECT_EQ(ShardIndex::keys(path), shardKeys(path));
+  const std::string bytes = readFile(path);
+  writeFileAtomic(dir + "/cut.tar", bytes.substr(0, bytes.size() * 6 / 10));
+  EXPECT_THROW(ShardIndex::keys(dir + "/cut.tar"), Error);
+}
+
 TEST(Shard, UnclosedWriterLeavesNothing) {
   const std::string dir = testing::scratchDir("unclosed");
   {
