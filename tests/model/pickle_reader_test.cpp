@@ -11,10 +11,15 @@
 #include <sstream>
 #include <string>
 
+#include "model/pickle_pieces.h"
 #include "util/error.h"
 
 namespace paircast {
 namespace {
+
+using testing::i64;
+using testing::str;
+using testing::tensor;
 using namespace std::string_literals;
 
 // A pickle in an in-memory archive as torch.save lays it out (data.pkl and a record data/<key>
@@ -60,27 +65,8 @@ std::string refusal(const std::string& pkl) {
 
 // Pickle pieces.
 const std::string kProto2 = "\x80\x02";
-std::string str(const std::string& s) {  // BINUNICODE
-  const uint32_t n = static_cast<uint32_t>(s.size());
-  return "X" + std::string(reinterpret_cast<const char*>(&n), 4) + s;
-}
 std::string shortStr(const std::string& s) {  // SHORT_BINUNICODE
   return "\x8c" + std::string(1, static_cast<char>(s.size())) + s;
-}
-std::string i64(int64_t v) {  // LONG1, 8 bytes
-  return std::string("\x8a\x08", 2) + std::string(reinterpret_cast<const char*>(&v), 8);
-}
-// _rebuild_tensor_v2(storage(key, numel), offset, size, stride, False, {}) of float32.
-std::string tensor(const std::string& key, int64_t numel, int64_t offset,
-                   const std::vector<int64_t>& size, const std::vector<int64_t>& stride) {
-  std::string p = "ctorch._utils\n_rebuild_tensor_v2\n(";
-  p += "(" + str("storage") + "ctorch\nFloatStorage\n" + str(key) + str("cpu") + i64(numel) + "tQ";
-  p += i64(offset) + "(";
-  for (int64_t s : size) p += i64(s);
-  p += "t(";
-  for (int64_t s : stride) p += i64(s);
-  p += "t\x89}tR";
-  return p;
 }
 
 TEST(PickleReader, ReadsConstantsNumbersAndStrings) {

@@ -8,12 +8,17 @@
 #include <chrono>
 
 #include "model/checkpoint.h"
+#include "model/pickle_pieces.h"
 #include "test_errors.h"
 #include "test_paths.h"
 #include "util/error.h"
 
 namespace paircast {
 namespace {
+
+using testing::i64;
+using testing::str;
+using testing::tensor;
 
 // A zip checkpoint as torch.save lays it out, with our own data.pkl and storage records.
 std::string writeCheckpoint(const std::string& dir, const std::string& name, const std::string& pkl,
@@ -28,26 +33,7 @@ std::string writeCheckpoint(const std::string& dir, const std::string& name, con
 }
 
 // Pickle pieces (protocol 2 unless noted).
-std::string str(const std::string& s) {  // BINUNICODE
-  const uint32_t n = static_cast<uint32_t>(s.size());
-  return "X" + std::string(reinterpret_cast<const char*>(&n), 4) + s;
-}
-std::string i64(int64_t v) {  // LONG1, 8 bytes
-  return std::string("\x8a\x08", 2) + std::string(reinterpret_cast<const char*>(&v), 8);
-}
 const std::string kProto = "\x80\x02";
-// _rebuild_tensor_v2(storage(key, numel), offset, size, stride, False, {}) of float32.
-std::string tensor(const std::string& key, int64_t numel, int64_t offset,
-                   const std::vector<int64_t>& size, const std::vector<int64_t>& stride) {
-  std::string p = "ctorch._utils\n_rebuild_tensor_v2\n(";
-  p += "(" + str("storage") + "ctorch\nFloatStorage\n" + str(key) + str("cpu") + i64(numel) + "tQ";
-  p += i64(offset) + "(";
-  for (int64_t s : size) p += i64(s);
-  p += "t(";
-  for (int64_t s : stride) p += i64(s);
-  p += "t\x89}tR";
-  return p;
-}
 // {key: value}
 std::string dictOf(const std::string& key, const std::string& value) {
   return "}" + str(key) + value + "s";
