@@ -226,11 +226,11 @@ class HeaderWalker {
     current_ = PendingSample{};
   }
 
-  const std::string& path_;
+  std::string path_;
   int fd_;
   uint64_t fileSize_, pos_ = 0;
-  const ShardIndex::Warn& warn_;
-  const ShardIndexOptions& options_;
+  ShardIndex::Warn warn_;  // copies: callers may pass temporaries
+  ShardIndexOptions options_;
   PendingSample current_;
 };
 
