@@ -8,13 +8,15 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config
   libembree-dev libassimp-dev libeigen3-dev libopenimageio-dev openimageio-tools
   libgtest-dev libtorch-dev libopenblas0-pthread libgloo-dev
-  nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev
+  nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev libjpeg-dev
   # The Python package (python/): pybind11, numpy, and its tests and pip install.
   python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-setuptools
 )
-# Optional references for tests and benchmarks (Python side): torch, open3d, sklearn.
+# Optional references for tests and benchmarks (Python side): torch, open3d, sklearn, and
+# torchvision with PIL for naver/croco's own loader (bench/bench_loader.py).
 if [[ "${PAIRCAST_WITH_REFERENCES:-1}" == 1 ]]; then
   PACKAGES+=(python3-numpy python3-torch python3-open3d python3-sklearn python3-openimageio)
+  PACKAGES+=(python3-torchvision python3-pil)
   PACKAGES+=(chromium)  # the dataset report is checked in headless Chromium
 fi
 
