@@ -132,9 +132,9 @@ Rerun rerun(const Args& a, uint64_t perScene) {
 
 int main(int argc, char** argv) {
   Args a;
-  a.tool = (fs::canonical("/proc/self/exe").parent_path().parent_path() / "tools" /
-            "generate_pairs")
-               .string();
+  a.tool =
+      (fs::canonical("/proc/self/exe").parent_path().parent_path() / "tools" / "generate_pairs")
+          .string();
   CLI::App app{"bench_resume: a no-op rerun of a finished generate_pairs job, faked"};
   app.add_option("--pairs", a.pairs, "pairs of the faked job (CroCo: 1.8 M)");
   app.add_option("--scenes", a.scenes, "scenes they are spread over");
@@ -146,8 +146,8 @@ int main(int argc, char** argv) {
   const uint64_t pairs = perScene * a.scenes;
   const auto t0 = std::chrono::steady_clock::now();
   fakeJob(a, perScene);
-  std::printf("faked %llu pairs over %d scenes in %.1f s\n",
-              static_cast<unsigned long long>(pairs), a.scenes,
+  std::printf("faked %llu pairs over %d scenes in %.1f s\n", static_cast<unsigned long long>(pairs),
+              a.scenes,
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   const double journalBytes = fs::file_size(a.out + "/out/.paircast/journal.jsonl");
   const Rerun r = rerun(a, perScene);
@@ -158,8 +158,8 @@ int main(int argc, char** argv) {
   std::printf("journal       %8.1f bytes/pair   (target < 300)\n", journalBytes / pairs);
   std::printf("no-op rerun   %8.2f s            (target < 30)\n", r.seconds);
   std::printf("peak RSS      %8.1f MiB          (target < 1024)\n", r.peakMiB);
-  std::printf("rerun %s: exit %d, pairs %llu, pairs this run %d\n", noop ? "made nothing" : "FAILED",
-              WIFEXITED(r.status) ? WEXITSTATUS(r.status) : -1,
+  std::printf("rerun %s: exit %d, pairs %llu, pairs this run %d\n",
+              noop ? "made nothing" : "FAILED", WIFEXITED(r.status) ? WEXITSTATUS(r.status) : -1,
               static_cast<unsigned long long>(summary.value("pairs", uint64_t(0))),
               summary.value("pairs_this_run", -1));
   const bool met = noop && journalBytes / pairs < 300 && r.seconds < 30 && r.peakMiB < 1024;

@@ -20,7 +20,8 @@ int main(int argc, char** argv) {
   app.add_option("--workers", workers, "Loader threads")->check(CLI::Range(1, 256));
   app.add_option("--batch-size", batch, "Pairs per batch")->check(CLI::Range(1, 4096));
   app.add_option("--img-size", imgSize, "Crop side")->check(CLI::Range(16, 4096));
-  app.add_option("--batches", batches, "Batches timed after the first")->check(CLI::Range(1, 1 << 20));
+  app.add_option("--batches", batches, "Batches timed after the first")
+      ->check(CLI::Range(1, 1 << 20));
   CLI11_PARSE(app, argc, argv);
   try {
     torch::set_num_threads(1);  // the loader's threads are the only parallelism measured

@@ -107,9 +107,9 @@ struct Item {
 };
 
 struct Result {
-  bool done = false;              // slot filled
-  nlohmann::json note;            // for the journal; null when nothing is recorded (skipped scene)
-  nlohmann::json entry;           // its CroCo metadata entry, when its CroCo files were written
+  bool done = false;     // slot filled
+  nlohmann::json note;   // for the journal; null when nothing is recorded (skipped scene)
+  nlohmann::json entry;  // its CroCo metadata entry, when its CroCo files were written
   std::optional<EncodedPair> pair;  // for the shard
 };
 
@@ -184,8 +184,7 @@ class GenerateRun {
   }
   // The journal of a scene's CroCo metadata entries, .paircast/metadata<part>/<scene>.jsonl.
   std::string entriesPath(const SceneJob& s) const {
-    return (fs::path(cfg_.out) / ".paircast" / ("metadata" + part_) / (s.name + ".jsonl"))
-        .string();
+    return (fs::path(cfg_.out) / ".paircast" / ("metadata" + part_) / (s.name + ".jsonl")).string();
   }
   std::unique_ptr<Journal> openEntries(const SceneJob& s) const;
   // Whether a file at the top of --out is this part's: its shards, index, pairs.txt, summary.
@@ -311,8 +310,9 @@ void GenerateRun::planItems() {
       const Journal::Has noted = journal_->has(key);
       if (noted == Journal::Has::kMarked) continue;  // known to have no sample
       const bool shardDone = !cfg_.shards || inShards_.count(key);
-      const bool crocoDone = !cfg_.croco || (noted == Journal::Has::kYes && entries && entries->contains(key) &&
-                                             fs::exists(crocoStem(job, k) + lastView));
+      const bool crocoDone =
+          !cfg_.croco || (noted == Journal::Has::kYes && entries && entries->contains(key) &&
+                          fs::exists(crocoStem(job, k) + lastView));
       if (shardDone && crocoDone) continue;
       items_.push_back({s, k, !shardDone, !crocoDone});
       job.pending++;
@@ -602,8 +602,8 @@ std::map<uint64_t, nlohmann::json> GenerateRun::readEntries(const SceneJob& job)
   std::ifstream in(entriesPath(job));
   for (std::string line; std::getline(in, line);) {
     nlohmann::json r = nlohmann::json::parse(line, nullptr, false);
-    if (!r.is_object() || !r.contains("entry") || !r["entry"].is_string() ||
-        !r.contains("index") || !r["index"].is_number_unsigned())
+    if (!r.is_object() || !r.contains("entry") || !r["entry"].is_string() || !r.contains("index") ||
+        !r["index"].is_number_unsigned())
       continue;
     entries[r["index"].get<uint64_t>()] =
         nlohmann::json::parse(r["entry"].get_ref<const std::string&>(), nullptr, false);

@@ -7,9 +7,9 @@
 
 #include "dataset/floor_map.h"
 #include "dataset/habitat_frame.h"
-#include "util/camera.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
+#include "util/camera.h"
 #include "util/random.h"
 
 namespace paircast {

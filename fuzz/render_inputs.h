@@ -5,8 +5,8 @@
 #include <nlohmann/json.hpp>
 
 #include "fuzz/fuzz_inputs.h"
-#include "util/camera.h"
 #include "render/scene_loader.h"
+#include "util/camera.h"
 
 namespace paircast::fuzz {
 
