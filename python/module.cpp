@@ -404,7 +404,7 @@ class PyShardReader {
     try {
       const ShardIndex index = ShardIndex::open(path_, [&](const std::string& m) { warn(m); });
       if (index.damaged() && index.size() == 0) throw Error(path_, index.damage());
-      if (index.damaged()) warn(path_ + ": " + index.damage() + "; its whole samples are used");
+      index.warnOfDamage([&](const std::string& m) { warn(m); });
       for (size_t i = 0; i < index.size(); ++i) {
         std::optional<Decoded> d;
         try {
@@ -498,10 +498,6 @@ class PyShardSet {
 
   py::array decode(size_t i, int view, int top, int left, int height, int width,
                    const std::string& dtype) const {
-    check(i);
-    if (view < 0 || view >= set_[i].record.views)
-      throw py::index_error("view " + std::to_string(view) + " of a sample of " +
-                            std::to_string(set_[i].record.views));
     if (dtype != "float32" && dtype != "uint8")
       throw py::value_error("dtype must be 'float32' or 'uint8', not '" + dtype + "'");
     const CropBox box{top, left, height, width};
@@ -519,10 +515,6 @@ class PyShardSet {
   // decode() into `out`, a writable C-contiguous array of shape [3, height, width] and the
   // dtype's type (a slot of a batch tensor): no array is allocated.
   void decodeIntoArray(size_t i, int view, int top, int left, py::array out) const {
-    check(i);
-    if (view < 0 || view >= set_[i].record.views)
-      throw py::index_error("view " + std::to_string(view) + " of a sample of " +
-                            std::to_string(set_[i].record.views));
     const bool isFloat = py::isinstance<py::array_t<float>>(out),
                isUint8 = py::isinstance<py::array_t<uint8_t>>(out);
     if ((!isFloat && !isUint8) || out.ndim() != 3 || out.shape(0) != 3 || !out.writeable() ||
@@ -538,7 +530,12 @@ class PyShardSet {
     if (i >= set_.size())
       throw py::index_error("sample " + std::to_string(i) + " of " + std::to_string(set_.size()));
   }
+  // The one path of decode() and decode_into(): sample, view and box checked, then the decode.
   void decodeInto(size_t i, int view, const CropBox& box, PixelLayout layout, void* out) const {
+    check(i);
+    if (view < 0 || view >= set_[i].record.views)
+      throw py::index_error("view " + std::to_string(view) + " of a sample of " +
+                            std::to_string(set_[i].record.views));
     if (box.height < 1 || box.width < 1) throw Error("the crop must be at least 1 x 1");
     py::gil_scoped_release release;
     set_.decodeView(i, view, box, layout, out);

@@ -241,6 +241,18 @@ bool wholeViews(const std::vector<Extent>& list, int views, bool optional) {
          std::none_of(list.begin(), list.end(), [](const Extent& e) { return e.size == 0; });
 }
 
+// The size of the open shard `f`; throws naming it when it is missing or not a file.
+uint64_t shardSize(const Fd& f, const std::string& path) {
+  struct stat st {};
+  if (f.fd < 0 || ::fstat(f.fd, &st) != 0 || !S_ISREG(st.st_mode))
+    throw Error(path, errno == ENOENT ? "no such shard" : "cannot read shard");
+  return static_cast<uint64_t>(st.st_size);
+}
+
+std::string damageMessage(const std::string& where) {
+  return "shard is truncated or corrupt: " + where;
+}
+
 }  // namespace
 
 Bytes readFileRange(const std::string& path, uint64_t offset, uint64_t size) {
@@ -256,15 +268,13 @@ Bytes readFileRange(const std::string& path, uint64_t offset, uint64_t size) {
 ShardIndex ShardIndex::open(const std::string& path, const Warn& warn,
                             const ShardIndexOptions& options) {
   Fd f(path);
-  struct stat st {};
-  if (f.fd < 0 || ::fstat(f.fd, &st) != 0 || !S_ISREG(st.st_mode))
-    throw Error(path, errno == ENOENT ? "no such shard" : "cannot read shard");
+  const uint64_t size = shardSize(f, path);
   ShardIndex index;
   index.path_ = path;
   auto report = [&](const std::string& msg) {
     if (warn) warn(path + ": " + msg);
   };
-  HeaderWalker walker(path, f.fd, static_cast<uint64_t>(st.st_size), warn, options);
+  HeaderWalker walker(path, f.fd, size, warn, options);
   const std::string damage = walker.walk([&](PendingSample&& p) {
     const std::string sample = "sample '" + printable(p.key) + "'";
     nlohmann::json json;
@@ -299,24 +309,23 @@ ShardIndex ShardIndex::open(const std::string& path, const Warn& warn,
     s.covisMask = std::move(p.member[2]);
     index.samples_.push_back(std::move(s));
   });
-  if (!damage.empty()) {
-    index.damaged_ = true;
-    index.damage_ = "shard is truncated or corrupt: " + damage;
-  }
+  if (!damage.empty()) index.damage_ = damageMessage(damage);
   return index;
+}
+
+void ShardIndex::warnOfDamage(const Warn& warn) const {
+  if (damaged() && warn) warn(path_ + ": " + damage_ + "; its whole samples are used");
 }
 
 std::vector<std::string> ShardIndex::keys(const std::string& path) {
   Fd f(path);
-  struct stat st {};
-  if (f.fd < 0 || ::fstat(f.fd, &st) != 0 || !S_ISREG(st.st_mode))
-    throw Error(path, errno == ENOENT ? "no such shard" : "cannot read shard");
+  const uint64_t size = shardSize(f, path);
   std::vector<std::string> keys;
-  HeaderWalker walker(path, f.fd, static_cast<uint64_t>(st.st_size), {}, {});
+  HeaderWalker walker(path, f.fd, size, {}, {});
   const std::string damage = walker.walk([&](PendingSample&& p) {
     if (p.hasRecord && p.record.size > 0 && !p.member[0].empty()) keys.push_back(std::move(p.key));
   });
-  if (!damage.empty()) throw Error(path, "shard is truncated or corrupt: " + damage);
+  if (!damage.empty()) throw Error(path, damageMessage(damage));
   return keys;
 }
 

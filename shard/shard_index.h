@@ -58,9 +58,12 @@ class ShardIndex {
   size_t size() const { return samples_.size(); }
   const IndexedSample& operator[](size_t i) const { return samples_[i]; }
   const std::vector<IndexedSample>& samples() const { return samples_; }
-  bool damaged() const { return damaged_; }
+  bool damaged() const { return !damage_.empty(); }
   // "shard is truncated or corrupt: <where>", or "" when the archive ends cleanly.
   const std::string& damage() const { return damage_; }
+  // For readers that keep a damaged shard's whole samples: "<shard>: <damage>; its whole samples
+  // are used" through `warn`, when damaged.
+  void warnOfDamage(const Warn& warn) const;
 
   // The bytes of a member. Throws paircast::Error naming the shard when the file is shorter than
   // the index says (it changed since).
@@ -71,7 +74,6 @@ class ShardIndex {
  private:
   std::string path_;
   std::vector<IndexedSample> samples_;
-  bool damaged_ = false;
   std::string damage_;
 };
 

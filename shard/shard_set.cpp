@@ -8,8 +8,7 @@ ShardSet ShardSet::open(const std::vector<std::string>& files, const ShardIndex:
   ShardSet set;
   for (const std::string& file : files) {
     ShardIndex index = ShardIndex::open(file, warn);
-    if (index.damaged() && warn)
-      warn(file + ": " + index.damage() + "; its whole samples are used");
+    index.warnOfDamage(warn);
     for (size_t k = 0; k < index.size(); ++k) set.where_.push_back({set.shards_.size(), k});
     set.shards_.push_back(std::move(index));
   }

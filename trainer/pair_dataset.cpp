@@ -57,7 +57,7 @@ PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
   PairDataset ds;
   for (const auto& file : expandPatterns(patterns)) {
     const ShardIndex index = ShardIndex::open(file, warn);
-    if (index.damaged()) warn(file + ": " + index.damage() + "; its whole samples are used");
+    index.warnOfDamage(warn);
     size_t single = 0;
     for (const IndexedSample& s : index.samples()) {
       auto member = [&](size_t k) {

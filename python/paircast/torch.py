@@ -82,11 +82,11 @@ class _Pairs(IterableDataset):
         iteration, as DistributedSampler.set_epoch does."""
         self.epoch = int(epoch)
 
-    def _generator(self, sample):
+    def _generator(self, scene, index):
         """The random draws of one sample (crops, the second view): a function of (seed, epoch,
         scene, index), so they do not depend on workers, ranks or threads."""
-        scene = zlib.crc32(str(sample["scene"]).encode())
-        return np.random.default_rng([self.seed, self.epoch, scene, int(sample["index"])])
+        return np.random.default_rng([self.seed, self.epoch, zlib.crc32(str(scene).encode()),
+                                      int(index)])
 
     def _crop_box(self, height, width, rng):
         """(top, left, h, w) of the crop of an image of height x width: drawn from rng when crop
@@ -118,7 +118,7 @@ class _Pairs(IterableDataset):
 
     def _pair(self, sample):
         """View 0 (the reference) and one other view, drawn when there are several."""
-        rng = self._generator(sample)
+        rng = self._generator(sample["scene"], sample["index"])
         images = sample["images"]
         if images.shape[0] < 2:
             raise Error(f"sample {sample.get('key', sample['index'])} has one view: no pair")
@@ -297,8 +297,7 @@ class ShardPairs(_Pairs):
             if views < 2:
                 warnings.warn(f"{key}: one view, no pair; skipped", RuntimeWarning)
                 continue
-            rng = np.random.default_rng([self.seed, self.epoch, zlib.crc32(scene.encode()),
-                                         int(index)])
+            rng = self._generator(scene, index)
             other = self._other_view(views, rng)
             yield shards, i, other, self._crop_box(height, width, rng), \
                 self._crop_box(height, width, rng)
