@@ -154,12 +154,4 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
   return index.size();
 }
 
-std::vector<std::string> shardKeys(const std::string& path) {
-  const ShardIndex index = ShardIndex::open(path);
-  if (index.damaged()) throw Error(path, index.damage());
-  std::vector<std::string> keys;
-  for (const IndexedSample& s : index.samples()) keys.push_back(s.key);
-  return keys;
-}
-
 }  // namespace paircast

@@ -79,7 +79,4 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
                  const std::function<void(const std::string&)>& onError = {},
                  const ShardReadOptions& options = {});
 
-// The keys of a shard's whole samples, in order. Throws paircast::Error naming a damaged shard.
-std::vector<std::string> shardKeys(const std::string& path);
-
 }  // namespace paircast

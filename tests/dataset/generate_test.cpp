@@ -219,9 +219,9 @@ TEST(GeneratePairs, SceneListsAndShardingSplitScenesDeterministically) {
   p1.shardIndex = 1;
   runGenerate(p0);
   runGenerate(p1);
-  EXPECT_EQ(shardKeys(dir + "/out/pairs-0-000000.tar"),
+  EXPECT_EQ(ShardIndex::keys(dir + "/out/pairs-0-000000.tar"),
             (std::vector<std::string>{"a-00000000", "a-00000001", "c-00000000", "c-00000001"}));
-  EXPECT_EQ(shardKeys(dir + "/out/pairs-1-000000.tar"),
+  EXPECT_EQ(ShardIndex::keys(dir + "/out/pairs-1-000000.tar"),
             (std::vector<std::string>{"b-00000000", "b-00000001"}));
 }
 
