@@ -151,8 +151,7 @@ DecoderBlockImpl::DecoderBlockImpl(int dim, int heads, int mlpRatio, bool normMe
 torch::Tensor DecoderBlockImpl::forward(const torch::Tensor& x0, const torch::Tensor& y,
                                         const torch::Tensor& xpos, const torch::Tensor& ypos) {
   auto x = x0 + attn(norm1(x0), xpos);
-  auto mem = norm_y ? norm_y(y) : y;
-  x = x + cross_attn(norm2(x), mem, xpos, ypos);
+  if (y.defined()) x = x + cross_attn(norm2(x), norm_y ? norm_y(y) : y, xpos, ypos);
   return x + mlp(norm3(x));
 }
 
@@ -253,16 +252,17 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
   if (mask.dim() != 2 || mask.size(0) != B || mask.size(1) != N ||
       mask.scalar_type() != torch::kBool)
     throw Error("mask must be [B, " + std::to_string(N) + "] bool");
-  auto feat1 = encode(img1, mask);             // [B, Nv, D]
-  auto feat2 = encode(img2, torch::Tensor());  // [B, N, D]
-  auto vis1 = linear(decoder_embed, feat1);    // [B, Nv, Dd]
-  auto f2 = linear(decoder_embed, feat2);      // [B, N, Dd]
+  // Image 1's decoder tokens: its visible features, mask tokens elsewhere. Image 2's, when it
+  // is given, are all its patches' features.
+  auto vis1 = linear(decoder_embed, encode(img1, mask));  // [B, Nv, Dd]
   const int64_t Dd = vis1.size(2);
   auto f1 = mask_token.to(vis1.dtype()).expand({B, N, Dd}).clone();
   f1.index_put_({mask.logical_not()}, vis1.reshape({-1, Dd}));
+  torch::Tensor f2;
+  if (img2.defined()) f2 = linear(decoder_embed, encode(img2, torch::Tensor()));  // [B, N, Dd]
   if (dec_pos_embed.defined()) {
     f1 = f1 + dec_pos_embed;
-    f2 = f2 + dec_pos_embed;
+    if (f2.defined()) f2 = f2 + dec_pos_embed;
   }
   torch::Tensor pos;
   if (config_.rope()) pos = positions_.to(img1.device()).unsqueeze(0).expand({B, -1, 2});
@@ -270,11 +270,14 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
   if (config_.decoder == "cross") {
     out = f1;
     for (auto& blk : *dec_blocks) out = blk->as<DecoderBlock>()->forward(out, f2, pos, pos);
-  } else {
+  } else if (f2.defined()) {
     out = torch::cat({f1 + view_embed1, f2 + view_embed2}, 1);  // [B, 2N, Dd]
     auto pos2 = pos.defined() ? torch::cat({pos, pos}, 1) : pos;
     for (auto& blk : *dec_blocks) out = blk->as<Block>()->forward(out, pos2);
     out = out.narrow(1, 0, N);  // the first image's tokens
+  } else {
+    out = f1 + view_embed1;
+    for (auto& blk : *dec_blocks) out = blk->as<Block>()->forward(out, pos);
   }
   CroCoOutput result;
   result.prediction = linear(prediction_head, dec_norm(out));

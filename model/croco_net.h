@@ -62,7 +62,9 @@ struct BlockImpl : torch::nn::Module {
 };
 TORCH_MODULE(Block);
 
-// The official DecoderBlock: self-attention, cross-attention to the second image, MLP.
+// The official DecoderBlock: self-attention, cross-attention to the second image, MLP. With y
+// undefined there is no second image: the cross-attention attends to nothing, and as a softmax
+// over an empty memory contributes nothing, its residual branch is skipped.
 struct DecoderBlockImpl : torch::nn::Module {
   DecoderBlockImpl(int dim, int heads, int mlpRatio, bool normMem, double ropeFreq);
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& y, const torch::Tensor& xpos,
@@ -93,7 +95,10 @@ class CroCoNetImpl : public torch::nn::Module {
 
   // Masks image 1 at random (RandomMask: argsort(uniform noise) < num_mask, per image).
   CroCoOutput forward(const torch::Tensor& img1, const torch::Tensor& img2);
-  // With a given mask [B, N] bool (each row with the same count of true).
+  // With a given mask [B, N] bool (each row with the same count of true). With img2 undefined,
+  // auto-completion (MAE): image 1 is completed from its own visible patches only, and the
+  // decoder gets no reference (the cross decoder's cross-attention attends to nothing, the cat
+  // decoder sees image 1's tokens alone). The parameters are the same either way.
   CroCoOutput forward(const torch::Tensor& img1, const torch::Tensor& img2,
                       const torch::Tensor& mask);
   torch::Tensor randomMask(int64_t batch, const torch::Device& device) const;

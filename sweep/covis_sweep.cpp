@@ -24,6 +24,7 @@
 #include "render/scene_loader.h"
 #include "sweep/depth_probe.h"
 #include "sweep/sweep_report.h"
+#include "sweep/sweep_stats.h"
 #include "trainer/distributed.h"
 #include "trainer/pair_dataset.h"
 #include "trainer/trainer.h"
@@ -64,6 +65,12 @@ nlohmann::json readJson(const std::string& path) {
   }
 }
 
+// obj[key] when it is a number, else NaN (a NaN is written to JSON as null).
+double numberOrNan(const nlohmann::json& obj, const char* key) {
+  const auto it = obj.find(key);
+  return it != obj.end() && it->is_number() ? it->get<double>() : NAN;
+}
+
 void say(const SweepConfig& c, const std::string& line) {
   if (c.progress) std::fprintf(stderr, "[covis_sweep] %s\n", line.c_str());
 }
@@ -77,6 +84,7 @@ struct PoolScene {
 };
 
 std::vector<std::unique_ptr<PoolScene>> loadScenes(const std::vector<std::string>& files,
+                                                   const LoadOptions& load,
                                                    const SamplerOptions& so, const char* role) {
   std::vector<std::unique_ptr<PoolScene>> out;
   const std::vector<std::string> names = uniqueSceneNames(files);
@@ -85,7 +93,7 @@ std::vector<std::unique_ptr<PoolScene>> loadScenes(const std::vector<std::string
     s->path = files[i];
     s->name = names[i];
     try {
-      s->scene = std::make_unique<Scene>(loadScene(files[i]));
+      s->scene = std::make_unique<Scene>(loadScene(files[i], load));
       s->scene->name = s->name;
       s->caster = std::make_unique<RayCaster>(s->scene->mesh);
       s->sampler = std::make_unique<ViewpointSampler>(*s->scene, *s->caster, so);
@@ -135,11 +143,14 @@ int total(const std::vector<int>& counts) {
 // The settings a pool was sampled with: a pool.json of other settings is not resumed.
 nlohmann::json poolSettings(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
                             const std::vector<int>& demand) {
-  return {{"scenes", sceneFiles},
-          {"seed", c.seed},
-          {"resolution", c.resolution},
-          {"demand", demand},
-          {"min_walk_scale", c.minWalkScale}};
+  nlohmann::json settings = {{"scenes", sceneFiles},
+                             {"seed", c.seed},
+                             {"resolution", c.resolution},
+                             {"demand", demand},
+                             {"min_walk_scale", c.minWalkScale}};
+  // Only a non-default axis is named, so that pools sampled before --up existed still resume.
+  if (c.load.up != UpAxis::Y) settings["up"] = c.load.up == UpAxis::Z ? "z" : "auto";
+  return settings;
 }
 
 // pool.json's progress; none (an empty pool) when there is no such file.
@@ -237,7 +248,7 @@ Pool buildPool(const SweepConfig& c, const std::vector<std::string>& sceneFiles,
 
   SamplerOptions so;
   so.minWalkScale = c.minWalkScale;
-  auto scenes = loadScenes(sceneFiles, so, "training");
+  auto scenes = loadScenes(sceneFiles, c.load, so, "training");
   const auto start = SteadyClock::now();
   int idle = 0;
   while (true) {
@@ -296,14 +307,17 @@ struct HeldOut {
   ProbeData probeA, probeB;        // the depth probe's two halves (crossFitProbe)
 };
 
-nlohmann::json evaluate(CroCoNet& model, const HeldOut& h) {
+// A model's held-out figures: its completion loss on its own task (with the reference view for
+// "croco", without for "mae") over the held-out pairs and their fixed masks, and the depth probe.
+nlohmann::json evaluate(CroCoNet& model, const HeldOut& h, const std::string& task) {
   torch::NoGradGuard ng;
   model->eval();
   double lossSum = 0;
   int64_t n = 0;
   for (int64_t i = 0; i < h.img1.size(0); i += 16) {
     const int64_t j = std::min<int64_t>(i + 16, h.img1.size(0));
-    auto out = model->forward(h.img1.slice(0, i, j), h.img2.slice(0, i, j), h.mask.slice(0, i, j));
+    auto out = pretrainForward(model, task, h.img1.slice(0, i, j), h.img2.slice(0, i, j),
+                               h.mask.slice(0, i, j));
     lossSum += maskedMse(out.prediction, out.mask, out.target).item<double>() * (j - i);
     n += j - i;
   }
@@ -322,18 +336,19 @@ CroCoConfig modelConfig(const SweepConfig& c) {
   return m;
 }
 
-// Pre-trains (or resumes) the model of one set, unless its run is complete. Every rank of a
-// multi-process sweep calls it for every set, in the same order: runPretrain is data-parallel.
-void trainSet(const SweepConfig& c, const CroCoConfig& mc, const SweepSet& set, Distributed* dist) {
-  const fs::path out(c.out), run = out / "runs" / set.name;
-  const nlohmann::json done = readJson((run / "summary.json").string());
+// Pre-trains (or resumes) one run, unless it is complete. Every rank of a multi-process sweep
+// calls it for every run, in the same order: runPretrain is data-parallel.
+void trainRun(const SweepConfig& c, const CroCoConfig& mc, const SweepRun& run, Distributed* dist) {
+  const fs::path out(c.out);
+  const nlohmann::json done = readJson((run.dir / "summary.json").string());
   if (done.is_object() && done.value("steps", int64_t{0}) >= c.steps &&
       !done.value("interrupted", false))
     return;
   TrainConfig t;
   t.shards = {(out / "pool" / "pool-*.tar").string()};
-  t.keysFile = (out / "sets" / (set.name + ".keys")).string();
+  t.keysFile = (out / "sets" / (run.keysSet + ".keys")).string();
   t.model = mc;
+  t.task = run.task;
   t.batchSize = c.batchSize;
   t.device = c.device;
   // --batch-size is per process, as in pretrain: epochs count the global batch.
@@ -343,16 +358,16 @@ void trainSet(const SweepConfig& c, const CroCoConfig& mc, const SweepSet& set, 
   t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
   t.maxSteps = c.steps;
   t.blr = c.blr;
-  t.seed = c.seed;
+  t.seed = run.seed;
   t.workers = c.workers;
   t.saveEvery = std::max<int64_t>(25, c.steps / 4);
-  t.out = run.string();
+  t.out = run.dir.string();
   t.resume = true;
   t.progress = false;
-  say(c, "training " + set.name + " (" + std::to_string(c.steps) + " steps)");
+  say(c, "training " + run.label() + " (" + std::to_string(c.steps) + " steps)");
   const nlohmann::json r = runPretrain(t, dist);
   if (r.value("interrupted", false))
-    throw Error(run.string(), "interrupted; run covis_sweep again to resume");
+    throw Error(run.dir.string(), "interrupted; run covis_sweep again to resume");
 }
 
 // What every rank must agree on before training: the sets, and how they are trained.
@@ -361,13 +376,14 @@ nlohmann::json rankSettings(const SweepConfig& c) {
           {"centers", c.centers},       {"pairs", c.pairsPerSet}, {"steps", c.steps},
           {"preset", c.preset},         {"img_size", c.imgSize},  {"patch_size", c.patchSize},
           {"batch", c.batchSize},       {"blr", c.blr},           {"seed", c.seed},
-          {"resolution", c.resolution}, {"device", c.device}};
+          {"resolution", c.resolution}, {"device", c.device},     {"seeds", c.seeds},
+          {"baselines", c.baselines}};
 }
 
 // Ranks other than 0 wait for rank 0 to write `ready.json` (the pool, the sets and the held-out
 // data are done, on a folder all ranks share), then train every set with it.
 nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
-                           const std::vector<SweepSet>& sets, int rank) {
+                           const std::vector<SweepRun>& runs, int rank) {
   const std::string ready = (fs::path(c.out) / "ready.json").string();
   const char* env = std::getenv("PAIRCAST_SWEEP_WAIT");
   const double limit = env && *env ? std::atof(env) : 24 * 3600.0;
@@ -392,8 +408,8 @@ nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
   }
   const auto dist = Distributed::fromEnvironment(c.device);
-  for (const auto& set : sets) trainSet(c, mc, set, dist.get());
-  return {{"rank", rank}, {"sets_trained", sets.size()}};
+  for (const auto& run : runs) trainRun(c, mc, run, dist.get());
+  return {{"rank", rank}, {"runs_trained", runs.size()}};
 }
 
 // ---- the stages of runCovisSweep, in order ----
@@ -481,6 +497,7 @@ std::string generateHeldOutPairs(const SweepConfig& c, const std::vector<std::st
       (c.evalPairs + static_cast<int>(heldout.size()) - 1) / static_cast<int>(heldout.size());
   g.seed = c.seed + 1;
   g.jobs = c.jobs;
+  g.load = c.load;
   g.pair.resolution = c.resolution;
   g.pair.minCovis = 0.45;
   g.pair.maxCovis = 0.55;
@@ -510,7 +527,7 @@ HeldOut loadHeldOut(const SweepConfig& c, const CroCoConfig& mc,
   auto gen = at::make_generator<at::CPUGeneratorImpl>(c.seed + 7);
   h.mask = torch::argsort(torch::rand({h.img1.size(0), mc.numPatches()}, gen), 1, false) <
            mc.numMasked();
-  auto heldScenes = loadScenes(heldout, SamplerOptions(), "held-out");
+  auto heldScenes = loadScenes(heldout, c.load, SamplerOptions(), "held-out");
   const int half = c.probeViews / 2;
   h.probeA = probeViews(c, heldScenes, 0, half);
   h.probeB = probeViews(c, heldScenes, half, c.probeViews - half);
@@ -529,79 +546,101 @@ nlohmann::json constantDepthBaseline(const HeldOut& h) {
   return {{"probe_delta1", m.delta1}, {"probe_absrel", m.absRel}, {"probe_rmse", m.rmse}};
 }
 
-// The random-encoder baseline: the weights every run starts from (runs/random/eval.json).
-nlohmann::json randomEncoderBaseline(const SweepConfig& c, const CroCoConfig& mc,
-                                     const HeldOut& h) {
-  const fs::path randomEval = fs::path(c.out) / "runs" / "random" / "eval.json";
-  nlohmann::json random = readJson(randomEval.string());
-  if (!random.is_object()) {
-    torch::manual_seed(c.seed);
-    CroCoNet model(mc);
-    random = evaluate(model, h);
-    makeDirs(randomEval.parent_path().string());
-    writeFileAtomic(randomEval.string(), random.dump(1) + "\n");
+// The random-encoder baseline of each seed: the weights that seed's runs start from
+// (runs/random/seed-<k>/eval.json).
+nlohmann::json randomEncoderRuns(const SweepConfig& c, const CroCoConfig& mc, const HeldOut& h) {
+  nlohmann::json runs = nlohmann::json::array();
+  for (int k = 0; k < c.seeds; ++k) {
+    const fs::path dir = fs::path(c.out) / "runs" / "random" / seedFolder(k);
+    nlohmann::json ev = readJson((dir / "eval.json").string());
+    if (!ev.is_object()) {
+      torch::manual_seed(c.seed + k);  // as runPretrain initialises the model
+      CroCoNet model(mc);
+      ev = evaluate(model, h, "croco");
+      makeDirs(dir.string());
+      writeFileAtomic((dir / "eval.json").string(), ev.dump(1) + "\n");
+    }
+    ev.update({{"set", "random_encoder"},
+               {"mode", "random"},
+               {"task", "croco"},
+               {"seed_index", k},
+               {"seed", c.seed + k}});
+    runs.push_back(ev);
   }
-  return random;
+  return runs;
 }
 
 // Tells the other ranks (WORLD_SIZE > 1) that the sets are ready: they start training from
-// here, in one process group for all sets.
+// here, in one process group for all runs.
 void releaseOtherRanks(const SweepConfig& c) {
   writeFileAtomic((fs::path(c.out) / "ready.json").string(),
                   nlohmann::json({{"settings", rankSettings(c)}}).dump(1) + "\n");
 }
 
-// One set's evaluation (runs/<name>/eval.json), after training it, unless a previous run did.
-nlohmann::json trainAndEvaluate(const SweepConfig& c, const CroCoConfig& mc, const SweepSet& set,
+// One run's evaluation (<run>/eval.json), after training it, unless a previous sweep did.
+nlohmann::json trainAndEvaluate(const SweepConfig& c, const CroCoConfig& mc, const SweepRun& run,
                                 const HeldOut& h, Distributed* dist) {
-  const fs::path run = fs::path(c.out) / "runs" / set.name;
-  nlohmann::json ev = readJson((run / "eval.json").string());
+  nlohmann::json ev = readJson((run.dir / "eval.json").string());
   if (ev.is_object()) return ev;
-  trainSet(c, mc, set, dist);
+  trainRun(c, mc, run, dist);
   CroCoNet model(mc);
-  const Checkpoint ck = loadCheckpoint((run / "checkpoint-last.pth").string());
-  loadStateDictStrict(model, ck.model, (run / "checkpoint-last.pth").string());
-  ev = evaluate(model, h);
-  const nlohmann::json sum = readJson((run / "summary.json").string());
-  ev["train_loss"] = sum.is_object() ? sum.value("loss", NAN) : NAN;
-  writeFileAtomic((run / "eval.json").string(), ev.dump(1) + "\n");
+  const std::string checkpoint = (run.dir / "checkpoint-last.pth").string();
+  loadStateDictStrict(model, loadCheckpoint(checkpoint).model, checkpoint);
+  ev = evaluate(model, h, run.task);
+  const nlohmann::json sum = readJson((run.dir / "summary.json").string());
+  ev["train_loss"] = sum.is_object() ? numberOrNan(sum, "loss") : NAN;
+  writeFileAtomic((run.dir / "eval.json").string(), ev.dump(1) + "\n");
   return ev;
 }
 
-// A row of the results: the set, its size and mean covis, and its evaluation.
-nlohmann::json resultRow(const SweepSet& set, const nlohmann::json& setInfo,
-                         const nlohmann::json& ev) {
-  nlohmann::json row = {{"mode", set.mode},
-                        {"center", set.center},
-                        {"set", set.name},
-                        {"pairs", setInfo.at(set.name).at("pairs")},
-                        {"mean_covis", setInfo.at(set.name).at("mean_covis")}};
+// A run's row of results_runs.csv: its set (with the set's size and mean covis), its seed and
+// its evaluation. A baseline's centre is null.
+nlohmann::json runRow(const std::vector<SweepSet>& sets, const SweepRun& run,
+                      const nlohmann::json& setInfo, const nlohmann::json& ev) {
+  nlohmann::json row = {{"set", run.name},
+                        {"task", run.task},
+                        {"mode", run.name},  // a set's mode below; a baseline's name
+                        {"center", nullptr},
+                        {"trained_on", run.keysSet},
+                        {"seed_index", run.seedIndex},
+                        {"seed", run.seed},
+                        {"pairs", setInfo.at(run.keysSet).at("pairs")},
+                        {"mean_covis", setInfo.at(run.keysSet).at("mean_covis")}};
+  for (const auto& set : sets)
+    if (set.name == run.name) row["mode"] = set.mode, row["center"] = set.center;
   row.update(ev);
   return row;
 }
 
-// results.json's content: the rows, both baselines, and what the sweep was run with.
+// results.json's content: the runs, their rows per set, both baselines, and what the sweep was
+// run with.
 nlohmann::json collectResults(const SweepConfig& c, const SceneFiles& scenes, const Pool& pool,
-                              const HeldOut& h, const nlohmann::json& rows,
-                              const nlohmann::json& random, const nlohmann::json& constant) {
-  return {{"rows", rows},
-          {"random_encoder", random},
-          {"constant_depth", constant},
-          {"config",
-           {{"scenes", scenes.train},
-            {"heldout", scenes.heldout},
-            {"modes", c.modes},
-            {"centers", c.centers},
-            {"pairs_per_set", c.pairsPerSet},
-            {"steps", c.steps},
-            {"preset", c.preset},
-            {"img_size", c.imgSize},
-            {"batch_size", c.batchSize},
-            {"blr", c.blr},
-            {"seed", c.seed},
-            {"eval_pairs", h.img1.size(0)},
-            {"probe_views", c.probeViews}}},
-          {"pool_pairs", pool.keys.size()}};
+                              const HeldOut& h, const nlohmann::json& runs,
+                              const nlohmann::json& randomRuns, const nlohmann::json& constant) {
+  nlohmann::json results = {{"rows", aggregateRuns(runs)},
+                            {"runs", runs},
+                            {"random_encoder", aggregateRuns(randomRuns).at(0)},
+                            {"random_runs", randomRuns},
+                            {"constant_depth", constant},
+                            {"config",
+                             {{"scenes", scenes.train},
+                              {"heldout", scenes.heldout},
+                              {"modes", c.modes},
+                              {"centers", c.centers},
+                              {"seeds", c.seeds},
+                              {"baselines", c.baselines},
+                              {"pairs_per_set", c.pairsPerSet},
+                              {"steps", c.steps},
+                              {"preset", c.preset},
+                              {"img_size", c.imgSize},
+                              {"batch_size", c.batchSize},
+                              {"blr", c.blr},
+                              {"seed", c.seed},
+                              {"eval_pairs", h.img1.size(0)},
+                              {"probe_views", c.probeViews}}},
+                            {"pool_pairs", pool.keys.size()}};
+  results["verdicts"] = sweepVerdicts(results);
+  return results;
 }
 
 }  // namespace
@@ -666,9 +705,10 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   c.validate();
   const CroCoConfig mc = modelConfig(c);
   const std::vector<SweepSet> sets = planSets(c);
+  const std::vector<SweepRun> runs = planRuns(c, sets);
   const SceneFiles scenes = sceneFiles(c);
   const int rank = environmentRole().rank;
-  if (rank != 0) return followSweep(c, mc, sets, rank);
+  if (rank != 0) return followSweep(c, mc, runs, rank);
   makeDirs(c.out);
   const auto start = SteadyClock::now();
 
@@ -681,26 +721,56 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   const HeldOut h = loadHeldOut(c, mc, scenes.heldout);
   const nlohmann::json constant = constantDepthBaseline(h);
 
-  // 3. The random-encoder baseline.
-  nlohmann::json random = randomEncoderBaseline(c, mc, h);
+  // 3. The random-encoder baseline, once per seed.
+  const nlohmann::json randomRuns = randomEncoderRuns(c, mc, h);
 
-  // 4. Train and evaluate each set, with the other ranks.
+  // 4. Train and evaluate every run (each set and baseline with each seed), with the other ranks.
   releaseOtherRanks(c);
   const auto dist = Distributed::fromEnvironment(c.device);
   nlohmann::json rows = nlohmann::json::array();
-  for (const SweepSet& set : sets) {
-    nlohmann::json ev = trainAndEvaluate(c, mc, set, h, dist.get());
-    rows.push_back(resultRow(set, setInfo, ev));
-    say(c, set.name + ": xv_loss " + std::to_string(ev["xv_loss"].get<double>()) +
-               ", probe delta1 " + std::to_string(ev["probe_delta1"].get<double>()) +
-               " (random encoder " + std::to_string(random["probe_delta1"].get<double>()) + ")");
+  for (const SweepRun& run : runs) {
+    const nlohmann::json ev = trainAndEvaluate(c, mc, run, h, dist.get());
+    rows.push_back(runRow(sets, run, setInfo, ev));
+    say(c, run.label() + ": xv_loss " + std::to_string(numberOrNan(ev, "xv_loss")) +
+               ", probe delta1 " + std::to_string(numberOrNan(ev, "probe_delta1")));
   }
 
-  // 5. Results: results.csv, results.json, the plots and summary.html.
-  nlohmann::json results = collectResults(c, scenes, pool, h, rows, random, constant);
+  // 5. Results: results.csv (a row per set, with intervals), results_runs.csv, results.json,
+  //    the plots and summary.html.
+  nlohmann::json results = collectResults(c, scenes, pool, h, rows, randomRuns, constant);
   writeSweepReport(c, results);
   results["seconds_this_run"] = secondsSince(start);
   return results;
+}
+
+std::string seedFolder(int seedIndex) {
+  return "seed-" + std::to_string(seedIndex);
+}
+
+std::string SweepRun::label() const {
+  return name + " seed " + std::to_string(seedIndex);
+}
+
+std::string maeTrainingSet(const std::vector<SweepSet>& sets) {
+  PAIRCAST_CHECK(!sets.empty());
+  auto distance = [](const SweepSet& s) { return std::abs(s.center - 0.5) + (s.mode != "bin"); };
+  return std::min_element(
+             sets.begin(), sets.end(),
+             [&](const SweepSet& a, const SweepSet& b) { return distance(a) < distance(b); })
+      ->name;
+}
+
+std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>& sets) {
+  std::vector<SweepRun> runs;
+  const fs::path root = fs::path(c.out) / "runs";
+  for (int k = 0; k < c.seeds; ++k) {
+    auto add = [&](const std::string& name, const std::string& task, const std::string& keys) {
+      runs.push_back({name, task, keys, k, c.seed + k, root / name / seedFolder(k)});
+    };
+    for (const SweepSet& set : sets) add(set.name, "croco", set.name);
+    for (const std::string& b : c.baselines) add(b, "mae", maeTrainingSet(sets));
+  }
+  return runs;
 }
 
 void SweepConfig::validate() const {
@@ -715,6 +785,13 @@ void SweepConfig::validate() const {
   if (steps < 1) throw OptionError("steps", "training steps must be >= 1");
   if (evalPairs < 1) throw OptionError("eval_pairs", "held-out pairs must be >= 1");
   if (probeViews < 4) throw OptionError("probe_views", "the depth probe needs at least 4 views");
+  if (seeds < 1 || seeds > 1000) throw OptionError("seeds", "seeds must be in 1..1000");
+  for (size_t i = 0; i < baselines.size(); ++i) {
+    if (baselines[i] != "mae")
+      throw OptionError("baseline", "unknown baseline '" + baselines[i] + "' (use mae)");
+    if (std::find(baselines.begin(), baselines.begin() + i, baselines[i]) != baselines.begin() + i)
+      throw OptionError("baseline", "baseline '" + baselines[i] + "' is given twice");
+  }
 }
 
 }  // namespace paircast

@@ -7,9 +7,12 @@
 // initialised encoder. Every stage is kept on disk and reused, so a killed sweep resumes.
 #pragma once
 
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
+
+#include "render/scene_loader.h"
 
 namespace paircast {
 
@@ -44,6 +47,7 @@ struct SweepConfig {
 
   std::vector<std::string> scenes;   // training scenes (files, folders or .txt lists)
   std::vector<std::string> heldout;  // evaluation scenes; never in training (checked)
+  LoadOptions load;                  // how every scene loads (its up axis: y, z or auto)
   std::string out;
   std::vector<std::string> modes = {"bin", "uniform"};
   // The defaults fit the shipped scenes on 2 cores in about 25 minutes (docs/covis_ablation.md).
@@ -57,7 +61,11 @@ struct SweepConfig {
   int batchSize = 16;          // per process
   std::string device = "cpu";  // training: cpu or cuda (evaluation runs on the CPU)
   double blr = 6e-3;  // high for so few steps: at 1.5e-3, 700 steps barely move the encoder
-  uint64_t seed = 0;
+  uint64_t seed = 0;  // the pool and held-out data; run k of a set trains with seed + k
+  int seeds = 1;      // runs per set and baseline, for the intervals of results.csv
+  // Baselines trained like every set, each at most once: "mae" (auto-completion: view 1 alone,
+  // no reference view, on the pairs of maeTrainingSet).
+  std::vector<std::string> baselines;
   int jobs = 0;                // render threads (0: all cores)
   int workers = 2;             // trainer data threads
   int evalPairs = 64;          // held-out pairs at covis in [0.45, 0.55]
@@ -67,10 +75,32 @@ struct SweepConfig {
   bool progress = true;
 };
 
-// Runs (or resumes) the sweep; writes results.csv, results.json, plots and summary.html in out.
+// One training run of a sweep: a set, or a baseline, with one of the seeds.
+struct SweepRun {
+  std::string name;           // the set's name, or the baseline's ("mae")
+  std::string task;           // "croco", or "mae" for the auto-completion baseline
+  std::string keysSet;        // the set whose pairs it trains on (sets/<keysSet>.keys)
+  int seedIndex = 0;          // 0 .. seeds - 1
+  uint64_t seed = 0;          // the model's initialisation, its masks and the data order
+  std::filesystem::path dir;  // <out>/runs/<name>/seed-<k>
+  std::string label() const;  // "bin_0.55 seed 1"
+};
+
+// "seed-<k>", the folder of a run's seed under runs/<name>/.
+std::string seedFolder(int seedIndex);
+// The set the mae baseline trains on: the bin set nearest covis 0.5 (else the set nearest it),
+// so that its views are those a cross-view model of that set completes.
+std::string maeTrainingSet(const std::vector<SweepSet>& sets);
+// Every run, seed by seed: each set and then each baseline with the first seed, then the next,
+// so that a sweep stopped early already has whole comparisons.
+std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>& sets);
+
+// Runs (or resumes) the sweep; writes results.csv (a row per set and baseline, means and 95 %
+// intervals over the seeds), results_runs.csv (a row per run), results.json, plots and
+// summary.html in out.
 // With WORLD_SIZE > 1 (torchrun-style variables, `out` on a folder every rank shares), rank 0
 // samples the pool and evaluates, and every rank trains each set data-parallel; other ranks
-// return {"rank": r, "sets_trained": n}.
+// return {"rank": r, "runs_trained": n}.
 nlohmann::json runCovisSweep(const SweepConfig& config);
 
 }  // namespace paircast

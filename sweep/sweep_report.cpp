@@ -4,7 +4,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 
+#include "sweep/sweep_stats.h"
 #include "util/atomic_file.h"
 #include "util/html.h"
 #include "util/plot.h"
@@ -14,38 +16,232 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// A result for the CSV file and the page: obj[key] as %.6g, nan when it is missing or no number.
-std::string num(const nlohmann::json& obj, const char* key) {
+// The metrics the verdicts compare, each with its better direction and a name for the page.
+struct Metric {
+  const char* key;
+  bool higherIsBetter;
+  const char* label;
+};
+const Metric kEvaluated[] = {{"xv_loss", false, "held-out completion loss (covis ~0.5)"},
+                             {"probe_delta1", true, "depth probe delta1"},
+                             {"probe_absrel", false, "depth probe AbsRel"},
+                             {"probe_rmse", false, "depth probe RMSE (m)"}};
+
+double value(const nlohmann::json& obj, const std::string& key) {
   const auto it = obj.find(key);
-  return html::number(it != obj.end() && it->is_number() ? it->get<double>() : NAN, "%.6g");
+  return it != obj.end() && it->is_number() ? it->get<double>() : NAN;
 }
 
+// obj[key] as %.6g for the CSV files; nan when it is missing or no number.
+std::string num(const nlohmann::json& obj, const std::string& key) {
+  return html::number(value(obj, key), "%.6g");
+}
+
+std::string text(const nlohmann::json& obj, const char* key) {
+  const auto it = obj.find(key);
+  return it != obj.end() && it->is_string() ? it->get<std::string>() : "";
+}
+
+std::string centerCell(const nlohmann::json& row) {
+  return row.value("center", nlohmann::json()).is_number() ? centerName(row["center"]) : "";
+}
+
+// "0.472 ± 0.010" (or "0.472" with one seed).
+std::string withInterval(double mean, double halfWidth) {
+  char b[64];
+  if (std::isfinite(halfWidth))
+    std::snprintf(b, sizeof b, "%.3f \u00b1 %.3f", mean, halfWidth);
+  else
+    std::snprintf(b, sizeof b, "%.3f", mean);
+  return b;
+}
+
+// Every run's value of `metric`, by set, in order of first appearance.
+struct RunValues {
+  std::vector<std::string> sets;
+  std::map<std::string, std::vector<double>> values;
+  std::map<std::string, std::string> task;
+};
+
+RunValues byset(const nlohmann::json& runs, const std::string& metric) {
+  RunValues r;
+  for (const auto& run : runs) {
+    const std::string set = run.at("set");
+    if (!r.values.count(set)) r.sets.push_back(set), r.task[set] = text(run, "task");
+    r.values[set].push_back(value(run, metric));
+  }
+  return r;
+}
+
+// ---- results.csv and results_runs.csv ----
+
 std::string resultsCsv(const nlohmann::json& rows, const nlohmann::json& random) {
-  std::string csv =
-      "mode,center,set,pairs,mean_covis,train_loss,xv_loss,probe_delta1,probe_absrel,probe_rmse\n";
-  for (const auto& r : rows)
-    csv += r["mode"].get<std::string>() + "," + centerName(r["center"]) + "," +
-           r["set"].get<std::string>() + "," + std::to_string(r["pairs"].get<int>()) + "," +
-           num(r, "mean_covis") + "," + num(r, "train_loss") + "," + num(r, "xv_loss") + "," +
-           num(r, "probe_delta1") + "," + num(r, "probe_absrel") + "," + num(r, "probe_rmse") +
-           "\n";
-  csv += "random,,random_encoder,0,," + std::string(",") + num(random, "xv_loss") + "," +
-         num(random, "probe_delta1") + "," + num(random, "probe_absrel") + "," +
-         num(random, "probe_rmse") + "\n";
+  std::string csv = "mode,center,set,task,trained_on,seeds,pairs,mean_covis";
+  for (const auto& m : sweepMetrics()) csv += "," + m + "_mean," + m + "_ci95";
+  csv += "\n";
+  auto line = [&](const nlohmann::json& r) {
+    std::string l = text(r, "mode") + "," + centerCell(r) + "," + text(r, "set") + "," +
+                    text(r, "task") + "," + text(r, "trained_on") + "," +
+                    std::to_string(r.value("seeds", 0)) + "," +
+                    std::to_string(r.value("pairs", 0)) + "," + num(r, "mean_covis");
+    for (const auto& m : sweepMetrics()) l += "," + num(r, m + "_mean") + "," + num(r, m + "_ci95");
+    return l + "\n";
+  };
+  for (const auto& r : rows) csv += line(r);
+  return csv + line(random);
+}
+
+std::string runsCsv(const nlohmann::json& runs, const nlohmann::json& randomRuns) {
+  std::string csv = "mode,center,set,task,trained_on,seed_index,seed,pairs,mean_covis";
+  for (const auto& m : sweepMetrics()) csv += "," + m;
+  csv += "\n";
+  for (const auto* list : {&runs, &randomRuns})
+    for (const auto& r : *list) {
+      csv += text(r, "mode") + "," + centerCell(r) + "," + text(r, "set") + "," + text(r, "task") +
+             "," + text(r, "trained_on") + "," + std::to_string(r.value("seed_index", 0)) + "," +
+             std::to_string(r.value("seed", uint64_t{0})) + "," +
+             std::to_string(r.value("pairs", 0)) + "," + num(r, "mean_covis");
+      for (const auto& m : sweepMetrics()) csv += "," + num(r, m);
+      csv += "\n";
+    }
   return csv;
 }
+
+// ---- the verdicts ----
+
+// a minus b in the metric's better direction (> 0: a is better), with Welch's interval.
+Interval gain(const std::vector<double>& a, const std::vector<double>& b, const Metric& m) {
+  Interval d = differenceInterval95(a, b);
+  if (!m.higherIsBetter) d.mean = -d.mean;
+  return d;
+}
+
+std::string signedInterval(const Interval& d) {
+  char b[64];
+  if (std::isfinite(d.halfWidth))
+    std::snprintf(b, sizeof b, "%+.3f \u00b1 %.3f", d.mean, d.halfWidth);
+  else
+    std::snprintf(b, sizeof b, "%+.3f (no interval: one seed)", d.mean);
+  return b;
+}
+
+// "bin_0.15 (-0.030 ± 0.012), mae (-0.041 ± 0.009)", or "none".
+std::string listOf(const std::vector<std::string>& items) {
+  if (items.empty()) return "none";
+  std::string s;
+  for (const auto& i : items) s += (s.empty() ? "" : ", ") + i;
+  return s;
+}
+
+// Against the best set and against the random encoder, for one metric. The completion loss of
+// a baseline with another task (mae completes without a reference) is not compared.
+std::vector<std::string> metricVerdicts(const Metric& m, const RunValues& v,
+                                        const std::vector<double>& random) {
+  auto mean = [&](const std::string& s) { return interval95(v.values.at(s)).mean; };
+  std::vector<std::string> sets;  // those with a figure (a set whose every run failed has none)
+  for (const auto& s : v.sets)
+    if ((std::string(m.key) != "xv_loss" || v.task.at(s) == "croco") && std::isfinite(mean(s)))
+      sets.push_back(s);
+  if (sets.empty()) return {};
+  const std::string best =
+      *std::max_element(sets.begin(), sets.end(), [&](const std::string& a, const std::string& b) {
+        return m.higherIsBetter ? mean(a) < mean(b) : mean(a) > mean(b);
+      });
+  std::vector<std::string> beyond, within, beats, notBeats;
+  for (const auto& s : sets) {
+    if (s != best) {
+      const Interval d = gain(v.values.at(s), v.values.at(best), m);
+      (excludesZero(d) ? beyond : within).push_back(s + " (" + signedInterval(d) + ")");
+    }
+    const Interval r = gain(v.values.at(s), random, m);
+    (excludesZero(r) && r.mean > 0 ? beats : notBeats)
+        .push_back(s + " (" + signedInterval(r) + ")");
+  }
+  const Interval b = interval95(v.values.at(best)), rnd = interval95(random);
+  if (!std::isfinite(b.halfWidth))
+    return {std::string(m.label) + ": the best is " + best + ", " +
+            withInterval(b.mean, b.halfWidth) +
+            ". With one seed there are no intervals, so no difference is told from noise (use "
+            "--seeds 3)."};
+  return {std::string(m.label) + ": the best is " + best + ", " +
+              withInterval(b.mean, b.halfWidth) + ". Behind it by more than the interval: " +
+              listOf(beyond) + ". Within the interval of it: " + listOf(within) + ".",
+          std::string(m.label) + ": better than the random encoder (" +
+              withInterval(rnd.mean, rnd.halfWidth) +
+              ") by more than the interval: " + listOf(beats) + ". Not: " + listOf(notBeats) + "."};
+}
+
+// A claim that `a` beats each of `others` on the depth probe's metrics (and on the completion
+// loss when all are cross-view sets): "holds" when it wins every comparison beyond the
+// interval, "does not hold" when it loses one beyond it, else "unresolved at this scale".
+std::string claimVerdict(const std::string& claim, const std::string& a,
+                         const std::vector<std::string>& others,
+                         const std::map<std::string, RunValues>& values) {
+  int wins = 0, losses = 0, total = 0;
+  std::string detail;
+  for (const Metric& m : kEvaluated) {
+    const RunValues& v = values.at(m.key);
+    bool sameTask = v.task.at(a) == "croco";
+    for (const auto& o : others) sameTask = sameTask && v.task.at(o) == "croco";
+    if (std::string(m.key) == "xv_loss" && !sameTask) continue;
+    for (const auto& o : others) {
+      const Interval d = gain(v.values.at(a), v.values.at(o), m);
+      ++total;
+      if (excludesZero(d)) ++(d.mean > 0 ? wins : losses);
+      detail +=
+          std::string(detail.empty() ? "" : "; ") + m.key + " vs " + o + " " + signedInterval(d);
+    }
+  }
+  const char* verdict = wins == total ? "holds"
+                        : losses > 0  ? "does not hold"
+                                      : "is not resolved at this scale";
+  return claim + ": " + verdict + " (" + a + " is ahead by more than the interval in " +
+         std::to_string(wins) + " of " + std::to_string(total) +
+         " comparisons and behind by more than it in " + std::to_string(losses) + "; its gains " +
+         "with their 95 % intervals, positive when " + a + " is better: " + detail + ").";
+}
+
+// The paper's claims, where the sweep has the runs they need.
+std::vector<std::string> claimVerdicts(const nlohmann::json& runs,
+                                       const std::map<std::string, RunValues>& values) {
+  std::vector<std::pair<double, std::string>> bins;  // (centre, set) of the bin sets
+  std::string maeTrainedOn;  // the cross-view set whose pairs mae trained on
+  for (const auto& r : runs) {
+    const nlohmann::json center = r.value("center", nlohmann::json());
+    if (r.value("mode", "") == "bin" && center.is_number())
+      bins.emplace_back(center.get<double>(), r.value("set", ""));
+    if (r.value("set", "") == "mae") maeTrainedOn = r.value("trained_on", "");
+  }
+  std::sort(bins.begin(), bins.end());
+  bins.erase(std::unique(bins.begin(), bins.end()), bins.end());
+  std::vector<std::string> out;
+  if (!maeTrainedOn.empty() && values.begin()->second.values.count(maeTrainedOn))
+    out.push_back(claimVerdict("Claim 2, cross-view completion beats auto-completion (MAE)",
+                               maeTrainedOn, {"mae"}, values));
+  if (bins.empty()) return out;
+  const std::string mid =
+      std::min_element(bins.begin(), bins.end(), [](const auto& x, const auto& y) {
+        return std::abs(x.first - 0.5) < std::abs(y.first - 0.5);
+      })->second;
+  // Against the lowest and the highest bin, those that are not the middle one itself.
+  std::vector<std::string> ends, sides;
+  if (bins.front().second != mid) ends.push_back(bins.front().second), sides.push_back("low");
+  if (bins.back().second != mid) ends.push_back(bins.back().second), sides.push_back("high");
+  if (!ends.empty())
+    out.insert(out.begin(),
+               claimVerdict("Claim 1, covis near 0.5 beats " + sides.front() +
+                                (sides.size() > 1 ? " and " + sides.back() : "") + " covis",
+                            mid, ends, values));
+  return out;
+}
+
+// ---- the plots and the page ----
 
 void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann::json& random) {
   const fs::path out(c.out);
   const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd"};
-  struct Metric {
-    const char* key;
-    const char* label;
-  } metrics[] = {{"xv_loss", "held-out completion loss (covis ~0.5), lower is better"},
-                 {"probe_delta1", "depth probe delta1, higher is better"},
-                 {"probe_absrel", "depth probe AbsRel, lower is better"},
-                 {"probe_rmse", "depth probe RMSE (m), lower is better"}};
-  for (const auto& m : metrics) {
+  for (const Metric& m : kEvaluated) {
+    const std::string mean = std::string(m.key) + "_mean", ci = std::string(m.key) + "_ci95";
     std::vector<plot::Series> series;
     int k = 0;
     for (const auto& mode : c.modes) {
@@ -53,79 +249,150 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
       s.label = mode;
       s.color = colors[k++ % 4];
       for (const auto& r : rows)
-        if (r["mode"] == mode) s.x.push_back(r["center"]), s.y.push_back(r[m.key]);
+        if (r["mode"] == mode)
+          s.x.push_back(r["center"]), s.y.push_back(value(r, mean)), s.yErr.push_back(value(r, ci));
       series.push_back(s);
     }
-    // The random encoder as a dashed line, unless it lies so far from the sets that the line
-    // would flatten them (as the completion loss's can, far above every set's); then in the title.
-    const double baseline = random[m.key].get<double>();
+    // Baselines as dashed lines over the centres: mae, and the random encoder unless it lies so
+    // far from the sets that its line would flatten them (the completion loss's can); then it
+    // goes in the title.
+    auto flat = [&](const std::string& label, const char* color, double y) {
+      plot::Series base;
+      base.label = label;
+      base.color = color;
+      base.dashed = true;
+      base.markers = false;
+      base.x = {c.centers.front(), c.centers.back()};
+      base.y = {y, y};
+      return base;
+    };
+    for (const auto& r : rows)
+      if (r["task"] == "mae")
+        series.push_back(flat(m.key == std::string("xv_loss") ? "mae (own task)" : "mae", "#d62728",
+                              value(r, mean)));
     double lo = INFINITY, hi = -INFINITY;
     for (const auto& s : series)
       for (double y : s.y) lo = std::min(lo, y), hi = std::max(hi, y);
+    const double baseline = value(random, mean);
     std::string title = m.label;
     if (lo <= hi && (baseline < lo - 3 * (hi - lo) || baseline > hi + 3 * (hi - lo))) {
       char note[96];
       std::snprintf(note, sizeof note, "; random encoder %.3f", baseline);
       title += note;
     } else {
-      plot::Series base;
-      base.label = "random encoder";
-      base.color = "#7f7f7f";
-      base.dashed = true;
-      base.markers = false;
-      base.x = {c.centers.front(), c.centers.back()};
-      base.y = {baseline, baseline};
-      series.push_back(base);
+      series.push_back(flat("random encoder", "#7f7f7f", baseline));
     }
+    title += std::string(m.higherIsBetter ? ", higher" : ", lower") + " is better";
     writeFileAtomic(
         (out / (std::string("plot_") + m.key + ".svg")).string(),
         plot::lines(series, {title, "covis centre of the training set", m.key, 620, 340}));
   }
 }
 
-// summary.html: what was trained, the plots, and a table of the sets and both baselines.
-std::string summaryPage(const SweepConfig& c, const nlohmann::json& rows,
-                        const nlohmann::json& random, const nlohmann::json& constant) {
+std::string cell(const nlohmann::json& r, const std::string& metric) {
+  const double mean = value(r, metric + "_mean");
+  return std::isfinite(mean) ? withInterval(mean, value(r, metric + "_ci95")) : "";
+}
+
+// summary.html: what was trained, the verdicts, the plots, and the table of sets and baselines.
+std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
+  const nlohmann::json& rows = results.at("rows");
+  const nlohmann::json& random = results.at("random_encoder");
+  const nlohmann::json& constant = results.at("constant_depth");
   std::string page =
       html::pageStart("covis_sweep results", html::style(1300)) +
       html::heading(1, "Co-visibility sweep") +
-      html::paragraph(
-          std::to_string(rows.size()) + " training sets of " + std::to_string(c.pairsPerSet) +
-          " pairs (" + plot::escape(c.preset) + " model, " + std::to_string(c.steps) +
-          " steps of " + std::to_string(c.batchSize) + " at " + std::to_string(c.imgSize) +
-          " px), evaluated on held-out scenes. Data: " + html::link("results.csv", "results.csv") +
-          ", " + html::link("results.json", "results.json") + ".");
-  for (const char* m : {"xv_loss", "probe_delta1", "probe_absrel", "probe_rmse"})
-    page += html::image("plot_" + std::string(m) + ".svg", m) + "\n";
-  page += html::tableStart(
-      {"set", "mean covis", "train loss", "xv loss", "delta1", "AbsRel", "RMSE", "dataset"});
+      html::paragraph(std::to_string(rows.size()) + " training sets and baselines of " +
+                      std::to_string(c.pairsPerSet) + " pairs, each trained with " +
+                      std::to_string(c.seeds) + " seed(s) (" + plot::escape(c.preset) + " model, " +
+                      std::to_string(c.steps) + " steps of " + std::to_string(c.batchSize) +
+                      " at " + std::to_string(c.imgSize) +
+                      " px), evaluated on held-out scenes. Figures are means over "
+                      "the seeds \u00b1 the half-width of a 95 % t-interval. Data: " +
+                      html::link("results.csv", "results.csv") + " (per set), " +
+                      html::link("results_runs.csv", "results_runs.csv") + " (per run), " +
+                      html::link("results.json", "results.json") + ".") +
+      html::heading(2, "Verdicts");
+  for (const auto& v : results.at("verdicts")) page += html::paragraph(plot::escape(v));
+  for (const Metric& m : kEvaluated)
+    page += html::image("plot_" + std::string(m.key) + ".svg", m.key) + "\n";
+  page += html::tableStart({"set", "seeds", "mean covis", "train loss", "xv loss", "delta1",
+                            "AbsRel", "RMSE", "dataset"});
   for (const auto& r : rows) {
     const std::string set = r["set"].get<std::string>();
     page += html::labelledRow(
-        set, {num(r, "mean_covis"), num(r, "train_loss"), num(r, "xv_loss"), num(r, "probe_delta1"),
-              num(r, "probe_absrel"), num(r, "probe_rmse"),
-              c.reports ? html::link("sets/" + set + "/report.html", "report") : "-"});
+        set + (r["task"] == "mae" ? " (xv loss: its own task)" : ""),
+        {std::to_string(r.value("seeds", 0)), num(r, "mean_covis"), cell(r, "train_loss"),
+         cell(r, "xv_loss"), cell(r, "probe_delta1"), cell(r, "probe_absrel"),
+         cell(r, "probe_rmse"),
+         c.reports ? html::link("sets/" + text(r, "trained_on") + "/report.html", "report") : "-"});
   }
-  page += html::labelledRow("random encoder",
-                            {"", "", num(random, "xv_loss"), num(random, "probe_delta1"),
-                             num(random, "probe_absrel"), num(random, "probe_rmse"), ""});
+  page += html::labelledRow(
+      "random encoder",
+      {std::to_string(random.value("seeds", 0)), "", "", cell(random, "xv_loss"),
+       cell(random, "probe_delta1"), cell(random, "probe_absrel"), cell(random, "probe_rmse"), ""});
   page += html::labelledRow("constant depth (no encoder)",
-                            {"", "", "", num(constant, "probe_delta1"),
+                            {"", "", "", "", num(constant, "probe_delta1"),
                              num(constant, "probe_absrel"), num(constant, "probe_rmse"), ""});
   return page + html::tableEnd() + html::pageEnd();
 }
 
 }  // namespace
 
+const std::vector<std::string>& sweepMetrics() {
+  static const std::vector<std::string> metrics = {"train_loss", "xv_loss", "probe_delta1",
+                                                   "probe_absrel", "probe_rmse"};
+  return metrics;
+}
+
+nlohmann::json aggregateRuns(const nlohmann::json& runs) {
+  nlohmann::json rows = nlohmann::json::array();
+  std::map<std::string, size_t> index;
+  for (const auto& run : runs) {
+    const std::string set = run.at("set");
+    if (index.count(set)) continue;
+    index[set] = rows.size();
+    nlohmann::json row;
+    for (const char* f : {"mode", "center", "set", "task", "trained_on", "pairs", "mean_covis"})
+      if (run.contains(f)) row[f] = run[f];
+    rows.push_back(row);
+  }
+  for (const auto& m : sweepMetrics()) {
+    const RunValues v = byset(runs, m);
+    for (const auto& set : v.sets) {
+      const Interval i = interval95(v.values.at(set));
+      nlohmann::json& row = rows[index.at(set)];
+      row["seeds"] = v.values.at(set).size();
+      row[m + "_mean"] = i.mean;  // nlohmann writes NaN as null
+      row[m + "_ci95"] = i.halfWidth;
+    }
+  }
+  return rows;
+}
+
+std::vector<std::string> sweepVerdicts(const nlohmann::json& results) {
+  const nlohmann::json& runs = results.at("runs");
+  std::map<std::string, RunValues> values;
+  std::vector<std::string> out;
+  for (const Metric& m : kEvaluated) {
+    values[m.key] = byset(runs, m.key);
+    const std::vector<double> random =
+        byset(results.at("random_runs"), m.key).values["random_encoder"];
+    for (auto& line : metricVerdicts(m, values[m.key], random)) out.push_back(std::move(line));
+  }
+  for (auto& line : claimVerdicts(runs, values)) out.push_back(std::move(line));
+  return out;
+}
+
 void writeSweepReport(const SweepConfig& c, const nlohmann::json& results) {
   const fs::path out(c.out);
-  const nlohmann::json& rows = results.at("rows");
-  const nlohmann::json& random = results.at("random_encoder");
-  const nlohmann::json& constant = results.at("constant_depth");
-  writeFileAtomic((out / "results.csv").string(), resultsCsv(rows, random));
+  writeFileAtomic((out / "results.csv").string(),
+                  resultsCsv(results.at("rows"), results.at("random_encoder")));
+  writeFileAtomic((out / "results_runs.csv").string(),
+                  runsCsv(results.at("runs"), results.at("random_runs")));
   writeFileAtomic((out / "results.json").string(), results.dump(1) + "\n");
-  writePlots(c, rows, random);
-  writeFileAtomic((out / "summary.html").string(), summaryPage(c, rows, random, constant));
+  writePlots(c, results.at("rows"), results.at("random_encoder"));
+  writeFileAtomic((out / "summary.html").string(), summaryPage(c, results));
 }
 
 }  // namespace paircast

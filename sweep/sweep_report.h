@@ -1,19 +1,38 @@
-// The files a covis sweep ends with, in its --out folder: results.csv and results.json (the
-// numbers), plot_<metric>.svg (each metric against the training sets' covis centre, a line per
-// mode, the random encoder dashed) and summary.html (the page that shows them, and links each
-// set's dataset report).
+// The files a covis sweep ends with, in its --out folder: results.csv (a row per set and
+// baseline: each metric's mean over the seeds and the half-width of its 95 % t-interval),
+// results_runs.csv (a row per run), results.json (all of it, and the verdicts),
+// plot_<metric>.svg (each metric against the training sets' covis centre, a line per mode with
+// error bars, the baselines dashed) and summary.html (the page that shows them, says in words
+// which differences are larger than their intervals, and links each set's dataset report).
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
 #include "sweep/covis_sweep.h"
 
 namespace paircast {
 
-// Writes the files from `results`, as runCovisSweep returns it: "rows" (one per set: mode,
-// center, set, pairs, mean_covis, train_loss, xv_loss, probe_delta1, probe_absrel,
-// probe_rmse), "random_encoder" (xv_loss and probe_*), "constant_depth" (probe_*) and
-// "config"; results.json holds `results` itself.
+// The metrics every run is evaluated on, in the files' column order: train_loss, xv_loss,
+// probe_delta1, probe_absrel, probe_rmse.
+const std::vector<std::string>& sweepMetrics();
+
+// Runs' rows (each with set, mode, center, task, trained_on, pairs, mean_covis and the metrics)
+// grouped by set, in the order each set first appears: a row per set with those fields, "seeds"
+// (its runs), and for every metric <metric>_mean and <metric>_ci95 (NaN with one seed).
+nlohmann::json aggregateRuns(const nlohmann::json& runs);
+
+// What summary.html says, a sentence each: for every evaluation metric, which sets and
+// baselines differ from the best one and from the random encoder by more than the 95 % interval
+// of the difference (Welch's), and which do not; then the paper's two claims (bin near 0.5
+// against the lowest and the highest bin; against mae), where the sweep has those runs.
+// `results` as collectResults makes it: "runs" and "random_runs".
+std::vector<std::string> sweepVerdicts(const nlohmann::json& results);
+
+// Writes the files from `results`, as runCovisSweep returns it: "rows" (aggregateRuns of
+// "runs"), "runs", "random_encoder" (aggregated), "random_runs", "constant_depth" (probe_*),
+// "verdicts" and "config"; results.json holds `results` itself.
 void writeSweepReport(const SweepConfig& config, const nlohmann::json& results);
 
 }  // namespace paircast

@@ -34,7 +34,18 @@ int main(int argc, char** argv) {
   app.add_option("--device", c.device, "Training device (evaluation runs on the CPU)")
       ->check(CLI::IsMember({"cpu", "cuda"}));
   app.add_option("--blr", c.blr, "Base learning rate (lr = blr * batch / 256)");
-  app.add_option("--seed", c.seed, "Random seed (the same for every set)");
+  app.add_option(
+      "--seed", c.seed,
+      "Random seed of the pool and held-out data; run k of every set trains with seed + k");
+  app.add_option("--seeds", c.seeds, "Runs per set and baseline, for the 95 % intervals");
+  app.add_option("--baseline", c.baselines,
+                 "Baselines trained like the sets: mae (view 1 alone, no reference view)")
+      ->delimiter(',');
+  std::string up = "y";
+  app.add_option("--up", up,
+                 "Up axis of the scenes: y, z, or auto (the axis with the larger floor and "
+                 "ceiling area)")
+      ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--jobs", c.jobs, "Render threads (0: all cores)");
   app.add_option("--eval-pairs", c.evalPairs, "Held-out pairs at covis ~0.5");
   app.add_option("--probe-views", c.probeViews,
@@ -45,6 +56,7 @@ int main(int argc, char** argv) {
   app.add_flag("--no-reports", noReports, "No dataset report per set");
   app.add_flag("--quiet", quiet, "No progress lines");
   return runTool("covis_sweep", app, argc, argv, [&] {
+    c.load.up = parseUpAxis(up);
     c.reports = !noReports;
     c.progress = !quiet;
     const nlohmann::json r = runCovisSweep(c);

@@ -20,6 +20,8 @@ int main(int argc, char** argv) {
   app.add_option("--live-weight", c.liveWeight, "Share of samples from --live when mixing");
   app.add_option("--preset", preset, "tiny, small or base")
       ->check(CLI::IsMember({"tiny", "small", "base"}));
+  app.add_option("--task", c.task,
+                 "croco (complete view 1 with view 2) or mae (view 1 alone: no reference)");
   app.add_option("--decoder", decoder, "cross or cat")->check(CLI::IsMember({"cross", "cat"}));
   app.add_option("--img-size", imgSize, "Training crop size (224 as the paper)");
   app.add_option("--batch-size", c.batchSize, "Pairs per iteration")->check(CLI::Range(1, 65536));

@@ -112,6 +112,11 @@ DecayGroups weightDecayGroups(const std::vector<std::pair<std::string, torch::Te
   return g;
 }
 
+CroCoOutput pretrainForward(CroCoNet& model, const std::string& task, const torch::Tensor& img1,
+                            const torch::Tensor& img2, const torch::Tensor& mask) {
+  return model->forward(img1, task == "mae" ? torch::Tensor() : img2, mask);
+}
+
 double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs, double e) {
   if (e < warmupEpochs) return baseLr * e / warmupEpochs;
   const double span = std::max(1e-12, epochs - warmupEpochs);
@@ -126,6 +131,8 @@ void TrainConfig::validate() const {
                       "several, with weights)");
   if (amp != "bf16" && amp != "fp16" && amp != "none")
     throw OptionError("amp", "mixed precision must be bf16, fp16 or none, not '" + amp + "'");
+  if (task != "croco" && task != "mae")
+    throw OptionError("task", "the task must be croco or mae, not '" + task + "'");
   if (out.empty()) throw OptionError("out", "an output folder is required");
   if (batchSize < 1) throw OptionError("batch_size", "the batch size must be >= 1");
   if (accumIter < 1) throw OptionError("accum_iter", "accumulation steps must be >= 1");
@@ -304,6 +311,7 @@ class Pretraining {
     const double seconds = since(start_);
     nlohmann::json s = {
         {"steps", iter_},
+        {"task", c_.task},
         {"steps_this_run", iter_ - firstIter_},
         {"loss", lastLoss_},
         {"seconds", seconds},
@@ -328,6 +336,10 @@ class Pretraining {
       throw Error(ckptPath_,
                   "checkpoint was trained with other hyper-parameters than the model "
                   "config");
+    if (ck.extra.value("task", std::string("croco")) != c_.task)
+      throw Error(ckptPath_, "checkpoint was trained on task " +
+                                 ck.extra.value("task", std::string("croco")) + ", not " + c_.task +
+                                 "; use another --out");
     loadStateDictStrict(model_, ck.model, ckptPath_);
     restoreOptimizer(*opt_, ordered_, ck.extraTensors, ckptPath_);
     iter_ = ck.extra.value("step", int64_t{0});
@@ -374,8 +386,8 @@ class Pretraining {
       // On CUDA: bf16 or fp16 autocast; the loss itself in float32.
       AutocastGuard autocast(device_.is_cuda() && c_.amp != "none",
                              c_.amp == "fp16" ? at::kHalf : at::kBFloat16);
-      auto out =
-          model_->forward(batch.img1.to(device_), batch.img2.to(device_), batch.mask.to(device_));
+      auto out = pretrainForward(model_, c_.task, batch.img1.to(device_), batch.img2.to(device_),
+                                 batch.mask.to(device_));
       loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
     }
     if (iter_ == c_.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
@@ -484,6 +496,7 @@ class Pretraining {
     nlohmann::json extra = {{"step", step},
                             {"live_position", loader_ ? loader_->livePosition() : 0},
                             {"seed", c_.seed},
+                            {"task", c_.task},
                             {"batch_size", c_.batchSize},
                             {"accum_iter", c_.accumIter}};
     if (scaler_->enabled()) extra["scaler"] = scaler_->state();

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "model/croco_config.h"
+#include "model/croco_net.h"
 
 namespace paircast {
 
@@ -29,6 +30,9 @@ struct TrainConfig {
   double shardsWeight = 1.0, crocoWeight = 1.0, liveWeight = 1.0;
 
   CroCoConfig model = presetConfig("tiny");
+  // What the model learns: "croco" completes view 1 from its visible patches and view 2;
+  // "mae" (auto-completion) from its visible patches alone, with no reference view.
+  std::string task = "croco";
   int batchSize = 16;
   int accumIter = 1;
   int epochs = 10;        // the schedule's length
@@ -57,6 +61,11 @@ struct TrainConfig {
   bool progress = true;
   int64_t debugNanAtStep = -1;  // fault injection for tests: this iteration's loss becomes NaN
 };
+
+// The pre-training forward pass of `task` ("croco" or "mae"): for "mae" the reference img2 is
+// not given to the model, whatever it holds (CroCoNetImpl::forward without img2).
+CroCoOutput pretrainForward(CroCoNet& model, const std::string& task, const torch::Tensor& img1,
+                            const torch::Tensor& img2, const torch::Tensor& mask);
 
 // lr at fractional epoch `e`: linear warmup, then half-cosine to minLr (CroCo's pretrain.py).
 double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs, double e);

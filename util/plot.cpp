@@ -168,13 +168,21 @@ std::string histogram(const std::vector<double>& edges, const std::vector<double
   return s + frame(f, a) + "</svg>\n";
 }
 
+namespace {
+// The half-width of point i's error bar; 0 when it has none.
+double errorBar(const Series& s, size_t i) {
+  return i < s.yErr.size() && std::isfinite(s.yErr[i]) && s.yErr[i] > 0 ? s.yErr[i] : 0.0;
+}
+}  // namespace
+
 std::string lines(const std::vector<Series>& series, const Axes& a) {
   double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
   for (const auto& s : series)
     for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
       if (!std::isfinite(s.y[i])) continue;
+      const double e = errorBar(s, i);
       x0 = std::min(x0, s.x[i]), x1 = std::max(x1, s.x[i]);
-      y0 = std::min(y0, s.y[i]), y1 = std::max(y1, s.y[i]);
+      y0 = std::min(y0, s.y[i] - e), y1 = std::max(y1, s.y[i] + e);
     }
   if (x0 > x1) x0 = 0, x1 = 1, y0 = 0, y1 = 1;
   if (x1 <= x0) x1 = x0 + 1;
@@ -189,6 +197,13 @@ std::string lines(const std::vector<Series>& series, const Axes& a) {
       if (std::isfinite(se.y[i])) pts += num(f.px(se.x[i])) + "," + num(f.py(se.y[i])) + " ";
     s += "<polyline fill='none' stroke='" + se.color + "' stroke-width='2'" +
          (se.dashed ? " stroke-dasharray='6 4'" : "") + " points='" + pts + "'/>";
+    for (size_t i = 0; i < se.x.size() && i < se.y.size(); ++i)
+      if (const double e = errorBar(se, i); std::isfinite(se.y[i]) && e > 0) {
+        const std::string x = num(f.px(se.x[i])), lo = num(f.py(se.y[i] - e)),
+                          hi = num(f.py(se.y[i] + e));
+        s += "<path d='M" + x + " " + lo + " V" + hi + " m-4 0 h8 M" + num(f.px(se.x[i]) - 4) +
+             " " + lo + " h8' stroke='" + se.color + "' stroke-width='1.5' fill='none'/>";
+      }
     if (se.markers)
       for (size_t i = 0; i < se.x.size() && i < se.y.size(); ++i)
         if (std::isfinite(se.y[i]))

@@ -10,6 +10,9 @@ namespace paircast::plot {
 struct Series {
   std::string label;
   std::vector<double> x, y;
+  // Optional half-widths of error bars, one per point (a bar from y - e to y + e, with caps);
+  // a point whose e is NaN or <= 0 has none.
+  std::vector<double> yErr;
   std::string color = "#1f77b4";
   bool dashed = false;
   bool markers = true;
@@ -38,7 +41,8 @@ std::string escape(const std::string& text);
 // Bars over [edges[i], edges[i+1]).
 std::string histogram(const std::vector<double>& edges, const std::vector<double>& counts,
                       const Axes& axes);
-// Lines (with markers) over shared axes, and a legend.
+// Lines (with markers and any error bars) over shared axes, and a legend. The y axis spans
+// the error bars too.
 std::string lines(const std::vector<Series>& series, const Axes& axes);
 // A heat map of counts[row][col] over x edges (cols) and y edges (rows), darker = more.
 std::string heatmap(const std::vector<double>& xEdges, const std::vector<double>& yEdges,

@@ -32,6 +32,39 @@ TEST(CroCoNet, ShapesOfTheForwardPass) {
                         "CroCo input must be [B, 3, 64, 64]");
 }
 
+// Auto-completion (no img2): the decoder gets no reference, so what stands in img2's place
+// cannot matter, and skipping the cross-attention is the same as a cross-attention whose output
+// projection is zero (one that adds nothing to its residual stream).
+TEST(CroCoNet, WithoutAReferenceTheDecoderSeesNoSecondImage) {
+  for (const char* decoder : {"cross", "cat"})
+    for (const char* pos : {"cosine", "RoPE100"}) {
+      SCOPED_TRACE(std::string(decoder) + " decoder, " + pos);
+      torch::manual_seed(0);
+      CroCoConfig c = tinyConfig();
+      c.decoder = decoder;
+      c.pos_embed = pos;
+      CroCoNet net(c);
+      net->eval();
+      torch::NoGradGuard ng;
+      const auto img1 = torch::randn({2, 3, 64, 64});
+      const auto mask = net->randomMask(2, torch::kCPU);
+      const auto alone = net->forward(img1, torch::Tensor(), mask).prediction;
+      const auto withA = net->forward(img1, torch::randn({2, 3, 64, 64}), mask).prediction;
+      const auto withB = net->forward(img1, torch::randn({2, 3, 64, 64}), mask).prediction;
+      EXPECT_FALSE(torch::allclose(withA, withB)) << decoder << ": the reference must matter";
+      EXPECT_FALSE(torch::allclose(alone, withA)) << decoder;
+      EXPECT_EQ(alone.sizes(), withA.sizes());
+      if (std::string(decoder) != "cross") continue;
+      for (auto& blk : *net->dec_blocks) {
+        auto& proj = blk->as<DecoderBlock>()->cross_attn->proj;
+        proj->weight.zero_();
+        proj->bias.zero_();
+      }
+      EXPECT_TRUE(torch::allclose(net->forward(img1, torch::randn({2, 3, 64, 64}), mask).prediction,
+                                  alone, 1e-5, 1e-6));
+    }
+}
+
 TEST(CroCoNet, ParameterCountsOfThePresets) {
   // The official CroCoNet (CrossBlock, base) has 120,076,288 parameters.
   struct Case {

@@ -213,9 +213,10 @@ TEST(CovisSweep, TwoRanksTrainEachSetLikeOneWithTheDoubledBatch) {
   const std::string dir = testing::scratchDir("ranks");
   // A small rate, as in Pretrain.TwoGlooProcessesEqualOneWithTheDoubledBatch: Adam scales every
   // step to about lr, so the two reduction orders' rounding differences grow with it.
+  // Two seeds and mae: every rank must train the same runs in the same order.
   auto args = [&](const std::string& out, const char* batch) {
     auto a = withOption(miniArgs(out), "--batch-size", batch);
-    a.insert(a.end(), {"--blr", "1.5e-4"});
+    a.insert(a.end(), {"--blr", "1.5e-4", "--mode", "bin", "--seeds", "2", "--baseline", "mae"});
     return a;
   };
   ASSERT_EQ(testing::runProcess(args(dir + "/one", "8")), 0);
@@ -230,18 +231,20 @@ TEST(CovisSweep, TwoRanksTrainEachSetLikeOneWithTheDoubledBatch) {
   for (pid_t p : ranks) ASSERT_EQ(testing::waitProcess(p), 0);
   const auto one = nlohmann::json::parse(readFile(dir + "/one/results.json"));
   const auto two = nlohmann::json::parse(readFile(dir + "/two/results.json"));
-  ASSERT_EQ(one["rows"].size(), two["rows"].size());
-  for (size_t i = 0; i < one["rows"].size(); ++i) {
-    const std::string set = one["rows"][i]["set"];
-    const Checkpoint a = loadCheckpoint(dir + "/one/runs/" + set + "/checkpoint-last.pth");
-    const Checkpoint b = loadCheckpoint(dir + "/two/runs/" + set + "/checkpoint-last.pth");
+  ASSERT_EQ(one["runs"].size(), 6u);  // 2 bins and mae, 2 seeds each
+  ASSERT_EQ(two["runs"].size(), one["runs"].size());
+  for (size_t i = 0; i < one["runs"].size(); ++i) {
+    const std::string run = one["runs"][i]["set"].get<std::string>() + "/seed-" +
+                            std::to_string(one["runs"][i]["seed_index"].get<int>());
+    const Checkpoint a = loadCheckpoint(dir + "/one/runs/" + run + "/checkpoint-last.pth");
+    const Checkpoint b = loadCheckpoint(dir + "/two/runs/" + run + "/checkpoint-last.pth");
     double worst = 0;
     for (const auto& [k, t] : a.model)
       worst = std::max(worst, (t - b.model.at(k)).abs().max().item<double>());
-    EXPECT_LT(worst, 1e-5) << set;
-    EXPECT_NEAR(one["rows"][i]["xv_loss"].get<double>(), two["rows"][i]["xv_loss"].get<double>(),
+    EXPECT_LT(worst, 1e-5) << run;
+    EXPECT_NEAR(one["runs"][i]["xv_loss"].get<double>(), two["runs"][i]["xv_loss"].get<double>(),
                 1e-4)
-        << set;
+        << run;
   }
   // A rank that never sees rank 0 gives up after PAIRCAST_SWEEP_WAIT instead of hanging.
   const auto start = std::chrono::steady_clock::now();
@@ -251,45 +254,138 @@ TEST(CovisSweep, TwoRanksTrainEachSetLikeOneWithTheDoubledBatch) {
   EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(30));
 }
 
+// The sweep of the end-to-end test: two seeds, and the mae baseline.
+SweepConfig seededSweep(const std::string& out) {
+  SweepConfig c = miniSweep(out);
+  c.seeds = 2;
+  c.baselines = {"mae"};
+  return c;
+}
+
+std::vector<std::string> seededArgs(const std::string& out) {
+  std::vector<std::string> a = miniArgs(out);
+  a.insert(a.end(), {"--seeds", "2", "--baseline", "mae"});
+  return a;
+}
+
+std::string runDir(const std::string& out, const std::string& set, int seed) {
+  return out + "/runs/" + set + "/seed-" + std::to_string(seed);
+}
+
 TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
   const std::string dir = testing::scratchDir("e2e");
-  // A clean run, through the library.
-  const nlohmann::json r = runCovisSweep(miniSweep(dir + "/clean"));
-  ASSERT_EQ(r["rows"].size(), 4u);
+  const std::string clean = dir + "/clean";
+  // A clean run, through the library: 4 sets and mae, each with 2 seeds.
+  const nlohmann::json r = runCovisSweep(seededSweep(clean));
+  ASSERT_EQ(r["rows"].size(), 5u);
+  ASSERT_EQ(r["runs"].size(), 10u);
   for (const auto& row : r["rows"]) {
     EXPECT_EQ(row["pairs"], 16);
-    EXPECT_TRUE(std::isfinite(row["xv_loss"].get<double>()));
-    EXPECT_GE(row["probe_delta1"].get<double>(), 0.0);
+    EXPECT_EQ(row["seeds"], 2);
+    EXPECT_TRUE(std::isfinite(row["xv_loss_mean"].get<double>()));
+    EXPECT_TRUE(std::isfinite(row["xv_loss_ci95"].get<double>()));
+    EXPECT_GE(row["probe_delta1_mean"].get<double>(), 0.0);
   }
-  const std::string csv = readFile(dir + "/clean/results.csv");
-  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 6);  // header, 4 sets, random encoder
+  // mae trains on the pairs of the bin set nearest covis 0.5, on its own task.
+  EXPECT_EQ(r["rows"][4]["set"], "mae");
+  EXPECT_EQ(r["rows"][4]["task"], "mae");
+  EXPECT_EQ(r["rows"][4]["trained_on"], "bin_0.45");
+  EXPECT_EQ(nlohmann::json::parse(readFile(runDir(clean, "mae", 1) + "/summary.json"))["task"],
+            "mae");
+  const std::string csv = readFile(clean + "/results.csv");
+  EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 7);  // header, 4 sets, mae, random
+  EXPECT_EQ(csv.substr(0, csv.find('\n')),
+            "mode,center,set,task,trained_on,seeds,pairs,mean_covis,train_loss_mean,"
+            "train_loss_ci95,xv_loss_mean,xv_loss_ci95,probe_delta1_mean,probe_delta1_ci95,"
+            "probe_absrel_mean,probe_absrel_ci95,probe_rmse_mean,probe_rmse_ci95");
+  const std::string runsCsv = readFile(clean + "/results_runs.csv");
+  EXPECT_EQ(std::count(runsCsv.begin(), runsCsv.end(), '\n'), 13);  // header, 10 runs, 2 random
   for (const char* f : {"results.json", "plot_xv_loss.svg", "plot_probe_delta1.svg",
                         "plot_probe_absrel.svg", "plot_probe_rmse.svg", "summary.html",
                         "sets/bin_0.45/report.html", "sets/uniform_0.75.keys"})
-    EXPECT_TRUE(fs::exists(dir + "/clean/" + f)) << f;
-  const std::string html = readFile(dir + "/clean/summary.html");
+    EXPECT_TRUE(fs::exists(clean + "/" + f)) << f;
+  const std::string html = readFile(clean + "/summary.html");
+  EXPECT_NE(html.find("Claim 2, cross-view completion beats auto-completion (MAE)"),
+            std::string::npos);
   const std::regex ref("(src|href)='([^']+)'");
   for (auto it = std::sregex_iterator(html.begin(), html.end(), ref); it != std::sregex_iterator();
        ++it)
-    EXPECT_TRUE(fs::exists(dir + "/clean/" + (*it)[2].str())) << (*it)[2].str();
+    EXPECT_TRUE(fs::exists(clean + "/" + (*it)[2].str())) << (*it)[2].str();
+
+  // The seed changes the initialisation (the random encoders differ), and so every run.
+  const auto& random = r["random_runs"];
+  EXPECT_NE(random[0]["xv_loss"], random[1]["xv_loss"]);
+  const Checkpoint s0 = loadCheckpoint(runDir(clean, "bin_0.45", 0) + "/checkpoint-last.pth");
+  const Checkpoint s1 = loadCheckpoint(runDir(clean, "bin_0.45", 1) + "/checkpoint-last.pth");
+  EXPECT_FALSE(torch::equal(s0.model.at("enc_blocks.0.attn.qkv.weight"),
+                            s1.model.at("enc_blocks.0.attn.qkv.weight")));
+  EXPECT_EQ(s0.extra["seed"], 0);
+  EXPECT_EQ(s1.extra["seed"], 1);
+  EXPECT_NE(r["runs"][0]["train_loss"], r["runs"][5]["train_loss"]);  // seeds 0 and 1 of bin_0.45
+  EXPECT_EQ(r["runs"][5]["set"], "bin_0.45");
 
   // A rerun reuses everything: no checkpoint is rewritten.
-  const auto ckpt = dir + "/clean/runs/bin_0.45/checkpoint-last.pth";
+  const auto ckpt = runDir(clean, "bin_0.45", 0) + "/checkpoint-last.pth";
   const auto before = fs::last_write_time(ckpt);
-  runCovisSweep(miniSweep(dir + "/clean"));
+  runCovisSweep(seededSweep(clean));
   EXPECT_EQ(fs::last_write_time(ckpt), before);
-  EXPECT_EQ(readFile(dir + "/clean/results.csv"), csv);
+  EXPECT_EQ(readFile(clean + "/results.csv"), csv);
+
+  // Resume is per run: with one seed's run gone, only that run trains again, to the same result.
+  fs::remove_all(runDir(clean, "uniform_0.75", 1));
+  runCovisSweep(seededSweep(clean));
+  EXPECT_EQ(fs::last_write_time(ckpt), before);
+  EXPECT_TRUE(fs::exists(runDir(clean, "uniform_0.75", 1) + "/eval.json"));
+  EXPECT_EQ(readFile(clean + "/results.csv"), csv);
 
   // The real command, SIGKILLed at growing delays and restarted, gives the same results.
   const std::string killed = dir + "/killed";
   int kills = 0;
   for (int delayMs = 300; delayMs < 60000 && !fs::exists(killed + "/results.csv"); delayMs *= 2) {
-    const int rc = testing::runProcess(miniArgs(killed), delayMs);
+    const int rc = testing::runProcess(seededArgs(killed), delayMs);
     if (rc == -SIGKILL) ++kills;
   }
   EXPECT_GE(kills, 1);
-  ASSERT_EQ(testing::runProcess(miniArgs(killed)), 0);
+  ASSERT_EQ(testing::runProcess(seededArgs(killed)), 0);
   EXPECT_EQ(readFile(killed + "/results.csv"), csv);
+  EXPECT_EQ(readFile(killed + "/results_runs.csv"), runsCsv);
+}
+
+TEST(CovisSweep, BadSeedsAndBaselinesAreRefused) {
+  SweepConfig c = miniSweep(testing::scratchDir("bad_seeds"));
+  c.seeds = 0;
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "seeds must be in 1..1000");
+  c.seeds = 2;
+  c.baselines = {"simclr"};
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "unknown baseline 'simclr' (use mae)");
+  c.baselines = {"mae", "mae"};
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "baseline 'mae' is given twice");
+  // The command refuses them before any work, with exit 2.
+  for (const auto& [option, value] : {std::pair{"--seeds", "0"}, std::pair{"--baseline", "byol"}})
+    EXPECT_EQ(testing::runProcess(withOption(seededArgs(c.out), option, value)), 2) << option;
+  EXPECT_FALSE(fs::exists(c.out + "/pool"));
+}
+
+TEST(CovisSweep, RunsGoSeedBySeedAndMaeTrainsOnTheSetNearestHalf) {
+  SweepConfig c = miniSweep("/tmp/out");
+  c.modes = {"uniform", "bin"};
+  c.centers = {0.15, 0.55, 0.95};
+  c.seeds = 3;
+  c.seed = 10;
+  c.baselines = {"mae"};
+  std::vector<SweepSet> sets;
+  for (const auto& m : c.modes)
+    for (double x : c.centers) sets.push_back(makeSweepSet(m, x));
+  EXPECT_EQ(maeTrainingSet(sets), "bin_0.55");  // a bin set before a uniform one at 0.55
+  const std::vector<SweepRun> runs = planRuns(c, sets);
+  ASSERT_EQ(runs.size(), 21u);
+  EXPECT_EQ(runs[0].label(), "uniform_0.15 seed 0");
+  EXPECT_EQ(runs[6].name, "mae");
+  EXPECT_EQ(runs[6].task, "mae");
+  EXPECT_EQ(runs[6].keysSet, "bin_0.55");
+  EXPECT_EQ(runs[7].label(), "uniform_0.15 seed 1");
+  EXPECT_EQ(runs[7].seed, 11u);
+  EXPECT_EQ(runs[20].dir, fs::path("/tmp/out/runs/mae/seed-2"));
 }
 
 }  // namespace

@@ -114,6 +114,44 @@ TEST(Augment, CropSizeJitterRangeAndNormalisation) {
   EXPECT_TRUE(torch::allclose(grey[0], grey[1]));
 }
 
+// The mae task's forward pass ignores the reference view whatever it holds; croco's does not.
+TEST(Pretrain, MaeTaskGivesTheDecoderNoReference) {
+  torch::manual_seed(3);
+  CroCoConfig m = presetConfig("tiny");
+  m.img_size = 32;
+  m.patch_size = 8;
+  CroCoNet net(m);
+  torch::NoGradGuard ng;
+  const auto img1 = torch::randn({3, 3, 32, 32});
+  const auto refA = torch::randn({3, 3, 32, 32}), refB = torch::zeros({3, 3, 32, 32});
+  const auto mask = net->randomMask(3, torch::kCPU);
+  auto predict = [&](const char* task, const torch::Tensor& ref) {
+    return pretrainForward(net, task, img1, ref, mask).prediction;
+  };
+  EXPECT_TRUE(torch::equal(predict("mae", refA), predict("mae", refB)));
+  EXPECT_TRUE(
+      torch::equal(predict("mae", refA), net->forward(img1, torch::Tensor(), mask).prediction));
+  EXPECT_FALSE(torch::allclose(predict("croco", refA), predict("croco", refB)));
+}
+
+// A mae run trains, says its task in summary.json and its checkpoint, and will not resume as a
+// croco run (or the other way round); an unknown task is refused by name.
+TEST(Pretrain, MaeRunsAndKeepsItsTask) {
+  const std::string dir = testing::scratchDir("mae");
+  TrainConfig c = tinyRun(dir);
+  c.task = "mae";
+  c.maxSteps = 4;
+  const nlohmann::json s = runPretrain(c);
+  EXPECT_EQ(s["task"], "mae");
+  EXPECT_TRUE(std::isfinite(s["loss"].get<double>()));
+  EXPECT_EQ(loadCheckpoint(dir + "/checkpoint-last.pth").extra["task"], "mae");
+  c.task = "croco";
+  c.resume = true;
+  EXPECT_ERROR_CONTAINS(runPretrain(c), "checkpoint was trained on task mae, not croco");
+  c.task = "simclr";
+  EXPECT_ERROR_CONTAINS(runPretrain(c), "the task must be croco or mae, not 'simclr'");
+}
+
 TEST(Pretrain, ResumeIsExact) {
   const std::string dir = testing::scratchDir("resume");
   TrainConfig whole = tinyRun(dir + "/whole");

@@ -135,5 +135,23 @@ TEST(PlotCharts, AxesCarryTheRoundTicks) {
   EXPECT_NE(plot::lines({s}, {}).find("</svg>"), std::string::npos);
 }
 
+TEST(PlotCharts, ErrorBarsAreDrawnAndWidenTheAxis) {
+  plot::Series s;
+  s.label = "delta1";
+  s.x = {0.15, 0.55, 0.95, 1.2};
+  s.y = {1.05, 0.8, 0.7, 0.62};
+  const std::string plain = plot::lines({s}, {"d", "covis", "delta1"});
+  EXPECT_EQ(plain.find("stroke-width='1.5'"), std::string::npos);
+  EXPECT_EQ(plain.find(">1.6</text>"), std::string::npos);
+  s.yErr = {0.5, NAN, 0.0, 0.1};  // bars on the first and the last point only
+  const std::string bars = plot::lines({s}, {"d", "covis", "delta1"});
+  size_t count = 0;
+  for (size_t at = bars.find("stroke-width='1.5'"); at != std::string::npos;
+       at = bars.find("stroke-width='1.5'", at + 1))
+    ++count;
+  EXPECT_EQ(count, 2u);
+  EXPECT_NE(bars.find(">1.6</text>"), std::string::npos);  // the axis reaches 1.05 + 0.5
+}
+
 }  // namespace
 }  // namespace paircast

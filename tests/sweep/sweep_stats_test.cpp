@@ -1,0 +1,156 @@
+#include "sweep/sweep_stats.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "sweep/sweep_report.h"
+
+namespace paircast {
+namespace {
+
+TEST(SweepStats, StudentQuantilesFromTheTables) {
+  EXPECT_NEAR(tQuantile95(1), 12.7062, 1e-4);
+  EXPECT_NEAR(tQuantile95(2), 4.3027, 1e-4);
+  EXPECT_NEAR(tQuantile95(4), 2.7764, 1e-4);
+  EXPECT_NEAR(tQuantile95(30), 2.0423, 1e-4);
+  EXPECT_NEAR(tQuantile95(1e7), 1.95996, 1e-4);
+  EXPECT_GT(tQuantile95(2.5), tQuantile95(3));  // fractional degrees of freedom (Welch)
+  EXPECT_LT(tQuantile95(2.5), tQuantile95(2));
+  EXPECT_TRUE(std::isnan(tQuantile95(0)));
+  EXPECT_TRUE(std::isnan(tQuantile95(-1)));
+  EXPECT_TRUE(std::isnan(tQuantile95(NAN)));
+}
+
+TEST(SweepStats, IntervalOfTheMean) {
+  // {1, 2, 3}: mean 2, s = 1, half-width t(0.975, 2) / sqrt(3).
+  const Interval a = interval95({1, 2, 3});
+  EXPECT_EQ(a.n, 3);
+  EXPECT_DOUBLE_EQ(a.mean, 2);
+  EXPECT_NEAR(a.halfWidth, 4.302653 / std::sqrt(3.0), 1e-6);
+  // Non-finite values (a run whose metric failed) are left out.
+  const Interval b = interval95({1, NAN, 2, INFINITY, 3});
+  EXPECT_EQ(b.n, 3);
+  EXPECT_DOUBLE_EQ(b.halfWidth, a.halfWidth);
+  // One value: a mean, no interval; none: neither.
+  const Interval one = interval95({0.5});
+  EXPECT_DOUBLE_EQ(one.mean, 0.5);
+  EXPECT_TRUE(std::isnan(one.halfWidth));
+  EXPECT_TRUE(std::isnan(interval95({}).mean));
+  // No spread: a zero half-width.
+  EXPECT_DOUBLE_EQ(interval95({0.25, 0.25, 0.25}).halfWidth, 0);
+}
+
+TEST(SweepStats, WelchIntervalOfADifference) {
+  // Equal spreads: s^2 = 1 each, se = sqrt(2/3), df = 4.
+  const Interval d = differenceInterval95({1, 2, 3}, {4, 5, 6});
+  EXPECT_DOUBLE_EQ(d.mean, -3);
+  EXPECT_NEAR(d.halfWidth, 2.776445 * std::sqrt(2.0 / 3.0), 1e-6);
+  EXPECT_TRUE(excludesZero(d));
+  // One side without spread: df = n - 1 of the other, se = sqrt(1/3).
+  const Interval e = differenceInterval95({0, 0, 0}, {1, 2, 3});
+  EXPECT_DOUBLE_EQ(e.mean, -2);
+  EXPECT_NEAR(e.halfWidth, 4.302653 / std::sqrt(3.0), 1e-6);
+  EXPECT_FALSE(excludesZero(e));  // 2 < 2.484
+  // Neither has spread: any difference is beyond its (zero) interval, and none is not.
+  EXPECT_TRUE(excludesZero(differenceInterval95({1, 1}, {2, 2})));
+  EXPECT_FALSE(excludesZero(differenceInterval95({1, 1}, {1, 1})));
+  // One seed on a side: no interval, so never called a difference.
+  const Interval f = differenceInterval95({1}, {5, 6, 7});
+  EXPECT_TRUE(std::isnan(f.halfWidth));
+  EXPECT_FALSE(excludesZero(f));
+}
+
+nlohmann::json run(const std::string& set, const std::string& task, double center, int seed,
+                   double xv, double delta1) {
+  return {{"set", set},
+          {"task", task},
+          {"mode", task == "mae" ? "mae" : "bin"},
+          {"center", task == "mae" ? nlohmann::json() : nlohmann::json(center)},
+          {"trained_on", task == "mae" ? "bin_0.55" : set},
+          {"pairs", 64},
+          {"mean_covis", center},
+          {"seed_index", seed},
+          {"train_loss", 0.5},
+          {"xv_loss", xv},
+          {"probe_delta1", delta1},
+          {"probe_absrel", 1 - delta1},
+          {"probe_rmse", 2 - delta1}};
+}
+
+TEST(SweepReport, RowsPerSetWithMeansAndIntervals) {
+  nlohmann::json runs = nlohmann::json::array();
+  for (int k = 0; k < 3; ++k) {
+    runs.push_back(run("bin_0.15", "croco", 0.15, k, 0.6 + 0.01 * k, 0.40 + 0.01 * k));
+    runs.push_back(run("mae", "mae", 0, k, 0.7, 0.30));
+  }
+  const nlohmann::json rows = aggregateRuns(runs);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0]["set"], "bin_0.15");
+  EXPECT_EQ(rows[1]["set"], "mae");
+  EXPECT_EQ(rows[0]["seeds"], 3);
+  EXPECT_NEAR(rows[0]["xv_loss_mean"].get<double>(), 0.61, 1e-12);
+  EXPECT_NEAR(rows[0]["xv_loss_ci95"].get<double>(), 4.302653 * 0.01 / std::sqrt(3.0), 1e-8);
+  EXPECT_NEAR(rows[0]["probe_delta1_mean"].get<double>(), 0.41, 1e-12);
+  EXPECT_DOUBLE_EQ(rows[1]["probe_delta1_ci95"].get<double>(), 0);
+  EXPECT_TRUE(rows[1]["center"].is_null());
+  EXPECT_EQ(rows[1]["task"], "mae");
+}
+
+// Three bins and mae over three seeds; bin 0.55 is far ahead in delta1 (beyond every interval)
+// and level with the others in the completion loss (within it).
+nlohmann::json syntheticResults(double gap) {
+  nlohmann::json runs = nlohmann::json::array(), random = nlohmann::json::array();
+  const double noise[] = {-0.01, 0.0, 0.01};
+  for (int k = 0; k < 3; ++k) {
+    const double e = noise[k];
+    runs.push_back(run("bin_0.15", "croco", 0.15, k, 0.62 + e, 0.40 + e));
+    runs.push_back(run("bin_0.55", "croco", 0.55, k, 0.62 - e, 0.40 + gap + e));
+    runs.push_back(run("bin_0.95", "croco", 0.95, k, 0.62 + e, 0.40 - e));
+    runs.push_back(run("mae", "mae", 0, k, 0.30, 0.40 + e));
+    random.push_back(run("random_encoder", "croco", 0, k, 1.3 + e, 0.35 + e));
+  }
+  return {{"runs", runs}, {"random_runs", random}};
+}
+
+std::string joined(const std::vector<std::string>& lines) {
+  std::string s;
+  for (const auto& l : lines) s += l + "\n";
+  return s;
+}
+
+TEST(SweepReport, VerdictsSayWhichDifferencesAreBeyondTheirIntervals) {
+  const std::string v = joined(sweepVerdicts(syntheticResults(0.1)));
+  EXPECT_NE(v.find("depth probe delta1: the best is bin_0.55, 0.500 \u00b1 0.025. Behind it by "
+                   "more than the interval: bin_0.15"),
+            std::string::npos)
+      << v;
+  // The completion loss: all three sets level, mae's (another task) not compared.
+  EXPECT_NE(v.find("Behind it by more than the interval: none. Within the interval of it: "),
+            std::string::npos)
+      << v;
+  const size_t xv = v.find("held-out completion loss (covis ~0.5): the best");
+  ASSERT_NE(xv, std::string::npos);
+  EXPECT_EQ(v.substr(xv, v.find('\n', xv) - xv).find("mae"), std::string::npos) << v;
+  EXPECT_NE(v.find("Claim 1, covis near 0.5 beats low and high covis: is not resolved at this "
+                   "scale"),
+            std::string::npos)
+      << v;  // ahead in the probe, level in the completion loss
+  EXPECT_NE(v.find("Claim 2, cross-view completion beats auto-completion (MAE): holds"),
+            std::string::npos)
+      << v;
+  // Without the gap, bin 0.55 wins nothing beyond the intervals.
+  const std::string level = joined(sweepVerdicts(syntheticResults(0.0)));
+  EXPECT_NE(level.find("Claim 2, cross-view completion beats auto-completion (MAE): is not "
+                       "resolved at this scale"),
+            std::string::npos)
+      << level;
+  // A gap the other way is a claim that does not hold.
+  const std::string worse = joined(sweepVerdicts(syntheticResults(-0.1)));
+  EXPECT_NE(worse.find("Claim 2, cross-view completion beats auto-completion (MAE): does not hold"),
+            std::string::npos)
+      << worse;
+}
+
+}  // namespace
+}  // namespace paircast
