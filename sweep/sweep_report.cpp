@@ -253,23 +253,24 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
           s.x.push_back(r["center"]), s.y.push_back(value(r, mean)), s.yErr.push_back(value(r, ci));
       series.push_back(s);
     }
-    // Baselines as dashed lines over the centres: mae, and the random encoder unless it lies so
-    // far from the sets that its line would flatten them (the completion loss's can); then it
-    // goes in the title.
-    auto flat = [&](const std::string& label, const char* color, double y) {
+    // Baselines as dashed lines over the centres, their intervals in the legend: mae (its
+    // completion loss is of its own task, as summary.html says), and the random encoder unless
+    // it lies so far from the sets that its line would flatten them (the completion loss's
+    // can); then it goes in the title.
+    auto flat = [&](std::string label, const char* color, const nlohmann::json& row) {
+      if (const double e = value(row, ci); std::isfinite(e))
+        label += " \u00b1" + html::number(e, "%.3f");
       plot::Series base;
       base.label = label;
       base.color = color;
       base.dashed = true;
       base.markers = false;
       base.x = {c.centers.front(), c.centers.back()};
-      base.y = {y, y};
+      base.y = {value(row, mean), value(row, mean)};
       return base;
     };
     for (const auto& r : rows)
-      if (r["task"] == "mae")
-        series.push_back(flat(m.key == std::string("xv_loss") ? "mae (own task)" : "mae", "#d62728",
-                              value(r, mean)));
+      if (r["task"] == "mae") series.push_back(flat("mae", "#d62728", r));
     double lo = INFINITY, hi = -INFINITY;
     for (const auto& s : series)
       for (double y : s.y) lo = std::min(lo, y), hi = std::max(hi, y);
@@ -280,7 +281,7 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
       std::snprintf(note, sizeof note, "; random encoder %.3f", baseline);
       title += note;
     } else {
-      series.push_back(flat("random encoder", "#7f7f7f", baseline));
+      series.push_back(flat("random", "#7f7f7f", random));
     }
     title += std::string(m.higherIsBetter ? ", higher" : ", lower") + " is better";
     writeFileAtomic(
@@ -380,7 +381,8 @@ std::vector<std::string> sweepVerdicts(const nlohmann::json& results) {
         byset(results.at("random_runs"), m.key).values["random_encoder"];
     for (auto& line : metricVerdicts(m, values[m.key], random)) out.push_back(std::move(line));
   }
-  for (auto& line : claimVerdicts(runs, values)) out.push_back(std::move(line));
+  std::vector<std::string> claims = claimVerdicts(runs, values);  // the claims come first
+  out.insert(out.begin(), claims.begin(), claims.end());
   return out;
 }
 

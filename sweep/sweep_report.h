@@ -23,10 +23,11 @@ const std::vector<std::string>& sweepMetrics();
 // (its runs), and for every metric <metric>_mean and <metric>_ci95 (NaN with one seed).
 nlohmann::json aggregateRuns(const nlohmann::json& runs);
 
-// What summary.html says, a sentence each: for every evaluation metric, which sets and
-// baselines differ from the best one and from the random encoder by more than the 95 % interval
-// of the difference (Welch's), and which do not; then the paper's two claims (bin near 0.5
-// against the lowest and the highest bin; against mae), where the sweep has those runs.
+// What summary.html says, a sentence each: the paper's two claims (the bin set nearest 0.5
+// against the lowest and the highest bin; the set mae trained on against mae), where the sweep
+// has those runs; then, for every evaluation metric, which sets and baselines are behind the
+// best one and ahead of the random encoder by more than the 95 % interval of the difference
+// (Welch's), and which are not.
 // `results` as collectResults makes it: "runs" and "random_runs".
 std::vector<std::string> sweepVerdicts(const nlohmann::json& results);
 
