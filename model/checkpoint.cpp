@@ -16,6 +16,14 @@
 #include "util/error.h"
 
 namespace paircast {
+
+std::string trainedTask(const Checkpoint& checkpoint) {
+  const nlohmann::json& e = checkpoint.extra;
+  return e.is_object() && e.value("task", nlohmann::json()).is_string()
+             ? e["task"].get<std::string>()
+             : "croco";
+}
+
 namespace {
 
 // Deeper nesting than this is refused when the values become JSON or tensors: far above what a

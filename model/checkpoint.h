@@ -27,6 +27,9 @@ struct Checkpoint {
   nlohmann::json extra;  // other scalar entries (step, data position, ...)
 };
 
+// What the checkpoint's model was trained on (pretrain --task): "croco" unless it says "mae".
+std::string trainedTask(const Checkpoint& checkpoint);
+
 // Writes {'model': state_dict, 'args': {...}, 'epoch': e, ...extra} atomically (temp + rename).
 // `extraTensors` keys "a/b" become nested dicts {'a': {'b': tensor}}.
 void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,

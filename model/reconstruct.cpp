@@ -58,8 +58,10 @@ torch::Tensor readMask(const std::string& path, int n) {
 
 }  // namespace
 
-CroCoNet modelFromCheckpoint(const std::string& path, const std::optional<CroCoConfig>& fallback) {
+CroCoNet modelFromCheckpoint(const std::string& path, const std::optional<CroCoConfig>& fallback,
+                             std::string* task) {
   const Checkpoint ck = loadCheckpoint(path);
+  if (task) *task = trainedTask(ck);
   CroCoConfig cfg;
   if (ck.hasArgs && ck.args.contains("enc_embed_dim") && !fallback) {
     cfg = configFromJson(ck.args, path);
@@ -87,12 +89,14 @@ Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1,
   auto predPix = out.prediction * std + mean;
   auto m = mask.unsqueeze(-1);
   auto recon = unpatchify(torch::where(m, predPix, target), c.patch_size);
-  auto grey = patchify(imagenetNormalize(torch::full_like(img1, 0.5)), c.patch_size);
+  const auto greyImage = imagenetNormalize(torch::full_like(img1, 0.5));
+  auto grey = patchify(greyImage, c.patch_size);
   auto maskedInput = unpatchify(torch::where(m, grey, target), c.patch_size);
   Reconstruction r;
   r.prediction = out.prediction[0].contiguous();
   r.loss = maskedMse(out.prediction, out.mask, out.target).item<double>();
-  const Image8 tiles[4] = {toImage(img2), toImage(maskedInput), toImage(recon), toImage(img1)};
+  const auto reference = img2.defined() ? img2 : greyImage;
+  const Image8 tiles[4] = {toImage(reference), toImage(maskedInput), toImage(recon), toImage(img1)};
   const int S = c.img_size, gap = 4;
   r.grid = Image8(4 * S + 3 * gap, S, 3, 255);
   for (int k = 0; k < 4; ++k)
@@ -102,7 +106,8 @@ Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1,
 }
 
 Reconstruction reconstruct(const ReconstructOptions& o) {
-  CroCoNet model = modelFromCheckpoint(o.checkpoint, o.config);
+  std::string task;
+  CroCoNet model = modelFromCheckpoint(o.checkpoint, o.config, &task);
   const CroCoConfig& c = model->config();
   auto img1 = imageTensor(readImage8(o.image1), c.img_size);
   auto img2 = imageTensor(readImage8(o.image2), c.img_size);
@@ -113,7 +118,7 @@ Reconstruction reconstruct(const ReconstructOptions& o) {
     torch::manual_seed(o.seed);
     mask = model->randomMask(1, torch::kCPU);
   }
-  return reconstructWith(model, img1, img2, mask);
+  return reconstructWith(model, img1, task == "mae" ? torch::Tensor() : img2, mask);
 }
 
 void writeNpy(const std::string& path, const torch::Tensor& t) {

@@ -28,13 +28,17 @@ struct Reconstruction {
 // the model's size and normalised with ImageNet mean and std. Throws paircast::Error naming the
 // bad file (checkpoint, image, mask) on bad input.
 Reconstruction reconstruct(const ReconstructOptions& options);
-// The same on a model in hand, images already [1, 3, S, S] normalised, mask [1, N] bool.
+// The same on a model in hand, images already [1, 3, S, S] normalised, mask [1, N] bool. With
+// img2 undefined the model completes img1 alone (a mae model's task), and the reference tile is
+// grey.
 Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1,
                                const torch::Tensor& img2, const torch::Tensor& mask);
 
 // The model a checkpoint describes: its own args (ours), else `fallback` checked against the
-// tensor shapes. Throws when neither applies.
-CroCoNet modelFromCheckpoint(const std::string& path, const std::optional<CroCoConfig>& fallback);
+// tensor shapes. Throws when neither applies. `task`, when given, is set to what the model was
+// trained on: "croco", or "mae" (pretrain --task mae: completion without a reference).
+CroCoNet modelFromCheckpoint(const std::string& path, const std::optional<CroCoConfig>& fallback,
+                             std::string* task = nullptr);
 
 // Writes a float32 .npy file of a 2-D tensor.
 void writeNpy(const std::string& path, const torch::Tensor& t);

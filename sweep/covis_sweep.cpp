@@ -65,12 +65,6 @@ nlohmann::json readJson(const std::string& path) {
   }
 }
 
-// obj[key] when it is a number, else NaN (a NaN is written to JSON as null).
-double numberOrNan(const nlohmann::json& obj, const char* key) {
-  const auto it = obj.find(key);
-  return it != obj.end() && it->is_number() ? it->get<double>() : NAN;
-}
-
 void say(const SweepConfig& c, const std::string& line) {
   if (c.progress) std::fprintf(stderr, "[covis_sweep] %s\n", line.c_str());
 }
@@ -554,7 +548,7 @@ nlohmann::json randomEncoderRuns(const SweepConfig& c, const CroCoConfig& mc, co
     const fs::path dir = fs::path(c.out) / "runs" / "random" / seedFolder(k);
     nlohmann::json ev = readJson((dir / "eval.json").string());
     if (!ev.is_object()) {
-      torch::manual_seed(c.seed + k);  // as runPretrain initialises the model
+      torch::manual_seed(runSeed(c, k));  // as runPretrain initialises the model
       CroCoNet model(mc);
       ev = evaluate(model, h, "croco");
       makeDirs(dir.string());
@@ -564,7 +558,7 @@ nlohmann::json randomEncoderRuns(const SweepConfig& c, const CroCoConfig& mc, co
                {"mode", "random"},
                {"task", "croco"},
                {"seed_index", k},
-               {"seed", c.seed + k}});
+               {"seed", runSeed(c, k)}});
     runs.push_back(ev);
   }
   return runs;
@@ -614,9 +608,10 @@ nlohmann::json runRow(const std::vector<SweepSet>& sets, const SweepRun& run,
 
 // results.json's content: the runs, their rows per set, both baselines, and what the sweep was
 // run with.
-nlohmann::json collectResults(const SweepConfig& c, const SceneFiles& scenes, const Pool& pool,
-                              const HeldOut& h, const nlohmann::json& runs,
-                              const nlohmann::json& randomRuns, const nlohmann::json& constant) {
+nlohmann::json collectResults(const SweepConfig& c, const std::vector<SweepSet>& sets,
+                              const SceneFiles& scenes, const Pool& pool, const HeldOut& h,
+                              const nlohmann::json& runs, const nlohmann::json& randomRuns,
+                              const nlohmann::json& constant) {
   nlohmann::json results = {{"rows", aggregateRuns(runs)},
                             {"runs", runs},
                             {"random_encoder", aggregateRuns(randomRuns).at(0)},
@@ -638,7 +633,8 @@ nlohmann::json collectResults(const SweepConfig& c, const SceneFiles& scenes, co
                               {"seed", c.seed},
                               {"eval_pairs", h.img1.size(0)},
                               {"probe_views", c.probeViews}}},
-                            {"pool_pairs", pool.keys.size()}};
+                            {"pool_pairs", pool.keys.size()},
+                            {"reference_set", referenceSet(sets)}};
   results["verdicts"] = sweepVerdicts(results);
   return results;
 }
@@ -737,7 +733,7 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
 
   // 5. Results: results.csv (a row per set, with intervals), results_runs.csv, results.json,
   //    the plots and summary.html.
-  nlohmann::json results = collectResults(c, scenes, pool, h, rows, randomRuns, constant);
+  nlohmann::json results = collectResults(c, sets, scenes, pool, h, rows, randomRuns, constant);
   writeSweepReport(c, results);
   results["seconds_this_run"] = secondsSince(start);
   return results;
@@ -747,11 +743,13 @@ std::string seedFolder(int seedIndex) {
   return "seed-" + std::to_string(seedIndex);
 }
 
+uint64_t runSeed(const SweepConfig& c, int seedIndex) { return c.seed + seedIndex; }
+
 std::string SweepRun::label() const {
   return name + " seed " + std::to_string(seedIndex);
 }
 
-std::string maeTrainingSet(const std::vector<SweepSet>& sets) {
+std::string referenceSet(const std::vector<SweepSet>& sets) {
   PAIRCAST_CHECK(!sets.empty());
   auto distance = [](const SweepSet& s) { return std::abs(s.center - 0.5) + (s.mode != "bin"); };
   return std::min_element(
@@ -765,10 +763,10 @@ std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>
   const fs::path root = fs::path(c.out) / "runs";
   for (int k = 0; k < c.seeds; ++k) {
     auto add = [&](const std::string& name, const std::string& task, const std::string& keys) {
-      runs.push_back({name, task, keys, k, c.seed + k, root / name / seedFolder(k)});
+      runs.push_back({name, task, keys, k, runSeed(c, k), root / name / seedFolder(k)});
     };
     for (const SweepSet& set : sets) add(set.name, "croco", set.name);
-    for (const std::string& b : c.baselines) add(b, "mae", maeTrainingSet(sets));
+    for (const std::string& b : c.baselines) add(b, "mae", referenceSet(sets));
   }
   return runs;
 }

@@ -2,9 +2,10 @@
 // sampled from the training scenes and bucketed by covis (20 buckets of 0.05); every set of the
 // sweep ("bin": covis in [x - 0.05, x + 0.05); "uniform": spread evenly over [x, 1]) is drawn
 // from the pool with the same size. The same model is pre-trained on each set with the same
-// seed and steps, then evaluated on held-out scenes: the cross-view completion loss on pairs at
-// covis about 0.5, and a monocular depth probe on the frozen encoder, against a randomly
-// initialised encoder. Every stage is kept on disk and reused, so a killed sweep resumes.
+// steps, once per seed (and so is any baseline, such as mae), then evaluated on held-out
+// scenes: the completion loss on pairs at covis about 0.5, and a monocular depth probe on the
+// frozen encoder, against a randomly initialised encoder of each seed. Every stage is kept on
+// disk and reused, so a killed sweep resumes run by run.
 #pragma once
 
 #include <filesystem>
@@ -64,7 +65,7 @@ struct SweepConfig {
   uint64_t seed = 0;  // the pool and held-out data; run k of a set trains with seed + k
   int seeds = 1;      // runs per set and baseline, for the intervals of results.csv
   // Baselines trained like every set, each at most once: "mae" (auto-completion: view 1 alone,
-  // no reference view, on the pairs of maeTrainingSet).
+  // no reference view, on the pairs of referenceSet).
   std::vector<std::string> baselines;
   int jobs = 0;                // render threads (0: all cores)
   int workers = 2;             // trainer data threads
@@ -88,11 +89,15 @@ struct SweepRun {
 
 // "seed-<k>", the folder of a run's seed under runs/<name>/.
 std::string seedFolder(int seedIndex);
-// The set the mae baseline trains on: the bin set nearest covis 0.5 (else the set nearest it),
-// so that its views are those a cross-view model of that set completes.
-std::string maeTrainingSet(const std::vector<SweepSet>& sets);
-// Every run, seed by seed: each set and then each baseline with the first seed, then the next,
-// so that a sweep stopped early already has whole comparisons.
+// The reference set: the bin set nearest covis 0.5 (else the set nearest it). mae trains on its
+// pairs, so that its views are those a cross-view model of that set completes, and the paper's
+// claims are judged on it (results.json's "reference_set").
+std::string referenceSet(const std::vector<SweepSet>& sets);
+// The seed of run k of every set and baseline: --seed + k (so run 0 is --seed), which also
+// initialises the random encoder of seed k.
+uint64_t runSeed(const SweepConfig& c, int seedIndex);
+// Every run, seed by seed: each set and then each baseline with the first seed, then the next.
+// A sweep stopped part way can so be finished with a smaller --seeds, from the runs it has.
 std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>& sets);
 
 // Runs (or resumes) the sweep; writes results.csv (a row per set and baseline, means and 95 %

@@ -27,9 +27,14 @@ const Metric kEvaluated[] = {{"xv_loss", false, "held-out completion loss (covis
                              {"probe_absrel", false, "depth probe AbsRel"},
                              {"probe_rmse", false, "depth probe RMSE (m)"}};
 
+// Whether two runs' figures of `m` can be compared: the completion loss only between models of
+// the same task (mae completes without the reference view), the probe always.
+bool comparable(const Metric& m, const std::string& taskA, const std::string& taskB) {
+  return std::string(m.key) != "xv_loss" || taskA == taskB;
+}
+
 double value(const nlohmann::json& obj, const std::string& key) {
-  const auto it = obj.find(key);
-  return it != obj.end() && it->is_number() ? it->get<double>() : NAN;
+  return numberOrNan(obj, key);
 }
 
 // obj[key] as %.6g for the CSV files; nan when it is missing or no number.
@@ -140,8 +145,7 @@ std::vector<std::string> metricVerdicts(const Metric& m, const RunValues& v,
   auto mean = [&](const std::string& s) { return interval95(v.values.at(s)).mean; };
   std::vector<std::string> sets;  // those with a figure (a set whose every run failed has none)
   for (const auto& s : v.sets)
-    if ((std::string(m.key) != "xv_loss" || v.task.at(s) == "croco") && std::isfinite(mean(s)))
-      sets.push_back(s);
+    if (comparable(m, v.task.at(s), "croco") && std::isfinite(mean(s))) sets.push_back(s);
   if (sets.empty()) return {};
   const std::string best =
       *std::max_element(sets.begin(), sets.end(), [&](const std::string& a, const std::string& b) {
@@ -178,114 +182,127 @@ std::string claimVerdict(const std::string& claim, const std::string& a,
                          const std::vector<std::string>& others,
                          const std::map<std::string, RunValues>& values) {
   int wins = 0, losses = 0, total = 0;
+  bool intervals = true;
   std::string detail;
   for (const Metric& m : kEvaluated) {
     const RunValues& v = values.at(m.key);
-    bool sameTask = v.task.at(a) == "croco";
-    for (const auto& o : others) sameTask = sameTask && v.task.at(o) == "croco";
-    if (std::string(m.key) == "xv_loss" && !sameTask) continue;
+    bool same = true;
+    for (const auto& o : others) same = same && comparable(m, v.task.at(a), v.task.at(o));
+    if (!same) continue;
     for (const auto& o : others) {
       const Interval d = gain(v.values.at(a), v.values.at(o), m);
       ++total;
+      intervals = intervals && std::isfinite(d.halfWidth);
       if (excludesZero(d)) ++(d.mean > 0 ? wins : losses);
       detail +=
           std::string(detail.empty() ? "" : "; ") + m.key + " vs " + o + " " + signedInterval(d);
     }
   }
-  const char* verdict = wins == total ? "holds"
-                        : losses > 0  ? "does not hold"
-                                      : "is not resolved at this scale";
+  const char* verdict = !intervals      ? "cannot be judged with one seed (use --seeds 3)"
+                        : wins == total ? "holds"
+                        : losses > 0    ? "does not hold"
+                                        : "is not resolved at this scale";
   return claim + ": " + verdict + " (" + a + " is ahead by more than the interval in " +
          std::to_string(wins) + " of " + std::to_string(total) +
          " comparisons and behind by more than it in " + std::to_string(losses) + "; its gains " +
          "with their 95 % intervals, positive when " + a + " is better: " + detail + ").";
 }
 
-// The paper's claims, where the sweep has the runs they need.
-std::vector<std::string> claimVerdicts(const nlohmann::json& runs,
+// The paper's claims about the reference set (the bin set nearest 0.5, which mae trains on),
+// where the sweep has the runs they need.
+std::vector<std::string> claimVerdicts(const nlohmann::json& runs, const std::string& reference,
                                        const std::map<std::string, RunValues>& values) {
+  const RunValues& any = values.begin()->second;
+  if (!any.values.count(reference)) return {};
   std::vector<std::pair<double, std::string>> bins;  // (centre, set) of the bin sets
-  std::string maeTrainedOn;  // the cross-view set whose pairs mae trained on
   for (const auto& r : runs) {
     const nlohmann::json center = r.value("center", nlohmann::json());
     if (r.value("mode", "") == "bin" && center.is_number())
       bins.emplace_back(center.get<double>(), r.value("set", ""));
-    if (r.value("set", "") == "mae") maeTrainedOn = r.value("trained_on", "");
   }
   std::sort(bins.begin(), bins.end());
   bins.erase(std::unique(bins.begin(), bins.end()), bins.end());
   std::vector<std::string> out;
-  if (!maeTrainedOn.empty() && values.begin()->second.values.count(maeTrainedOn))
-    out.push_back(claimVerdict("Claim 2, cross-view completion beats auto-completion (MAE)",
-                               maeTrainedOn, {"mae"}, values));
-  if (bins.empty()) return out;
-  const std::string mid =
-      std::min_element(bins.begin(), bins.end(), [](const auto& x, const auto& y) {
-        return std::abs(x.first - 0.5) < std::abs(y.first - 0.5);
-      })->second;
-  // Against the lowest and the highest bin, those that are not the middle one itself.
+  // Claim 1: against the lowest and the highest bin, those that are not the reference itself.
+  const bool referenceIsABin =
+      std::any_of(bins.begin(), bins.end(), [&](const auto& b) { return b.second == reference; });
   std::vector<std::string> ends, sides;
-  if (bins.front().second != mid) ends.push_back(bins.front().second), sides.push_back("low");
-  if (bins.back().second != mid) ends.push_back(bins.back().second), sides.push_back("high");
+  if (referenceIsABin && bins.front().second != reference)
+    ends.push_back(bins.front().second), sides.push_back("low");
+  if (referenceIsABin && bins.back().second != reference)
+    ends.push_back(bins.back().second), sides.push_back("high");
   if (!ends.empty())
-    out.insert(out.begin(),
-               claimVerdict("Claim 1, covis near 0.5 beats " + sides.front() +
-                                (sides.size() > 1 ? " and " + sides.back() : "") + " covis",
-                            mid, ends, values));
+    out.push_back(claimVerdict("Claim 1, covis near 0.5 beats " + sides.front() +
+                                   (sides.size() > 1 ? " and " + sides.back() : "") + " covis",
+                               reference, ends, values));
+  if (any.values.count("mae"))
+    out.push_back(claimVerdict("Claim 2, cross-view completion beats auto-completion (MAE)",
+                               reference, {"mae"}, values));
   return out;
 }
 
 // ---- the plots and the page ----
 
-void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann::json& random) {
-  const fs::path out(c.out);
+// One line per mode over the covis centres, with error bars.
+std::vector<plot::Series> modeSeries(const SweepConfig& c, const nlohmann::json& rows,
+                                     const Metric& m) {
   const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd"};
-  for (const Metric& m : kEvaluated) {
-    const std::string mean = std::string(m.key) + "_mean", ci = std::string(m.key) + "_ci95";
-    std::vector<plot::Series> series;
-    int k = 0;
-    for (const auto& mode : c.modes) {
-      plot::Series s;
-      s.label = mode;
-      s.color = colors[k++ % 4];
-      for (const auto& r : rows)
-        if (r["mode"] == mode)
-          s.x.push_back(r["center"]), s.y.push_back(value(r, mean)), s.yErr.push_back(value(r, ci));
-      series.push_back(s);
-    }
-    // Baselines as dashed lines over the centres, their intervals in the legend: mae (its
-    // completion loss is of its own task, as summary.html says), and the random encoder unless
-    // it lies so far from the sets that its line would flatten them (the completion loss's
-    // can); then it goes in the title.
-    auto flat = [&](std::string label, const char* color, const nlohmann::json& row) {
-      if (const double e = value(row, ci); std::isfinite(e))
-        label += " \u00b1" + html::number(e, "%.3f");
-      plot::Series base;
-      base.label = label;
-      base.color = color;
-      base.dashed = true;
-      base.markers = false;
-      base.x = {c.centers.front(), c.centers.back()};
-      base.y = {value(row, mean), value(row, mean)};
-      return base;
-    };
+  const std::string mean = std::string(m.key) + "_mean", ci = std::string(m.key) + "_ci95";
+  std::vector<plot::Series> series;
+  for (const auto& mode : c.modes) {
+    plot::Series s;
+    s.label = mode;
+    s.color = colors[series.size() % 4];
     for (const auto& r : rows)
-      if (r["task"] == "mae") series.push_back(flat("mae", "#d62728", r));
-    double lo = INFINITY, hi = -INFINITY;
-    for (const auto& s : series)
-      for (double y : s.y) lo = std::min(lo, y), hi = std::max(hi, y);
-    const double baseline = value(random, mean);
+      if (r["mode"] == mode)
+        s.x.push_back(r["center"]), s.y.push_back(value(r, mean)), s.yErr.push_back(value(r, ci));
+    series.push_back(s);
+  }
+  return series;
+}
+
+// A baseline's mean as a dashed line over the centres, its interval in the legend.
+plot::Series baselineSeries(const SweepConfig& c, std::string label, const char* color,
+                            const nlohmann::json& row, const Metric& m) {
+  const double mean = value(row, std::string(m.key) + "_mean");
+  if (const double e = value(row, std::string(m.key) + "_ci95"); std::isfinite(e))
+    label += " \u00b1" + html::number(e, "%.3f");
+  plot::Series base;
+  base.label = label;
+  base.color = color;
+  base.dashed = true;
+  base.markers = false;
+  base.x = {c.centers.front(), c.centers.back()};
+  base.y = {mean, mean};
+  return base;
+}
+
+// Whether a baseline at y lies so far from the other lines that drawing it would flatten them
+// (as the random encoder's completion loss does, far above every set's).
+bool offTheScale(const std::vector<plot::Series>& series, double y) {
+  double lo = INFINITY, hi = -INFINITY;
+  for (const auto& s : series)
+    for (double v : s.y) lo = std::min(lo, v), hi = std::max(hi, v);
+  return lo <= hi && (y < lo - 3 * (hi - lo) || y > hi + 3 * (hi - lo));
+}
+
+// plot_<metric>.svg: the modes, mae (not in the completion loss's: its task is another) and the
+// random encoder, which goes in the title instead when it is off the scale.
+void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann::json& random) {
+  for (const Metric& m : kEvaluated) {
+    std::vector<plot::Series> series = modeSeries(c, rows, m);
+    for (const auto& r : rows)
+      if (r["task"] != "croco" && comparable(m, r["task"], "croco"))
+        series.push_back(baselineSeries(c, text(r, "set"), "#d62728", r, m));
     std::string title = m.label;
-    if (lo <= hi && (baseline < lo - 3 * (hi - lo) || baseline > hi + 3 * (hi - lo))) {
-      char note[96];
-      std::snprintf(note, sizeof note, "; random encoder %.3f", baseline);
-      title += note;
-    } else {
-      series.push_back(flat("random", "#7f7f7f", random));
-    }
+    const double randomMean = value(random, std::string(m.key) + "_mean");
+    if (offTheScale(series, randomMean))
+      title += "; random encoder " + html::number(randomMean, "%.3f");
+    else
+      series.push_back(baselineSeries(c, "random", "#7f7f7f", random, m));
     title += std::string(m.higherIsBetter ? ", higher" : ", lower") + " is better";
     writeFileAtomic(
-        (out / (std::string("plot_") + m.key + ".svg")).string(),
+        (fs::path(c.out) / (std::string("plot_") + m.key + ".svg")).string(),
         plot::lines(series, {title, "covis centre of the training set", m.key, 620, 340}));
   }
 }
@@ -341,9 +358,17 @@ std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
 }  // namespace
 
 const std::vector<std::string>& sweepMetrics() {
-  static const std::vector<std::string> metrics = {"train_loss", "xv_loss", "probe_delta1",
-                                                   "probe_absrel", "probe_rmse"};
+  static const std::vector<std::string> metrics = [] {
+    std::vector<std::string> m = {"train_loss"};
+    for (const Metric& e : kEvaluated) m.push_back(e.key);
+    return m;
+  }();
   return metrics;
+}
+
+double numberOrNan(const nlohmann::json& obj, const std::string& key) {
+  const auto it = obj.find(key);
+  return it != obj.end() && it->is_number() ? it->get<double>() : NAN;
 }
 
 nlohmann::json aggregateRuns(const nlohmann::json& runs) {
@@ -381,7 +406,9 @@ std::vector<std::string> sweepVerdicts(const nlohmann::json& results) {
         byset(results.at("random_runs"), m.key).values["random_encoder"];
     for (auto& line : metricVerdicts(m, values[m.key], random)) out.push_back(std::move(line));
   }
-  std::vector<std::string> claims = claimVerdicts(runs, values);  // the claims come first
+  // The claims come first.
+  std::vector<std::string> claims =
+      claimVerdicts(runs, results.value("reference_set", std::string()), values);
   out.insert(out.begin(), claims.begin(), claims.end());
   return out;
 }

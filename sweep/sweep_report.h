@@ -18,17 +18,19 @@ namespace paircast {
 // probe_delta1, probe_absrel, probe_rmse.
 const std::vector<std::string>& sweepMetrics();
 
+// obj[key] when it is a number, else NaN (results.json writes a NaN as null).
+double numberOrNan(const nlohmann::json& obj, const std::string& key);
+
 // Runs' rows (each with set, mode, center, task, trained_on, pairs, mean_covis and the metrics)
 // grouped by set, in the order each set first appears: a row per set with those fields, "seeds"
 // (its runs), and for every metric <metric>_mean and <metric>_ci95 (NaN with one seed).
 nlohmann::json aggregateRuns(const nlohmann::json& runs);
 
-// What summary.html says, a sentence each: the paper's two claims (the bin set nearest 0.5
-// against the lowest and the highest bin; the set mae trained on against mae), where the sweep
-// has those runs; then, for every evaluation metric, which sets and baselines are behind the
-// best one and ahead of the random encoder by more than the 95 % interval of the difference
-// (Welch's), and which are not.
-// `results` as collectResults makes it: "runs" and "random_runs".
+// What summary.html says, a sentence each: the paper's two claims about "reference_set" (see
+// referenceSet: against the lowest and the highest bin; against mae), where the sweep has those
+// runs; then, for every evaluation metric, which sets and baselines are behind the best one and
+// ahead of the random encoder by more than the 95 % interval of the difference (Welch's), and
+// which are not. `results` as collectResults makes it: "runs", "random_runs", "reference_set".
 std::vector<std::string> sweepVerdicts(const nlohmann::json& results);
 
 // Writes the files from `results`, as runCovisSweep returns it: "rows" (aggregateRuns of

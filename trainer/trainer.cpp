@@ -336,10 +336,9 @@ class Pretraining {
       throw Error(ckptPath_,
                   "checkpoint was trained with other hyper-parameters than the model "
                   "config");
-    if (ck.extra.value("task", std::string("croco")) != c_.task)
-      throw Error(ckptPath_, "checkpoint was trained on task " +
-                                 ck.extra.value("task", std::string("croco")) + ", not " + c_.task +
-                                 "; use another --out");
+    if (trainedTask(ck) != c_.task)
+      throw Error(ckptPath_, "checkpoint was trained on task " + trainedTask(ck) + ", not " +
+                                 c_.task + "; use another --out");
     loadStateDictStrict(model_, ck.model, ckptPath_);
     restoreOptimizer(*opt_, ordered_, ck.extraTensors, ckptPath_);
     iter_ = ck.extra.value("step", int64_t{0});
@@ -512,9 +511,10 @@ class Pretraining {
     auto gen = at::make_generator<at::CPUGeneratorImpl>(c_.seed);
     auto mask = torch::argsort(torch::rand({1, c_.model.numPatches()}, gen), 1, false) <
                 c_.model.numMasked();
-    const Reconstruction r =
-        reconstructWith(model_, imageTensor(x, c_.model.img_size).to(device_),
-                        imageTensor(y, c_.model.img_size).to(device_), mask.to(device_));
+    torch::Tensor reference;  // none for mae: the model completes view 1 alone
+    if (c_.task != "mae") reference = imageTensor(y, c_.model.img_size).to(device_);
+    const Reconstruction r = reconstructWith(model_, imageTensor(x, c_.model.img_size).to(device_),
+                                             reference, mask.to(device_));
     writeImage((fs::path(c_.out) / "recon-latest.png").string(), r.grid);
     model_->train();
   }

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
 
 #include "model/checkpoint.h"
@@ -272,10 +273,9 @@ std::string runDir(const std::string& out, const std::string& set, int seed) {
   return out + "/runs/" + set + "/seed-" + std::to_string(seed);
 }
 
-TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
-  const std::string dir = testing::scratchDir("e2e");
-  const std::string clean = dir + "/clean";
-  // A clean run, through the library: 4 sets and mae, each with 2 seeds.
+TEST(CovisSweep, SeedsAndMaeEndToEnd) {
+  const std::string clean = testing::scratchDir("e2e");
+  // Through the library: 4 sets and mae, each with 2 seeds.
   const nlohmann::json r = runCovisSweep(seededSweep(clean));
   ASSERT_EQ(r["rows"].size(), 5u);
   ASSERT_EQ(r["runs"].size(), 10u);
@@ -286,7 +286,8 @@ TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
     EXPECT_TRUE(std::isfinite(row["xv_loss_ci95"].get<double>()));
     EXPECT_GE(row["probe_delta1_mean"].get<double>(), 0.0);
   }
-  // mae trains on the pairs of the bin set nearest covis 0.5, on its own task.
+  // mae trains on the pairs of the reference set (the bin set nearest 0.5), on its own task.
+  EXPECT_EQ(r["reference_set"], "bin_0.45");
   EXPECT_EQ(r["rows"][4]["set"], "mae");
   EXPECT_EQ(r["rows"][4]["task"], "mae");
   EXPECT_EQ(r["rows"][4]["trained_on"], "bin_0.45");
@@ -321,23 +322,46 @@ TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
                             s1.model.at("enc_blocks.0.attn.qkv.weight")));
   EXPECT_EQ(s0.extra["seed"], 0);
   EXPECT_EQ(s1.extra["seed"], 1);
-  EXPECT_NE(r["runs"][0]["train_loss"], r["runs"][5]["train_loss"]);  // seeds 0 and 1 of bin_0.45
   EXPECT_EQ(r["runs"][5]["set"], "bin_0.45");
+  EXPECT_NE(r["runs"][0]["train_loss"], r["runs"][5]["train_loss"]);  // its seeds 0 and 1
+}
 
+// Every run's checkpoint and when it was written.
+std::map<std::string, fs::file_time_type> checkpointTimes(const std::string& out) {
+  std::map<std::string, fs::file_time_type> times;
+  for (const auto& e : fs::recursive_directory_iterator(out + "/runs"))
+    if (e.path().filename() == "checkpoint-last.pth")
+      times[e.path().string()] = fs::last_write_time(e.path());
+  return times;
+}
+
+TEST(CovisSweep, ResumesRunByRun) {
+  const std::string out = testing::scratchDir("per_run");
+  runCovisSweep(seededSweep(out));
+  const std::string csv = readFile(out + "/results.csv");
+  const auto before = checkpointTimes(out);
+  ASSERT_EQ(before.size(), 10u);
   // A rerun reuses everything: no checkpoint is rewritten.
-  const auto ckpt = runDir(clean, "bin_0.45", 0) + "/checkpoint-last.pth";
-  const auto before = fs::last_write_time(ckpt);
-  runCovisSweep(seededSweep(clean));
-  EXPECT_EQ(fs::last_write_time(ckpt), before);
-  EXPECT_EQ(readFile(clean + "/results.csv"), csv);
+  runCovisSweep(seededSweep(out));
+  EXPECT_EQ(checkpointTimes(out), before);
+  EXPECT_EQ(readFile(out + "/results.csv"), csv);
+  // With one seed's run gone, only that run trains again, to the same result.
+  const std::string gone = runDir(out, "uniform_0.75", 1);
+  fs::remove_all(gone);
+  runCovisSweep(seededSweep(out));
+  auto after = checkpointTimes(out);
+  ASSERT_EQ(after.size(), 10u);
+  EXPECT_TRUE(after.count(gone + "/checkpoint-last.pth"));
+  after.erase(gone + "/checkpoint-last.pth");
+  auto others = before;
+  others.erase(gone + "/checkpoint-last.pth");
+  EXPECT_EQ(after, others);
+  EXPECT_EQ(readFile(out + "/results.csv"), csv);
+}
 
-  // Resume is per run: with one seed's run gone, only that run trains again, to the same result.
-  fs::remove_all(runDir(clean, "uniform_0.75", 1));
-  runCovisSweep(seededSweep(clean));
-  EXPECT_EQ(fs::last_write_time(ckpt), before);
-  EXPECT_TRUE(fs::exists(runDir(clean, "uniform_0.75", 1) + "/eval.json"));
-  EXPECT_EQ(readFile(clean + "/results.csv"), csv);
-
+TEST(CovisSweep, ResumesAfterKills) {
+  const std::string dir = testing::scratchDir("kills");
+  runCovisSweep(seededSweep(dir + "/clean"));
   // The real command, SIGKILLed at growing delays and restarted, gives the same results.
   const std::string killed = dir + "/killed";
   int kills = 0;
@@ -347,8 +371,8 @@ TEST(CovisSweep, RunsEndToEndAndResumesAfterKills) {
   }
   EXPECT_GE(kills, 1);
   ASSERT_EQ(testing::runProcess(seededArgs(killed)), 0);
-  EXPECT_EQ(readFile(killed + "/results.csv"), csv);
-  EXPECT_EQ(readFile(killed + "/results_runs.csv"), runsCsv);
+  EXPECT_EQ(readFile(killed + "/results.csv"), readFile(dir + "/clean/results.csv"));
+  EXPECT_EQ(readFile(killed + "/results_runs.csv"), readFile(dir + "/clean/results_runs.csv"));
 }
 
 TEST(CovisSweep, BadSeedsAndBaselinesAreRefused) {
@@ -376,7 +400,7 @@ TEST(CovisSweep, RunsGoSeedBySeedAndMaeTrainsOnTheSetNearestHalf) {
   std::vector<SweepSet> sets;
   for (const auto& m : c.modes)
     for (double x : c.centers) sets.push_back(makeSweepSet(m, x));
-  EXPECT_EQ(maeTrainingSet(sets), "bin_0.55");  // a bin set before a uniform one at 0.55
+  EXPECT_EQ(referenceSet(sets), "bin_0.55");  // a bin set before a uniform one at 0.55
   const std::vector<SweepRun> runs = planRuns(c, sets);
   ASSERT_EQ(runs.size(), 21u);
   EXPECT_EQ(runs[0].label(), "uniform_0.15 seed 0");

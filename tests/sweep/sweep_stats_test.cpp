@@ -99,10 +99,10 @@ TEST(SweepReport, RowsPerSetWithMeansAndIntervals) {
 
 // Three bins and mae over three seeds; bin 0.55 is far ahead in delta1 (beyond every interval)
 // and level with the others in the completion loss (within it).
-nlohmann::json syntheticResults(double gap) {
+nlohmann::json syntheticResults(double gap, int seeds = 3) {
   nlohmann::json runs = nlohmann::json::array(), random = nlohmann::json::array();
   const double noise[] = {-0.01, 0.0, 0.01};
-  for (int k = 0; k < 3; ++k) {
+  for (int k = 0; k < seeds; ++k) {
     const double e = noise[k];
     runs.push_back(run("bin_0.15", "croco", 0.15, k, 0.62 + e, 0.40 + e));
     runs.push_back(run("bin_0.55", "croco", 0.55, k, 0.62 - e, 0.40 + gap + e));
@@ -110,7 +110,7 @@ nlohmann::json syntheticResults(double gap) {
     runs.push_back(run("mae", "mae", 0, k, 0.30, 0.40 + e));
     random.push_back(run("random_encoder", "croco", 0, k, 1.3 + e, 0.35 + e));
   }
-  return {{"runs", runs}, {"random_runs", random}};
+  return {{"runs", runs}, {"random_runs", random}, {"reference_set", "bin_0.55"}};
 }
 
 std::string joined(const std::vector<std::string>& lines) {
@@ -145,6 +145,16 @@ TEST(SweepReport, VerdictsSayWhichDifferencesAreBeyondTheirIntervals) {
                        "resolved at this scale"),
             std::string::npos)
       << level;
+  // With one seed there are no intervals: nothing is called a difference.
+  const std::string one = joined(sweepVerdicts(syntheticResults(0.1, 1)));
+  EXPECT_NE(one.find("Claim 2, cross-view completion beats auto-completion (MAE): cannot be "
+                     "judged with one seed"),
+            std::string::npos)
+      << one;
+  EXPECT_NE(one.find("depth probe delta1: the best is bin_0.55, 0.490. With one seed there are no "
+                     "intervals"),
+            std::string::npos)
+      << one;
   // A gap the other way is a claim that does not hold.
   const std::string worse = joined(sweepVerdicts(syntheticResults(-0.1)));
   EXPECT_NE(worse.find("Claim 2, cross-view completion beats auto-completion (MAE): does not hold"),

@@ -13,6 +13,7 @@
 
 #include "dataset/generate_job.h"
 #include "model/checkpoint.h"
+#include "model/reconstruct.h"
 #include "test_errors.h"
 #include "test_paths.h"
 #include "test_process.h"
@@ -20,6 +21,7 @@
 #include "trainer/grad_scaler.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/image_io.h"
 
 namespace paircast {
 namespace {
@@ -141,10 +143,26 @@ TEST(Pretrain, MaeRunsAndKeepsItsTask) {
   TrainConfig c = tinyRun(dir);
   c.task = "mae";
   c.maxSteps = 4;
+  c.reconEvery = 2;
   const nlohmann::json s = runPretrain(c);
   EXPECT_EQ(s["task"], "mae");
   EXPECT_TRUE(std::isfinite(s["loss"].get<double>()));
   EXPECT_EQ(loadCheckpoint(dir + "/checkpoint-last.pth").extra["task"], "mae");
+  EXPECT_TRUE(fs::exists(dir + "/recon-latest.png"));
+  // reconstruct reads the task from the checkpoint: the second image plays no part.
+  Image8 a(32, 32, 3, 90), b(32, 32, 3, 200), target(32, 32, 3, 0);
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) target.pixel(x, y)[0] = static_cast<uint8_t>(8 * x);
+  writeImage(dir + "/a.png", a);
+  writeImage(dir + "/b.png", b);
+  writeImage(dir + "/t.png", target);
+  ReconstructOptions ro;
+  ro.checkpoint = dir + "/checkpoint-last.pth";
+  ro.image1 = dir + "/t.png";
+  ro.image2 = dir + "/a.png";
+  const Reconstruction withA = reconstruct(ro);
+  ro.image2 = dir + "/b.png";
+  EXPECT_TRUE(torch::equal(withA.prediction, reconstruct(ro).prediction));
   c.task = "croco";
   c.resume = true;
   EXPECT_ERROR_CONTAINS(runPretrain(c), "checkpoint was trained on task mae, not croco");
