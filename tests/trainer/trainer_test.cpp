@@ -18,7 +18,9 @@
 #include "test_paths.h"
 #include "test_process.h"
 #include "trainer/augment.h"
+#include "trainer/batch_loader.h"
 #include "trainer/grad_scaler.h"
+#include "trainer/pair_dataset.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
@@ -114,6 +116,27 @@ TEST(Augment, CropSizeJitterRangeAndNormalisation) {
   EXPECT_TRUE(torch::allclose(colorJitter(img, 0.5, 1, 1, order), img * 0.5));
   auto grey = colorJitter(img, 1, 1, 0, order);
   EXPECT_TRUE(torch::allclose(grey[0], grey[1]));
+}
+
+// The seed (covis_sweep's seeds) changes the masks and the order of the data, and nothing else
+// does: the same seed gives the same batch.
+TEST(BatchLoader, TheSeedChangesTheMasksAndTheDataOrder) {
+  const PairDataset ds = PairDataset::fromShards({pairsDir() + "/pairs-*.tar"});
+  auto firstBatch = [&](uint64_t seed) {
+    TrainConfig c = tinyRun(testing::scratchDir("loader"));
+    c.seed = seed;
+    BatchLoader loader({Source{&ds, 1.0, "shards"}}, c, 0, 0, 1);
+    return loader.get(0);
+  };
+  const Batch a = firstBatch(0), again = firstBatch(0), b = firstBatch(1);
+  EXPECT_TRUE(torch::equal(a.img1, again.img1));
+  EXPECT_TRUE(torch::equal(a.mask, again.mask));
+  EXPECT_FALSE(torch::equal(a.mask, b.mask));
+  EXPECT_FALSE(torch::equal(a.img1, b.img1));
+  // Other pairs (or crops), not a small change: the batch's mean colours per pair differ.
+  EXPECT_FALSE(torch::allclose(a.img1.mean({1, 2, 3}), b.img1.mean({1, 2, 3}), 0.05, 0.05));
+  EXPECT_FALSE(torch::equal(sampleMask(presetConfig("tiny"), 0, "mask", 7),
+                            sampleMask(presetConfig("tiny"), 1, "mask", 7)));
 }
 
 // The mae task's forward pass ignores the reference view whatever it holds; croco's does not.
