@@ -28,8 +28,8 @@ Fixture makeFixture(const std::string& name) {
   saveCheckpoint(f.ckpt, net, 0);
   Image8 img(80, 80, 3);
   for (size_t i = 0; i < img.data.size(); ++i) img.data[i] = static_cast<uint8_t>(i * 7);
-  f.a = f.dir + "/a.png";
-  f.b = f.dir + "/b.png";
+  f.a = f.dir + "/a.jpg";  // JPEG: the trainer-only build reads no other format
+  f.b = f.dir + "/b.jpg";
   writeImage(f.a, img);
   writeImage(f.b, img);
   return f;
