@@ -743,7 +743,9 @@ std::string seedFolder(int seedIndex) {
   return "seed-" + std::to_string(seedIndex);
 }
 
-uint64_t runSeed(const SweepConfig& c, int seedIndex) { return c.seed + seedIndex; }
+uint64_t runSeed(const SweepConfig& c, int seedIndex) {
+  return c.seed + seedIndex;
+}
 
 std::string SweepRun::label() const {
   return name + " seed " + std::to_string(seedIndex);

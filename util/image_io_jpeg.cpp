@@ -10,7 +10,6 @@
 #include <filesystem>
 #include <string>
 
-
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
@@ -23,7 +22,6 @@ namespace fs = std::filesystem;
 
 const char* const kFullBuild =
     "needs the full build (this one was configured with PAIRCAST_WITH_RENDER=OFF)";
-
 
 // Decodes into a malloc'd buffer (no C++ object lives across setjmp). Returns an empty string on
 // success, else libjpeg's message.
@@ -184,7 +182,6 @@ std::vector<unsigned char> encodeImage(const Image8& image, std::string_view for
 std::vector<unsigned char> encodeExr(const ImageF&, bool) {
   throw Error("image.exr", std::string("EXR ") + kFullBuild);
 }
-
 
 void writeExr(const std::string& path, const ImageF&, bool) {
   throw Error(path, std::string("EXR ") + kFullBuild);
