@@ -33,13 +33,9 @@ bool comparable(const Metric& m, const std::string& taskA, const std::string& ta
   return std::string(m.key) != "xv_loss" || taskA == taskB;
 }
 
-double value(const nlohmann::json& obj, const std::string& key) {
-  return numberOrNan(obj, key);
-}
-
 // obj[key] as %.6g for the CSV files; nan when it is missing or no number.
 std::string num(const nlohmann::json& obj, const std::string& key) {
-  return html::number(value(obj, key), "%.6g");
+  return html::number(numberOrNan(obj, key), "%.6g");
 }
 
 std::string text(const nlohmann::json& obj, const char* key) {
@@ -49,6 +45,13 @@ std::string text(const nlohmann::json& obj, const char* key) {
 
 std::string centerCell(const nlohmann::json& row) {
   return row.value("center", nlohmann::json()).is_number() ? centerName(row["center"]) : "";
+}
+
+// The columns both CSV files open with, naming the set (or baseline) a row is of.
+const char* const kSetColumns = "mode,center,set,task,trained_on";
+std::string setCells(const nlohmann::json& r) {
+  return text(r, "mode") + "," + centerCell(r) + "," + text(r, "set") + "," + text(r, "task") +
+         "," + text(r, "trained_on");
 }
 
 // "0.472 ± 0.010" (or "0.472" with one seed).
@@ -73,7 +76,7 @@ RunValues byset(const nlohmann::json& runs, const std::string& metric) {
   for (const auto& run : runs) {
     const std::string set = run.at("set");
     if (!r.values.count(set)) r.sets.push_back(set), r.task[set] = text(run, "task");
-    r.values[set].push_back(value(run, metric));
+    r.values[set].push_back(numberOrNan(run, metric));
   }
   return r;
 }
@@ -81,13 +84,11 @@ RunValues byset(const nlohmann::json& runs, const std::string& metric) {
 // ---- results.csv and results_runs.csv ----
 
 std::string resultsCsv(const nlohmann::json& rows, const nlohmann::json& random) {
-  std::string csv = "mode,center,set,task,trained_on,seeds,pairs,mean_covis";
+  std::string csv = std::string(kSetColumns) + ",seeds,pairs,mean_covis";
   for (const auto& m : sweepMetrics()) csv += "," + m + "_mean," + m + "_ci95";
   csv += "\n";
   auto line = [&](const nlohmann::json& r) {
-    std::string l = text(r, "mode") + "," + centerCell(r) + "," + text(r, "set") + "," +
-                    text(r, "task") + "," + text(r, "trained_on") + "," +
-                    std::to_string(r.value("seeds", 0)) + "," +
+    std::string l = setCells(r) + "," + std::to_string(r.value("seeds", 0)) + "," +
                     std::to_string(r.value("pairs", 0)) + "," + num(r, "mean_covis");
     for (const auto& m : sweepMetrics()) l += "," + num(r, m + "_mean") + "," + num(r, m + "_ci95");
     return l + "\n";
@@ -97,13 +98,12 @@ std::string resultsCsv(const nlohmann::json& rows, const nlohmann::json& random)
 }
 
 std::string runsCsv(const nlohmann::json& runs, const nlohmann::json& randomRuns) {
-  std::string csv = "mode,center,set,task,trained_on,seed_index,seed,pairs,mean_covis";
+  std::string csv = std::string(kSetColumns) + ",seed_index,seed,pairs,mean_covis";
   for (const auto& m : sweepMetrics()) csv += "," + m;
   csv += "\n";
   for (const auto* list : {&runs, &randomRuns})
     for (const auto& r : *list) {
-      csv += text(r, "mode") + "," + centerCell(r) + "," + text(r, "set") + "," + text(r, "task") +
-             "," + text(r, "trained_on") + "," + std::to_string(r.value("seed_index", 0)) + "," +
+      csv += setCells(r) + "," + std::to_string(r.value("seed_index", 0)) + "," +
              std::to_string(r.value("seed", uint64_t{0})) + "," +
              std::to_string(r.value("pairs", 0)) + "," + num(r, "mean_covis");
       for (const auto& m : sweepMetrics()) csv += "," + num(r, m);
@@ -255,7 +255,8 @@ std::vector<plot::Series> modeSeries(const SweepConfig& c, const nlohmann::json&
     s.color = colors[series.size() % 4];
     for (const auto& r : rows)
       if (r["mode"] == mode)
-        s.x.push_back(r["center"]), s.y.push_back(value(r, mean)), s.yErr.push_back(value(r, ci));
+        s.x.push_back(r["center"]), s.y.push_back(numberOrNan(r, mean)),
+            s.yErr.push_back(numberOrNan(r, ci));
     series.push_back(s);
   }
   return series;
@@ -264,8 +265,8 @@ std::vector<plot::Series> modeSeries(const SweepConfig& c, const nlohmann::json&
 // A baseline's mean as a dashed line over the centres, its interval in the legend.
 plot::Series baselineSeries(const SweepConfig& c, std::string label, const char* color,
                             const nlohmann::json& row, const Metric& m) {
-  const double mean = value(row, std::string(m.key) + "_mean");
-  if (const double e = value(row, std::string(m.key) + "_ci95"); std::isfinite(e))
+  const double mean = numberOrNan(row, std::string(m.key) + "_mean");
+  if (const double e = numberOrNan(row, std::string(m.key) + "_ci95"); std::isfinite(e))
     label += " \u00b1" + html::number(e, "%.3f");
   plot::Series base;
   base.label = label;
@@ -295,7 +296,7 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
       if (r["task"] != "croco" && comparable(m, r["task"], "croco"))
         series.push_back(baselineSeries(c, text(r, "set"), "#d62728", r, m));
     std::string title = m.label;
-    const double randomMean = value(random, std::string(m.key) + "_mean");
+    const double randomMean = numberOrNan(random, std::string(m.key) + "_mean");
     if (offTheScale(series, randomMean))
       title += "; random encoder " + html::number(randomMean, "%.3f");
     else
@@ -308,8 +309,8 @@ void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann
 }
 
 std::string cell(const nlohmann::json& r, const std::string& metric) {
-  const double mean = value(r, metric + "_mean");
-  return std::isfinite(mean) ? withInterval(mean, value(r, metric + "_ci95")) : "";
+  const double mean = numberOrNan(r, metric + "_mean");
+  return std::isfinite(mean) ? withInterval(mean, numberOrNan(r, metric + "_ci95")) : "";
 }
 
 // summary.html: what was trained, the verdicts, the plots, and the table of sets and baselines.
