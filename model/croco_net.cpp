@@ -286,6 +286,10 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
   return result;
 }
 
+torch::Tensor taskReference(const std::string& task, const torch::Tensor& img2) {
+  return task == "mae" ? torch::Tensor() : img2;
+}
+
 torch::Tensor patchify(const torch::Tensor& imgs, int p) {
   const int64_t B = imgs.size(0), h = imgs.size(2) / p, w = imgs.size(3) / p;
   PAIRCAST_CHECK(imgs.size(2) % p == 0 && imgs.size(3) % p == 0);

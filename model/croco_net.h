@@ -123,6 +123,10 @@ class CroCoNetImpl : public torch::nn::Module {
 };
 TORCH_MODULE(CroCoNet);
 
+// The reference view a model trained on `task` is given: img2 for "croco" (cross-view
+// completion), none (undefined) for "mae", which completes view 1 alone.
+torch::Tensor taskReference(const std::string& task, const torch::Tensor& img2);
+
 // [B, 3, S, S] -> [B, N, P], each patch flattened as (row, col, channel), as CroCo's patchify.
 torch::Tensor patchify(const torch::Tensor& imgs, int patch);
 torch::Tensor unpatchify(const torch::Tensor& x, int patch, int channels = 3);

@@ -118,7 +118,7 @@ Reconstruction reconstruct(const ReconstructOptions& o) {
     torch::manual_seed(o.seed);
     mask = model->randomMask(1, torch::kCPU);
   }
-  return reconstructWith(model, img1, task == "mae" ? torch::Tensor() : img2, mask);
+  return reconstructWith(model, img1, taskReference(task, img2), mask);
 }
 
 void writeNpy(const std::string& path, const torch::Tensor& t) {

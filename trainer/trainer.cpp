@@ -114,7 +114,7 @@ DecayGroups weightDecayGroups(const std::vector<std::pair<std::string, torch::Te
 
 CroCoOutput pretrainForward(CroCoNet& model, const std::string& task, const torch::Tensor& img1,
                             const torch::Tensor& img2, const torch::Tensor& mask) {
-  return model->forward(img1, task == "mae" ? torch::Tensor() : img2, mask);
+  return model->forward(img1, taskReference(task, img2), mask);
 }
 
 double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs, double e) {
@@ -511,10 +511,9 @@ class Pretraining {
     auto gen = at::make_generator<at::CPUGeneratorImpl>(c_.seed);
     auto mask = torch::argsort(torch::rand({1, c_.model.numPatches()}, gen), 1, false) <
                 c_.model.numMasked();
-    torch::Tensor reference;  // none for mae: the model completes view 1 alone
-    if (c_.task != "mae") reference = imageTensor(y, c_.model.img_size).to(device_);
-    const Reconstruction r = reconstructWith(model_, imageTensor(x, c_.model.img_size).to(device_),
-                                             reference, mask.to(device_));
+    const Reconstruction r = reconstructWith(
+        model_, imageTensor(x, c_.model.img_size).to(device_),
+        taskReference(c_.task, imageTensor(y, c_.model.img_size).to(device_)), mask.to(device_));
     writeImage((fs::path(c_.out) / "recon-latest.png").string(), r.grid);
     model_->train();
   }

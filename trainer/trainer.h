@@ -62,8 +62,8 @@ struct TrainConfig {
   int64_t debugNanAtStep = -1;  // fault injection for tests: this iteration's loss becomes NaN
 };
 
-// The pre-training forward pass of `task` ("croco" or "mae"): for "mae" the reference img2 is
-// not given to the model, whatever it holds (CroCoNetImpl::forward without img2).
+// The pre-training forward pass of `task` ("croco" or "mae"): the model gets
+// taskReference(task, img2), so for "mae" no reference, whatever img2 holds.
 CroCoOutput pretrainForward(CroCoNet& model, const std::string& task, const torch::Tensor& img1,
                             const torch::Tensor& img2, const torch::Tensor& mask);
 
