@@ -1,6 +1,5 @@
 // bench_render: rays/s of depth-only and RGB+depth rendering, against the Embree bound (a
 // minimal rtcIntersect8 loop over the same rays, measured in the same run), and scene build time.
-#include <embree3/rtcore.h>
 #include <omp.h>
 
 #include <unistd.h>
@@ -17,6 +16,7 @@
 
 #include "util/image_io.h"
 
+#include "render/embree.h"
 #include "render/ray_caster.h"
 #include "render/scene_loader.h"
 #include "util/error.h"
@@ -78,9 +78,7 @@ struct EmbreeBound {
     double sum = 0;
 #pragma omp parallel for schedule(dynamic, tilesX) reduction(+ : sum)  // as RayCaster
     for (int tile = 0; tile < tilesX * tilesY; ++tile) {
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+      embree::Query query(embree::Rays::kCoherent);
       RTCRayHit8 rh;
       alignas(32) int valid[8];
       const int x0 = (tile % tilesX) * 8, y0 = (tile / tilesX) * 8;
@@ -94,7 +92,7 @@ struct EmbreeBound {
           rh.ray.mask[i] = 0xFFFFFFFFu, rh.ray.id[i] = i, rh.ray.flags[i] = 0;
           rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
         }
-        rtcIntersect8(valid, scene, &ctx, &rh);
+        query.intersect8(valid, scene, rh);
         for (int i = 0; i < 8; ++i) sum += rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID;
       }
     }

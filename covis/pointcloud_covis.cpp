@@ -21,6 +21,18 @@ struct PointCloud {
   }
 };
 
+// nanoflann 1.5 renamed SearchParams (checks, eps, sorted) to SearchParameters (eps, sorted):
+// Debian 12 ships 1.4, Debian 13 1.7. Unsorted, exact search in both.
+#if NANOFLANN_VERSION >= 0x150
+inline nanoflann::SearchParameters unsortedSearch() {
+  return nanoflann::SearchParameters(0.0f, false);
+}
+#else
+inline nanoflann::SearchParams unsortedSearch() {
+  return nanoflann::SearchParams(0, 0.0f, false);
+}
+#endif
+
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointCloud>,
                                                    PointCloud, 3, uint32_t>;
 
@@ -28,6 +40,8 @@ using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<
 // need to know whether a neighbour exists, not which one is nearest.
 class AnyWithin {
  public:
+  using DistanceType = float;  // nanoflann >= 1.5 reads it
+  using IndexType = uint32_t;
   explicit AnyWithin(float radiusSquared) : radiusSquared_(radiusSquared) {}
   bool full() const { return found_; }
   float worstDist() const { return radiusSquared_; }
@@ -36,6 +50,7 @@ class AnyWithin {
     return !found_;  // false stops the search
   }
   bool found() const { return found_; }
+  void sort() {}  // nanoflann >= 1.5 names it even for unsorted searches
 
  private:
   float radiusSquared_;
@@ -47,7 +62,7 @@ size_t countWithin(const std::vector<Eigen::Vector3f>& query, const KdTree& tree
                    float radius) {
   if (query.empty() || treeSize == 0) return 0;
   size_t n = 0;
-  const nanoflann::SearchParams params(0, 0.0f, false);
+  const auto params = unsortedSearch();
   for (const Eigen::Vector3f& p : query) {
     AnyWithin result(radius * radius);
     tree.findNeighbors(result, p.data(), params);

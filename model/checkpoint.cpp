@@ -210,6 +210,13 @@ void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
   writeFileAtomic(path, std::string_view(bytes.data(), bytes.size()));
 }
 
+void saveTensors(const std::string& path, const std::map<std::string, torch::Tensor>& tensors) {
+  c10::impl::GenericDict dict(c10::StringType::get(), c10::TensorType::get());
+  for (const auto& [k, t] : tensors) dict.insert(k, t.detach().to(torch::kCPU).contiguous());
+  const std::vector<char> bytes = pickleSave(dict);
+  writeFileAtomic(path, std::string_view(bytes.data(), bytes.size()));
+}
+
 namespace {
 
 // A checkpoint's zip archive, and its data.pkl.

@@ -36,6 +36,10 @@ void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
                     const nlohmann::json& extra = nlohmann::json::object(),
                     const std::map<std::string, torch::Tensor>& extraTensors = {});
 
+// Writes a dict of tensors {'name': tensor} atomically, without TorchScript's type tags, so that
+// Python's torch.load reads it with its defaults (weights_only=True since PyTorch 2.6).
+void saveTensors(const std::string& path, const std::map<std::string, torch::Tensor>& tensors);
+
 // Reads our files and official ones (a plain state_dict, or {'model': ...}). Throws
 // paircast::Error naming the file (and the key, when one is at fault).
 Checkpoint loadCheckpoint(const std::string& path);

@@ -1,6 +1,5 @@
 #include "render/ray_caster.h"
 
-#include <embree3/rtcore.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -9,6 +8,7 @@
 #include <cmath>
 #include <mutex>
 
+#include "render/embree.h"
 #include "render/packet_shading.h"
 #include "render/texture_pyramid.h"
 #include "util/error.h"
@@ -94,13 +94,9 @@ PacketLight packetLight(const ShadingOptions& o, float sampleSize) {
 // where the BVH quality changes too.
 constexpr int kIncoherentPixels = 128 * 128;
 
-inline RTCIntersectContext primaryContext(int width, int height, bool largeMesh) {
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  ctx.flags = largeMesh && width * height <= kIncoherentPixels
-                  ? RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
-                  : RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  return ctx;
+inline embree::Query primaryQuery(int width, int height, bool largeMesh) {
+  return embree::Query(largeMesh && width * height <= kIncoherentPixels ? embree::Rays::kIncoherent
+                                                                        : embree::Rays::kCoherent);
 }
 
 }  // namespace
@@ -247,13 +243,13 @@ void RayCaster::renderDepth(const Camera& camera, ImageF& depth) const {
   // lines of the output (false sharing).
 #pragma omp parallel for schedule(dynamic, tilesX)
   for (int tile = 0; tile < tilesX * tilesY; ++tile) {
-    RTCIntersectContext ctx = primaryContext(W, H, largeMesh);
+    embree::Query query = primaryQuery(W, H, largeMesh);
     RTCRayHit8 rh;
     alignas(32) int valid[kPacket];
     const int x0 = (tile % tilesX) * kTileW, ty = (tile / tilesX) * kTileH;
     for (int y = ty; y < std::min(ty + kTileH, H); ++y) {
       setupPacket(P, x0, y, W, 0.5f, 0.5f, rh, valid);
-      rtcIntersect8(valid, scene, &ctx, &rh);
+      query.intersect8(valid, scene, rh);
       float* row = depth.data.data() + static_cast<size_t>(y) * W;
       for (int i = 0; i < kPacket && x0 + i < W; ++i)
         row[x0 + i] = rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID ? rh.ray.tfar[i] : 0.0f;
@@ -288,7 +284,7 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
   const int W = frame.depth.width, H = frame.depth.height;
   const int rows = std::min(kTileH, H - y0), cols = std::min(kTileW, W - x0);
   const int ss = std::clamp(options.supersample, 1, 4);
-  RTCIntersectContext ctx = primaryContext(W, H, largeMesh);
+  embree::Query query = primaryQuery(W, H, largeMesh);
   RTCRayHit8 rh[kTileH];
   alignas(32) int valid[kPacket];
   alignas(32) float colour[kTileH][3][kPacket];  // linear colour sums over the sub-samples
@@ -296,7 +292,7 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
   // them back to back overlap in the CPU where a cast between them would not.
   for (int r = 0; r < rows; ++r) {
     setupPacket(P, x0, y0 + r, W, 0.5f, 0.5f, rh[r], valid);
-    rtcIntersect8(valid, scene, &ctx, &rh[r]);
+    query.intersect8(valid, scene, rh[r]);
     writeGeometry(rh[r], options, x0, y0 + r, cols, frame);
   }
   if (!options.rgb) return;
@@ -309,7 +305,7 @@ void RayCaster::Impl::renderTile(const PrimaryRays& P, const RenderOptions& opti
   for (int sub = 0; sub < ss * ss; ++sub) {
     for (int r = 0; r < rows; ++r) {
       setupPacket(P, x0, y0 + r, W, (sub % ss + 0.5f) / ss, (sub / ss + 0.5f) / ss, rh[r], valid);
-      rtcIntersect8(valid, scene, &ctx, &rh[r]);
+      query.intersect8(valid, scene, rh[r]);
     }
     alignas(32) LaneColours c[kTileH];
     shadeRows(rh, rows, light, c, nullptr, cols);
@@ -463,8 +459,7 @@ void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {
   RTCScene scene = impl_->scene;
 #pragma omp parallel for schedule(static, 256)
   for (long k = 0; k < static_cast<long>(count); ++k) {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
+    embree::Query query;
     RTCRayHit rh;
     const Ray& r = rays[k];
     rh.ray.org_x = r.origin.x();
@@ -482,7 +477,7 @@ void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(scene, &ctx, &rh);
+    query.intersect1(scene, rh);
     Hit& h = hits[k];
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
       h = Hit{};

@@ -1,11 +1,25 @@
 #!/usr/bin/env bash
-# Installs the Debian 12 packages paircast needs, plus any named as arguments (scripts/fuzz.sh
-# adds clang's). Idempotent: installs only what is missing, and runs `apt-get update` once, only
-# when something is missing.
+# Installs the packages paircast needs on Debian 12 (bookworm) or 13 (trixie), plus any named as
+# arguments (scripts/fuzz.sh adds clang's). Idempotent: installs only what is missing, and runs
+# `apt-get update` once, only when something is missing. The release comes from /etc/os-release;
+# both have the same package names (Debian 12: Embree 3, LibTorch 1.13, Python 3.11; Debian 13:
+# Embree 4, LibTorch 2.6, Python 3.13). Another system stops with exit status 2.
 set -euo pipefail
 
+os_release=${PAIRCAST_OS_RELEASE:-/etc/os-release}
+release=$(. "$os_release" 2>/dev/null && echo "${ID:-}:${VERSION_ID:-}") || release=":"
+case "$release" in
+  debian:12 | debian:13) ;;
+  *)
+    pretty=$(. "$os_release" 2>/dev/null && echo "${PRETTY_NAME:-}") || true
+    echo "setup: known releases are Debian 12 (bookworm) and Debian 13 (trixie), not" \
+      "'${pretty:-unknown, no $os_release}'" >&2
+    exit 2
+    ;;
+esac
+
 PACKAGES=(
-  build-essential cmake ninja-build pkg-config
+  build-essential cmake ninja-build pkg-config ccache
   libembree-dev libassimp-dev libeigen3-dev libopenimageio-dev openimageio-tools
   libgtest-dev libtorch-dev libopenblas0-pthread libgloo-dev
   nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev libjpeg-dev

@@ -4,6 +4,9 @@
 #   scripts/test.sh              Release build in build/, every test.
 #   scripts/test.sh --sanitize   AddressSanitizer + UndefinedBehaviorSanitizer build in build-asan/
 #                                (RelWithDebInfo), and the tests of util, render, covis and dataset.
+#   scripts/test.sh --in debian13   the same inside a Debian 13 (or debian12) chroot, made with
+#                                debootstrap on the first run and kept (scripts/chroot.sh); as root.
+#                                Combines with --sanitize.
 #
 # Why --sanitize leaves out model/, trainer/ and sweep/: the prebuilt LibTorch is not instrumented,
 # so ASan checks none of its code, and its tests (CroCo forward/backward passes, training runs)
@@ -17,19 +20,31 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 sanitize=0
-for arg in "$@"; do
+release=""
+args=("$@")
+for ((i = 0; i < ${#args[@]}; ++i)); do
+  arg=${args[i]}
   case "$arg" in
     --sanitize) sanitize=1 ;;
+    --in)
+      release=${args[i + 1]:-}
+      ((++i))
+      ;;
     -h | --help)
       sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'
       exit 0
       ;;
     *)
-      echo "test.sh: unknown argument '$arg' (use --sanitize or nothing)" >&2
+      echo "test.sh: unknown argument '$arg' (use --sanitize, --in RELEASE or nothing)" >&2
       exit 2
       ;;
   esac
 done
+if [[ -n "$release" ]]; then
+  inner=()
+  ((sanitize)) && inner+=(--sanitize)
+  exec scripts/chroot.sh "$release" scripts/test.sh "${inner[@]}"
+fi
 
 JOBS=${JOBS:-$(nproc)}
 export JOBS

@@ -97,6 +97,11 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
   opts.isServer = d->rank_ == 0;
   opts.numWorkers = static_cast<size_t>(world);
   opts.timeout = std::chrono::seconds(envInt("PAIRCAST_DIST_TIMEOUT", 300));
+#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 4)
+  // Since 2.4 the store asks for its libuv backend by default, and builds without libuv (Debian
+  // 13's LibTorch 2.6) then refuse to start. The classic backend is in every build.
+  opts.useLibUV = false;
+#endif
   d->impl_ = std::make_unique<Impl>();
   d->impl_->store = c10::make_intrusive<c10d::TCPStore>(host, opts);
   if (device == "cuda") {
