@@ -32,6 +32,9 @@ def test_the_default_torch_load_reads_a_pretrain_checkpoint(checkpoint):
 def test_weights_only_reads_it_on_any_torch_that_has_it(checkpoint):
     if "weights_only" not in inspect.signature(torch.load).parameters:
         pytest.skip(f"torch {torch.__version__} has no weights_only")
+    if int(torch.__version__.split(".")[0]) < 2:
+        # 1.13's early weights_only unpickler has no BINFLOAT (opcode 71), which any float needs.
+        pytest.skip(f"torch {torch.__version__}'s weights_only reads no floats")
     ck = torch.load(checkpoint, map_location="cpu", weights_only=True)
     assert set(ck["model"]) == set(torch.load(checkpoint, map_location="cpu")["model"])
 
