@@ -183,6 +183,18 @@ std::vector<char> pickleSave(const c10::IValue& value) {
   return archive;
 }
 
+// {'name': tensor}, each detached, on the CPU and contiguous, as torch.save would store them.
+c10::impl::GenericDict tensorDict(const std::map<std::string, torch::Tensor>& tensors) {
+  c10::impl::GenericDict dict(c10::StringType::get(), c10::TensorType::get());
+  for (const auto& [k, t] : tensors) dict.insert(k, t.detach().to(torch::kCPU).contiguous());
+  return dict;
+}
+
+void writePickled(const std::string& path, const c10::IValue& value) {
+  const std::vector<char> bytes = pickleSave(value);
+  writeFileAtomic(path, std::string_view(bytes.data(), bytes.size()));
+}
+
 }  // namespace
 
 std::map<std::string, torch::Tensor> stateDict(CroCoNet& model) {
@@ -195,26 +207,19 @@ std::map<std::string, torch::Tensor> stateDict(CroCoNet& model) {
 void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
                     const nlohmann::json& extra,
                     const std::map<std::string, torch::Tensor>& extraTensors) {
-  c10::impl::GenericDict state(c10::StringType::get(), c10::TensorType::get());
-  for (const auto& [k, t] : stateDict(model))
-    state.insert(k, t.detach().to(torch::kCPU).contiguous());
   c10::impl::GenericDict root(c10::StringType::get(), c10::AnyType::get());
-  root.insert("model", state);
+  root.insert("model", tensorDict(stateDict(model)));
   root.insert("args", jsonToIValue(configToJson(model->config())));
   root.insert("epoch", epoch);
   for (auto it = extra.begin(); it != extra.end(); ++it)
     root.insert(it.key(), jsonToIValue(it.value()));
   auto nested = nestTensors(extraTensors);
   for (const auto& entry : nested) root.insert_or_assign(entry.key(), entry.value());
-  const std::vector<char> bytes = pickleSave(root);
-  writeFileAtomic(path, std::string_view(bytes.data(), bytes.size()));
+  writePickled(path, root);
 }
 
 void saveTensors(const std::string& path, const std::map<std::string, torch::Tensor>& tensors) {
-  c10::impl::GenericDict dict(c10::StringType::get(), c10::TensorType::get());
-  for (const auto& [k, t] : tensors) dict.insert(k, t.detach().to(torch::kCPU).contiguous());
-  const std::vector<char> bytes = pickleSave(dict);
-  writeFileAtomic(path, std::string_view(bytes.data(), bytes.size()));
+  writePickled(path, tensorDict(tensors));
 }
 
 namespace {

@@ -19,8 +19,6 @@
 
 namespace paircast::embree {
 
-constexpr int kMajorVersion = PAIRCAST_EMBREE_MAJOR;
-
 // How the rays of one query relate: coherent rays (neighbouring pixels of a large image) are
 // traversed together; incoherent ones (Embree's default) one by one inside the packet.
 enum class Rays { kCoherent, kIncoherent };

@@ -28,6 +28,10 @@ for ((i = 0; i < ${#args[@]}; ++i)); do
     --sanitize) sanitize=1 ;;
     --in)
       release=${args[i + 1]:-}
+      if [[ -z "$release" ]]; then
+        echo "test.sh: --in needs a release (debian12 or debian13)" >&2
+        exit 2
+      fi
       ((++i))
       ;;
     -h | --help)
