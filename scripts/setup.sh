@@ -21,7 +21,7 @@ esac
 PACKAGES=(
   build-essential cmake ninja-build pkg-config ccache
   libembree-dev libassimp-dev libeigen3-dev libopenimageio-dev openimageio-tools
-  libgtest-dev libtorch-dev libopenblas0-pthread libgloo-dev
+  libgtest-dev libtorch-dev libopenblas0-openmp libgloo-dev
   nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev libjpeg-dev
   libboost-dev  # Boost.Math: the t quantiles of the sweep's confidence intervals
   # The Python package (python/): pybind11, numpy, and its tests and pip install.
@@ -37,17 +37,35 @@ fi
 
 PACKAGES+=("$@")
 
+# LibTorch's BLAS: OpenBLAS built on OpenMP, the runtime of LibTorch's own threads. The pthread
+# build, which apt prefers when both are installed, keeps a second pool of threads that spin
+# against LibTorch's: CroCo training steps on 2 cores ran 1.2-10x slower with it (docs/releases.md,
+# "OpenBLAS"). Without any OpenBLAS, LibTorch falls back to a reference BLAS, 20x slower.
+select_openmp_blas() {
+  local name target
+  for name in libblas.so.3 liblapack.so.3 libopenblas.so.0; do
+    name=$name-$(dpkg-architecture -qDEB_HOST_MULTIARCH 2>/dev/null || echo x86_64-linux-gnu)
+    target=$(update-alternatives --list "$name" 2>/dev/null | grep /openblas-openmp/ | head -1) ||
+      continue
+    [[ $(update-alternatives --query "$name" | sed -n 's/^Value: //p') == "$target" ]] && continue
+    echo "setup: $name -> $target"
+    $SUDO update-alternatives --quiet --set "$name" "$target"
+  done
+}
+
+SUDO=""
+if [[ $(id -u) != 0 ]]; then SUDO=sudo; fi
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 if ((${#missing[@]} == 0)); then
   echo "setup: all ${#PACKAGES[@]} packages are installed"
+  select_openmp_blas
   exit 0
 fi
-SUDO=""
-if [[ $(id -u) != 0 ]]; then SUDO=sudo; fi
 echo "setup: installing ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -q
 $SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"
+select_openmp_blas

@@ -1,6 +1,7 @@
 #include "trainer/trainer.h"
 
 #include <ATen/CPUGeneratorImpl.h>
+#include <link.h>
 #include <signal.h>
 
 #include <atomic>
@@ -171,6 +172,21 @@ class StopSignals {
   Handler oldInt_, oldTerm_;
 };
 
+// The loaded OpenBLAS when it is Debian's pthread build ("" otherwise). Its own threads spin
+// against LibTorch's OpenMP threads: CPU training steps ran 1.2-10x slower (docs/releases.md).
+std::string pthreadOpenBlas() {
+  std::string found;
+  dl_iterate_phdr(
+      [](dl_phdr_info* info, size_t, void* out) {
+        const std::string name = info->dlpi_name ? info->dlpi_name : "";
+        if (name.find("/openblas-pthread/") == std::string::npos) return 0;
+        *static_cast<std::string*>(out) = name;
+        return 1;
+      },
+      &found);
+  return found;
+}
+
 // One run of runPretrain. Its stages, in order: the constructor (device and output folder),
 // openDataSources, buildModelAndOptimizer, resumeOrStartLog, startLoaders, trainSteps and
 // summary. Members are declared in the order they are made, so that they are destroyed in
@@ -191,6 +207,11 @@ class Pretraining {
           torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
       allowTf32();
     }
+    if (const std::string blas = pthreadOpenBlas(); lead_ && !device_.is_cuda() && !blas.empty())
+      std::fprintf(stderr,
+                   "pretrain: warning: LibTorch runs on the pthread OpenBLAS (%s), 1.2-10x slower "
+                   "on the CPU than libopenblas0-openmp; scripts/setup.sh selects that one\n",
+                   blas.c_str());
     makeDirs(c.out);
     if (lead_) removeStaleTemporaries(c.out);  // left by a killed run
     ckptPath_ = (fs::path(c.out) / "checkpoint-last.pth").string();

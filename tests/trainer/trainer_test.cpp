@@ -412,6 +412,31 @@ TEST(Pretrain, SigtermSavesACheckpointAndExits) {
   EXPECT_TRUE(summary["interrupted"].get<bool>());
 }
 
+// Which OpenBLAS LibTorch gets is the system's choice (update-alternatives): both builds are
+// put first on the library path in turn, and only the pthread one earns the warning.
+TEST(Pretrain, WarnsOnThePthreadOpenBlas) {
+  const std::string lib = "/usr/lib/x86_64-linux-gnu/openblas-";
+  if (!fs::exists(lib + "pthread/libblas.so.3") || !fs::exists(lib + "openmp/libblas.so.3"))
+    GTEST_SKIP() << "needs libopenblas0-pthread and libopenblas0-openmp";
+  const std::string dir = testing::scratchDir("blas");
+  const std::string run = "LD_LIBRARY_PATH=" + lib + "%s " + PAIRCAST_BINARY_DIR +
+                          "/tools/pretrain --data '" + pairsDir() +
+                          "/pairs-*.tar' --img-size 32 --batch-size 4 --max-steps 1 --out " + dir +
+                          "/%s --quiet 2>&1";
+  auto output = [&](const std::string& variant) {
+    char cmd[2048];
+    std::snprintf(cmd, sizeof cmd, run.c_str(), variant.c_str(), variant.c_str());
+    std::string out;
+    std::FILE* p = popen(cmd, "r");
+    for (int ch; (ch = std::fgetc(p)) != EOF;) out.push_back(static_cast<char>(ch));
+    EXPECT_EQ(pclose(p), 0) << out;
+    return out;
+  };
+  EXPECT_NE(output("pthread").find("warning: LibTorch runs on the pthread OpenBLAS"),
+            std::string::npos);
+  EXPECT_EQ(output("openmp").find("OpenBLAS"), std::string::npos);
+}
+
 TEST(Pretrain, PythonLoadsTheCheckpoint) {
   if (std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") != 0)
     GTEST_SKIP() << "python3-torch not installed";
