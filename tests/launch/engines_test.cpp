@@ -64,10 +64,18 @@ std::string binary(const std::string& tool) {
   return std::string(PAIRCAST_BINARY_DIR) + "/tools/" + tool;
 }
 
-// A one-node cluster in `dir` for the life of the object (tests/launch/slurm_cluster.sh).
+// The text of `path`, or "" when there is none (for failure messages).
+std::string textOf(const std::string& path) {
+  std::error_code ec;
+  return fs::exists(path, ec) ? readFile(path) : std::string();
+}
+
+// A one-node cluster for the life of the object (tests/launch/slurm_cluster.sh), in a short
+// folder of its own under /tmp: slurmd's sockets go there, and their paths hold 108 bytes at
+// most. The folder stays when the test failed, for its logs.
 class SlurmCluster {
  public:
-  explicit SlurmCluster(const std::string& dir) : dir_(dir), started_(Clock::now()) {
+  SlurmCluster() : dir_(shortTempDir()), started_(Clock::now()) {
     const Output check = shell(script() + " check");
     if (check.status != 0) {
       skip_ = check.text.empty() ? "slurm_cluster.sh check failed" : check.text;
@@ -75,8 +83,8 @@ class SlurmCluster {
     }
     // Ports from the test's pid, below the ephemeral range: parallel test runs do not meet.
     const int port = 30000 + static_cast<int>(getpid() % 1300) * 2;
-    const Output start =
-        shell("timeout 60 " + script() + " start " + shellQuoted(dir) + " " + std::to_string(port));
+    const Output start = shell("timeout 60 " + script() + " start " + shellQuoted(dir_) + " " +
+                               std::to_string(port));
     up_ = start.status == 0;
     startLog_ = start.text;
     // Status 4: a Slurm whose auth/slurm setup (>= 23.11) could not start here; untested.
@@ -87,8 +95,13 @@ class SlurmCluster {
     if (!up_ && skip_.empty()) return;
     const auto stopping = Clock::now();
     shell("timeout 60 " + script() + " stop " + shellQuoted(dir_));
+    // Start to stop is about the whole test: the cluster is its first and last step.
     std::printf("[ slurm ] cluster up in %.1f s, down in %.1f s, start to stop %.1f s\n",
                 upSeconds_, secondsSince(stopping), secondsSince(started_));
+    if (::testing::Test::HasFailure())
+      std::printf("[ slurm ] its configuration and logs: %s\n", dir_.c_str());
+    else
+      fs::remove_all(dir_);
   }
   const std::string& skipReason() const { return skip_; }
   bool up() const { return up_; }
@@ -110,6 +123,10 @@ class SlurmCluster {
   }
 
  private:
+  static std::string shortTempDir() {
+    char name[] = "/tmp/paircast-slurm.XXXXXX";
+    return mkdtemp(name) ? name : "/tmp";
+  }
   static std::string script() {
     return shellQuoted(testing::sourceDir() + "/tests/launch/slurm_cluster.sh");
   }
@@ -119,39 +136,54 @@ class SlurmCluster {
   bool up_ = false;
 };
 
-#define START_SLURM(cluster, dir)                                          \
-  SlurmCluster cluster(dir);                                               \
+#define START_SLURM(cluster)                                               \
+  SlurmCluster cluster;                                                    \
   if (!cluster.skipReason().empty()) GTEST_SKIP() << cluster.skipReason(); \
   ASSERT_TRUE(cluster.up()) << cluster.startLog()
 
 // ---- generation ----
 
 // generate_pairs over `scenes` into `out` with `extra` arguments: tiny, fast pairs.
-std::vector<std::string> generateArgs(const std::string& scenes, const std::string& out,
-                                      int pairs) {
-  return {"--scenes",     scenes, "--out",        out, "--pairs-per-scene", std::to_string(pairs),
-          "--resolution", "32",   "--shard-size", "5", "--format",          "both",
-          "--seed",       "5"};
+// generate_pairs' options besides --scenes and --out: tiny, fast pairs.
+std::vector<std::string> pairArgs(int pairs) {
+  return {"--pairs-per-scene",
+          std::to_string(pairs),
+          "--resolution",
+          "32",
+          "--shard-size",
+          "5",
+          "--format",
+          "both",
+          "--seed",
+          "5"};
+}
+
+// The whole command line of generate_pairs over `scenes` into `out`.
+std::vector<std::string> generateCommand(const std::string& scenes, const std::string& out,
+                                         int pairs) {
+  std::vector<std::string> args = {binary("generate_pairs"), "--scenes", scenes, "--out", out};
+  for (const auto& a : pairArgs(pairs)) args.push_back(a);
+  return args;
 }
 
 // The parts run by hand, one after the other, with --shard-index i --num-shards n.
 void runPartsByHand(const std::string& scenes, const std::string& out, int pairs, int parts) {
   for (int i = 0; i < parts; ++i) {
-    auto args = generateArgs(scenes, out, pairs);
-    args.insert(args.begin(), binary("generate_pairs"));
+    auto args = generateCommand(scenes, out, pairs);
     args.insert(args.end(), {"--jobs", "1", "--quiet", "--shard-index", std::to_string(i),
                              "--num-shards", std::to_string(parts)});
     ASSERT_EQ(testing::runProcess(args), 0) << "part " << i << " by hand";
   }
 }
 
-// `sbatch --wait` of the example array script with `args` for generate_pairs.
-Output sbatchGenerate(const SlurmCluster& cluster, const std::string& dir, const std::string& out,
-                      const std::string& array, const std::vector<std::string>& args,
-                      bool wait = true) {
+// `sbatch --wait` (or `--parsable`, not waiting) of the example array script over `scenes` into
+// `out`, with `args` for generate_pairs; the tasks' output in dir/generate-<task>.out.
+Output sbatchGenerate(const SlurmCluster& cluster, const std::string& dir,
+                      const std::string& scenes, const std::string& out, const std::string& array,
+                      const std::vector<std::string>& args, bool wait = true) {
   const std::string env = "PAIRCAST=" + shellQuoted(testing::sourceDir()) +
                           " PAIRCAST_BUILD=" + shellQuoted(PAIRCAST_BINARY_DIR) +
-                          " OUT=" + shellQuoted(out);
+                          " SCENES=" + shellQuoted(scenes) + " OUT=" + shellQuoted(out);
   return cluster.run(env + " sbatch " + (wait ? "--wait" : "--parsable") + " --array=" + array +
                          " --cpus-per-task=1 --chdir=" + shellQuoted(dir) +
                          " --output=" + shellQuoted(dir + "/generate-%a.out") + " " +
@@ -223,15 +255,14 @@ std::string scenesDir() {
 }
 
 TEST(Slurm, ArrayOfGeneratePairsWritesTheUnionOfOneMachine) {
-  const auto began = Clock::now();
   const std::string dir = testing::scratchDir("array");
-  START_SLURM(cluster, dir + "/cluster");
+  START_SLURM(cluster);
   // --array=1-3: an array need not start at 0; task 1 is part 0.
-  const Output sbatch = sbatchGenerate(cluster, dir, dir + "/slurm", "1-3",
-                                       generateArgs(scenesDir(), dir + "/slurm", 12));
-  ASSERT_EQ(sbatch.status, 0) << sbatch.text << readFile(dir + "/generate-1.out");
+  const Output sbatch =
+      sbatchGenerate(cluster, dir, scenesDir(), dir + "/slurm", "1-3", pairArgs(12));
+  ASSERT_EQ(sbatch.status, 0) << sbatch.text << textOf(dir + "/generate-1.out");
   for (int task = 1; task <= 3; ++task) {
-    const std::string log = readFile(dir + "/generate-" + std::to_string(task) + ".out");
+    const std::string log = textOf(dir + "/generate-" + std::to_string(task) + ".out");
     EXPECT_EQ(log.rfind("generate_pairs: part " + std::to_string(task - 1) +
                             " of 3, from the Slurm array (SLURM_ARRAY_TASK_ID=" +
                             std::to_string(task) + " - SLURM_ARRAY_TASK_MIN=1",
@@ -242,28 +273,25 @@ TEST(Slurm, ArrayOfGeneratePairsWritesTheUnionOfOneMachine) {
   // The same bytes as the parts run by hand with the flags, and as one machine's run.
   runPartsByHand(scenesDir(), dir + "/flags", 12, 3);
   expectSameFolders(dir + "/flags", dir + "/slurm", 3);
-  auto whole = generateArgs(scenesDir(), dir + "/whole", 12);
-  whole.insert(whole.begin(), binary("generate_pairs"));
+  auto whole = generateCommand(scenesDir(), dir + "/whole", 12);
   whole.insert(whole.end(), {"--jobs", "2", "--quiet"});
   ASSERT_EQ(testing::runProcess(whole), 0);
   expectUnionIsOneMachine(dir + "/slurm", dir + "/whole", 3);
-  std::printf("[ slurm ] test wall time %.1f s\n", secondsSince(began));
 }
 
 TEST(Slurm, ArrayTasksWithoutASceneFailWithOneLineAndSbatchWaitFails) {
-  const auto began = Clock::now();
   const std::string dir = testing::scratchDir("empty");
-  START_SLURM(cluster, dir + "/cluster");
+  START_SLURM(cluster);
   // One scene, two tasks: task 1 has nothing to do.
-  auto args = generateArgs(scenesDir() + "/room", dir + "/out", 2);
+  auto args = pairArgs(2);
   args.push_back("--quiet");
-  const Output sbatch = sbatchGenerate(cluster, dir, dir + "/out", "0-1", args);
+  const Output sbatch =
+      sbatchGenerate(cluster, dir, scenesDir() + "/room", dir + "/out", "0-1", args);
   EXPECT_NE(sbatch.status, 0) << "sbatch --wait succeeded although a task failed: " << sbatch.text;
-  EXPECT_EQ(readFile(dir + "/generate-1.out"),
+  EXPECT_EQ(textOf(dir + "/generate-1.out"),
             "generate_pairs: error: part 1 of 2 has no scene: the scene list has 1 scene(s) for 2 "
             "parts (use at most 1 parts)\n");
   EXPECT_TRUE(fs::exists(dir + "/out/index-0.json")) << "task 0 did its part";
-  std::printf("[ slurm ] test wall time %.1f s\n", secondsSince(began));
 }
 
 // Whether `out` holds a temporary of a file whose name starts with `prefix`.
@@ -277,12 +305,11 @@ bool hasTemporary(const std::string& out, const std::string& prefix) {
 }
 
 TEST(Slurm, ACancelledArrayTaskSubmittedAgainEndsWithTheSameBytes) {
-  const auto began = Clock::now();
   const std::string dir = testing::scratchDir("cancel");
-  START_SLURM(cluster, dir + "/cluster");
+  START_SLURM(cluster);
   const std::string out = dir + "/slurm";
-  const auto args = generateArgs(scenesDir(), out, 60);
-  const Output submitted = sbatchGenerate(cluster, dir, out, "0-2", args, false);
+  const auto args = pairArgs(60);
+  const Output submitted = sbatchGenerate(cluster, dir, scenesDir(), out, "0-2", args, false);
   ASSERT_EQ(submitted.status, 0) << submitted.text;
   const std::string job = submitted.text.substr(0, submitted.text.find_first_of(";\n"));
   // Cancel task 1 (the room) while it writes a shard.
@@ -298,14 +325,13 @@ TEST(Slurm, ACancelledArrayTaskSubmittedAgainEndsWithTheSameBytes) {
   // Task 1 alone again: with --num-shards, the task id is the part index.
   auto again = args;
   again.insert(again.end(), {"--num-shards", "3"});
-  const Output rerun = sbatchGenerate(cluster, dir, out, "1", again);
-  ASSERT_EQ(rerun.status, 0) << rerun.text << readFile(dir + "/generate-1.out");
+  const Output rerun = sbatchGenerate(cluster, dir, scenesDir(), out, "1", again);
+  ASSERT_EQ(rerun.status, 0) << rerun.text << textOf(dir + "/generate-1.out");
   runPartsByHand(scenesDir(), dir + "/flags", 60, 3);
   expectSameFolders(dir + "/flags", out, 3);
   for (const auto& e : fs::recursive_directory_iterator(out))
     EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos)
         << "temporary left: " << e.path();
-  std::printf("[ slurm ] test wall time %.1f s\n", secondsSince(began));
 }
 
 // ---- training ----
@@ -336,9 +362,10 @@ const std::string& trainingPairs() {
 // pretrain's arguments after --data and --out: 3 steps of the tiny model at 32x32 (as
 // Pretrain.TwoGlooProcessesEqualOneWithTheDoubledBatch).
 std::vector<std::string> trainArgs(int batch) {
+  // No --workers: pretrain.sbatch gives it from --cpus-per-task (and batches do not depend on it).
   return {"--img-size",  "32", "--batch-size", std::to_string(batch),
           "--max-steps", "3",  "--epochs",     "4",
-          "--seed",      "4",  "--workers",    "1"};
+          "--seed",      "4"};
 }
 
 // One process with the doubled batch, into `out`.
@@ -365,9 +392,8 @@ void expectTwoRanksEqualOne(const std::string& one, const std::string& two) {
 }
 
 TEST(Slurm, PretrainSbatchWithTwoSrunTasksEqualsOneProcessWithTheDoubledBatch) {
-  const auto began = Clock::now();
   const std::string dir = testing::scratchDir("pretrain");
-  START_SLURM(cluster, dir + "/cluster");
+  START_SLURM(cluster);
   trainAlone(dir + "/one");
   // The example script as it is: srun starts one pretrain per task.
   const std::string env = "PAIRCAST=" + shellQuoted(testing::sourceDir()) +
@@ -380,7 +406,7 @@ TEST(Slurm, PretrainSbatchWithTwoSrunTasksEqualsOneProcessWithTheDoubledBatch) {
                       shellQuoted(testing::sourceDir() + "/scripts/slurm/pretrain.sbatch") + " " +
                       joined(trainArgs(2)),
                   300);
-  const std::string log = readFile(dir + "/pretrain.out");
+  const std::string log = textOf(dir + "/pretrain.out");
   ASSERT_EQ(sbatch.status, 0) << sbatch.text << log;
   for (int r = 0; r < 2; ++r)
     EXPECT_NE(log.find("pretrain: rank " + std::to_string(r) + " of 2 (local rank " +
@@ -388,7 +414,6 @@ TEST(Slurm, PretrainSbatchWithTwoSrunTasksEqualsOneProcessWithTheDoubledBatch) {
               std::string::npos)
         << log;
   expectTwoRanksEqualOne(dir + "/one", dir + "/two");
-  std::printf("[ slurm ] test wall time %.1f s\n", secondsSince(began));
 }
 
 TEST(Torchrun, TwoPretrainProcessesEqualOneWithTheDoubledBatch) {
@@ -470,9 +495,8 @@ std::vector<std::string> sweepArgs(const std::string& out) {
 }
 
 TEST(Slurm, CovisSweepUnderSrunEqualsTheRanksStartedByHand) {
-  const auto began = Clock::now();
   const std::string dir = testing::scratchDir("sweep");
-  START_SLURM(cluster, dir + "/cluster");
+  START_SLURM(cluster);
   // By hand: the variables, two processes over loopback.
   const std::string port = "MASTER_PORT=" + std::to_string(20000 + (getpid() + 5) % 10000);
   std::vector<pid_t> ranks;
@@ -505,7 +529,6 @@ TEST(Slurm, CovisSweepUnderSrunEqualsTheRanksStartedByHand) {
                 1e-4)
         << run;
   }
-  std::printf("[ slurm ] test wall time %.1f s\n", secondsSince(began));
 }
 
 }  // namespace

@@ -92,6 +92,8 @@ CONF
 start() {
   local dir=$1 port=$2
   check >&2 || exit 3
+  # slurmd's step sockets live in DIR/spool: a Unix socket path holds at most 108 bytes.
+  ((${#dir} <= 48)) || die "$dir is too long for Slurm's sockets under it (at most 48 characters)"
   port_free "$port" && port_free $((port + 1)) || die "port $port or $((port + 1)) is taken"
   write_conf "$dir" "$port"
   export SLURM_CONF=$dir/slurm.conf
