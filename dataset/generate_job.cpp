@@ -295,6 +295,11 @@ void GenerateRun::planScenes() {
     job->name = names[i];
     scenes_.push_back(std::move(job));
   }
+  if (scenes_.empty())  // a Slurm array with more tasks than scenes, say
+    throw Error("part " + std::to_string(cfg_.shardIndex) + " of " +
+                std::to_string(cfg_.numShards) + " has no scene: the scene list has " +
+                std::to_string(all.size()) + " scene(s) for " + std::to_string(cfg_.numShards) +
+                " parts (use at most " + std::to_string(all.size()) + " parts)");
 }
 
 // What is left: samples in neither a completed shard nor the journal (with their files).

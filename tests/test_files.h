@@ -2,7 +2,9 @@
 #pragma once
 
 #include <filesystem>
+#include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "util/atomic_file.h"
@@ -22,6 +24,17 @@ inline std::map<std::string, std::string> fileTree(const std::string& dir) {
     files[rel] = readFile(e.path().string());
   }
   return files;
+}
+
+// The last record of each key in a generate_pairs journal.
+inline std::map<std::string, nlohmann::json> journalRecords(const std::string& path) {
+  std::map<std::string, nlohmann::json> last;
+  std::ifstream in(path);
+  for (std::string line; std::getline(in, line);) {
+    const auto r = nlohmann::json::parse(line);
+    last[r["scene"].get<std::string>() + std::to_string(r["index"].get<int>())] = r;
+  }
+  return last;
 }
 
 }  // namespace paircast::testing

@@ -59,6 +59,7 @@ int main(int argc, char** argv) {
     c.load.up = parseUpAxis(up);
     c.reports = !noReports;
     c.progress = !quiet;
+    if (!quiet) logLaunch("covis_sweep", launchRole(processEnvironment()).describe());
     const nlohmann::json r = runCovisSweep(c);
     if (r.contains("rank")) {  // a rank > 0 of a multi-process sweep: rank 0 writes the results
       std::printf("%s\n", r.dump().c_str());

@@ -65,10 +65,16 @@ int main(int argc, char** argv) {
   app.add_option("--format", format, "shards, croco or both")
       ->check(CLI::IsMember({"shards", "croco", "both"}));
   app.add_option("--shard-size", cfg.shardSize, "Pairs per tar shard");
-  app.add_option("--shard-index", cfg.shardIndex,
-                 "This machine's part of the scene list (0-based)");
-  app.add_option("--num-shards", cfg.numShards, "Number of parts the scene list is split into")
-      ->check(CLI::Range(1, 100000));
+  auto* shardIndexOpt = app.add_option(
+      "--shard-index", cfg.shardIndex,
+      "This machine's part of the scene list (0-based; default: from SLURM_ARRAY_TASK_ID or "
+      "JOB_COMPLETION_INDEX, docs/scale.md)");
+  auto* numShardsOpt =
+      app.add_option(
+             "--num-shards", cfg.numShards,
+             "Number of parts the scene list is split into (default: "
+             "SLURM_ARRAY_TASK_COUNT in a Slurm array; required in a Kubernetes Indexed Job)")
+          ->check(CLI::Range(1, 100000));
   app.add_option("--jpeg-quality", cfg.jpegQuality, "JPEG quality (1..100)");
   app.add_option("--supersample", cfg.pair.render.supersample, "s x s colour samples per pixel")
       ->check(CLI::Range(1, 4));
@@ -115,6 +121,13 @@ int main(int argc, char** argv) {
                         "metadata file(s)", cfg.out, allowSkipped);
     }
     if (cfg.scenes.empty()) throw Error("--scenes (or --from-metadata) is required");
+    const JobPart part =
+        jobPart(processEnvironment(),
+                shardIndexOpt->count() ? std::optional<int>(cfg.shardIndex) : std::nullopt,
+                numShardsOpt->count() ? std::optional<int>(cfg.numShards) : std::nullopt);
+    cfg.shardIndex = part.index;
+    cfg.numShards = part.count;
+    if (!quiet) logLaunch("generate_pairs", part.describe());
     cfg.shards = format != "croco";
     cfg.croco = format != "shards";
     cfg.pair.covis.normalize =

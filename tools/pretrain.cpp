@@ -58,6 +58,7 @@ int main(int argc, char** argv) {
     c.model.decoder = decoder;
     c.model.img_size = imgSize;
     c.progress = !quiet;
+    if (!quiet) logLaunch("pretrain", launchRole(processEnvironment()).describe());
     const nlohmann::json summary = runPretrain(c);
     std::printf("%s\n", summary.dump().c_str());
     return 0;

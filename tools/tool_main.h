@@ -9,6 +9,7 @@
 #include <string>
 
 #include "util/error.h"
+#include "util/launch_env.h"
 
 namespace paircast {
 
@@ -19,6 +20,12 @@ inline std::string flagOf(const CLI::App& app, const std::string& field) {
   for (char& c : flag)
     if (c == '_') c = '-';
   return app.get_option_no_throw(flag) ? flag : "";
+}
+
+// The line that says where this process's place in the job came from (LaunchRole::describe,
+// JobPart::describe), first on stderr; nothing when there is nothing to say.
+inline void logLaunch(const char* name, const std::string& line) {
+  if (!line.empty()) std::fprintf(stderr, "%s: %s\n", name, line.c_str());
 }
 
 // Exit codes: 0 success, 1 error (bad input, I/O), 2 bad command line, 3 internal error.

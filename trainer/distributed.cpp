@@ -8,6 +8,7 @@
 #if defined(PAIRCAST_HAVE_GLOO) || defined(PAIRCAST_HAVE_NCCL)
 #define PAIRCAST_HAVE_C10D 1
 #include <torch/csrc/distributed/c10d/Backend.hpp>
+#include <torch/csrc/distributed/c10d/PrefixStore.hpp>
 #include <torch/csrc/distributed/c10d/TCPStore.hpp>
 #endif
 #if defined(PAIRCAST_HAVE_GLOO)
@@ -19,28 +20,8 @@
 
 namespace paircast {
 
-namespace {
-
-int envInt(const char* name, int fallback) {
-  const char* v = std::getenv(name);
-  if (!v || !*v) return fallback;
-  try {
-    return std::stoi(v);
-  } catch (...) {
-    throw Error(std::string("environment variable ") + name + "='" + v + "' is not an integer");
-  }
-}
-
-}  // namespace
-
-EnvironmentRole environmentRole() {
-  EnvironmentRole role;
-  role.world = std::max(1, envInt("WORLD_SIZE", 1));
-  if (role.world == 1) return role;
-  role.rank = envInt("RANK", -1);
-  if (role.rank < 0 || role.rank >= role.world)
-    throw Error("RANK must be set and in [0, WORLD_SIZE)");
-  return role;
+LaunchRole environmentRole() {
+  return launchRole(processEnvironment());
 }
 
 #if defined(PAIRCAST_HAVE_C10D)
@@ -75,28 +56,28 @@ bool Distributed::hasNccl() {
 }
 
 std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& device) {
-  const int world = envInt("WORLD_SIZE", 1);
+  const Environment env = processEnvironment();
+  const LaunchRole role = launchRole(env);
+  const int world = role.world;
   // PAIRCAST_PROCESS_GROUP=1 makes a group even for one process, so that one GPU runs the
   // multi-GPU code path (NCCL all-reduces and broadcasts) end to end.
-  const char* force = std::getenv("PAIRCAST_PROCESS_GROUP");
-  if (world < 1 || (world == 1 && !(force && std::string(force) == "1"))) return nullptr;
+  if (world == 1 && env("PAIRCAST_PROCESS_GROUP") != "1") return nullptr;
 #if !defined(PAIRCAST_HAVE_C10D)
   (void)device;
   throw Error(
-      "WORLD_SIZE > 1, but paircast was built without c10d (install libgloo-dev and rebuild)");
+      "more than one process, but paircast was built without c10d (install libgloo-dev and "
+      "rebuild)");
 #else
   auto d = std::unique_ptr<Distributed>(new Distributed());
   d->world_ = world;
-  d->rank_ = environmentRole().rank;
-  d->localRank_ = envInt("LOCAL_RANK", 0);
-  const char* addr = std::getenv("MASTER_ADDR");
-  const std::string host = addr && *addr ? addr : "127.0.0.1";
-  const int port = envInt("MASTER_PORT", 29500);
+  d->rank_ = role.rank;
+  d->localRank_ = role.localRank;
+  const std::string& host = role.masterAddr;
   c10d::TCPStoreOptions opts;
-  opts.port = static_cast<uint16_t>(port);
-  opts.isServer = d->rank_ == 0;
+  opts.port = static_cast<uint16_t>(role.masterPort);
+  opts.isServer = d->rank_ == 0 && !role.agentStore;
   opts.numWorkers = static_cast<size_t>(world);
-  opts.timeout = std::chrono::seconds(envInt("PAIRCAST_DIST_TIMEOUT", 300));
+  opts.timeout = std::chrono::seconds(environmentInteger(env, "PAIRCAST_DIST_TIMEOUT", 300));
 #if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 4)
   // Since 2.4 the store asks for its libuv backend by default, and builds without libuv (Debian
   // 13's LibTorch 2.6) then refuse to start. The classic backend is in every build.
@@ -104,22 +85,25 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
 #endif
   d->impl_ = std::make_unique<Impl>();
   d->impl_->store = c10::make_intrusive<c10d::TCPStore>(host, opts);
+  if (role.agentStore)  // as torch.distributed's _create_c10d_store: this restart's own keys
+    d->impl_->store = c10::make_intrusive<c10d::PrefixStore>(
+        "/worker/attempt_" + std::to_string(role.restartCount), d->impl_->store);
   if (device == "cuda") {
 #if defined(PAIRCAST_HAVE_NCCL)
     d->impl_->group = c10::make_intrusive<c10d::ProcessGroupNCCL>(d->impl_->store, d->rank_, world);
     return d;
 #else
-    throw OptionError("device", "device cuda with WORLD_SIZE > 1 needs a LibTorch built with NCCL");
+    throw OptionError("device",
+                      "device cuda with more than one process needs a LibTorch built with NCCL");
 #endif
   }
 #if !defined(PAIRCAST_HAVE_GLOO)
-  throw Error("WORLD_SIZE > 1 on CPU needs c10d Gloo (install libgloo-dev and rebuild)");
+  throw Error("more than one process on CPU needs c10d Gloo (install libgloo-dev and rebuild)");
 #else
   auto options = c10d::ProcessGroupGloo::Options::create(opts.timeout);
-  const char* ifname = std::getenv("GLOO_SOCKET_IFNAME");
-  options->devices.push_back(ifname && *ifname
-                                 ? c10d::ProcessGroupGloo::createDeviceForInterface(ifname)
-                                 : c10d::ProcessGroupGloo::createDeviceForHostname(host));
+  const std::optional<std::string> ifname = env("GLOO_SOCKET_IFNAME");
+  options->devices.push_back(ifname ? c10d::ProcessGroupGloo::createDeviceForInterface(*ifname)
+                                    : c10d::ProcessGroupGloo::createDeviceForHostname(host));
   options->threads = 2;
   d->impl_->group =
       c10::make_intrusive<c10d::ProcessGroupGloo>(d->impl_->store, d->rank_, world, options);

@@ -1,6 +1,7 @@
-// Data-parallel training through torch's own c10d: a TCPStore rendezvous from the usual
-// environment (MASTER_ADDR, MASTER_PORT, RANK, WORLD_SIZE, LOCAL_RANK: torchrun, Slurm and
-// Kubernetes set them), ProcessGroupGloo on CPU (ProcessGroupNCCL when built with it, on CUDA).
+// Data-parallel training through torch's own c10d: a TCPStore rendezvous at the place that the
+// engine gives (launchRole: torchrun's RANK, WORLD_SIZE, LOCAL_RANK, MASTER_ADDR, MASTER_PORT, or
+// srun's SLURM_PROCID, SLURM_NTASKS, ...), ProcessGroupGloo on CPU (ProcessGroupNCCL when built
+// with it, on CUDA).
 #pragma once
 
 #include <torch/torch.h>
@@ -9,19 +10,18 @@
 #include <string>
 #include <vector>
 
+#include "util/launch_env.h"
+
 namespace paircast {
 
-// This process's place from RANK and WORLD_SIZE ({0, 1} when WORLD_SIZE is unset or 1), for
+// This process's place from its engine's variables (launchRole of the process's environment), for
 // work outside any process group. Throws paircast::Error on a bad environment.
-struct EnvironmentRole {
-  int rank = 0, world = 1;
-};
-EnvironmentRole environmentRole();
+LaunchRole environmentRole();
 
 class Distributed {
  public:
-  // nullptr when WORLD_SIZE is unset or 1 (unless PAIRCAST_PROCESS_GROUP=1, which makes a group
-  // of one). Throws paircast::Error on a bad environment.
+  // nullptr for a world of one (unless PAIRCAST_PROCESS_GROUP=1, which makes a group of one).
+  // Throws paircast::Error on a bad environment.
   static std::unique_ptr<Distributed> fromEnvironment(const std::string& device);
   // The process groups this build has: Gloo (CPU) and NCCL (CUDA).
   static bool hasGloo();

@@ -225,17 +225,6 @@ TEST(GeneratePairs, SceneListsAndShardingSplitScenesDeterministically) {
             (std::vector<std::string>{"b-00000000", "b-00000001"}));
 }
 
-// The last record of each key in a journal.
-std::map<std::string, nlohmann::json> journalRecords(const std::string& path) {
-  std::map<std::string, nlohmann::json> last;
-  std::ifstream in(path);
-  for (std::string line; std::getline(in, line);) {
-    const auto r = nlohmann::json::parse(line);
-    last[r["scene"].get<std::string>() + std::to_string(r["index"].get<int>())] = r;
-  }
-  return last;
-}
-
 int runCommand(const std::vector<std::string>& args, int killAfterMs) {
   return testing::runProcess(args, killAfterMs);
 }
@@ -268,8 +257,8 @@ TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {
   const auto a = testing::fileTree(dir + "/clean"), b = testing::fileTree(dir + "/killed");
   // The journal of the resumed run may hold a record twice (a sample redone after the kill);
   // the last record of each key is the same as the clean run's.
-  EXPECT_EQ(journalRecords(dir + "/clean/.paircast/journal.jsonl"),
-            journalRecords(dir + "/killed/.paircast/journal.jsonl"));
+  EXPECT_EQ(testing::journalRecords(dir + "/clean/.paircast/journal.jsonl"),
+            testing::journalRecords(dir + "/killed/.paircast/journal.jsonl"));
   ASSERT_EQ(a.size(), b.size());
   for (const auto& [name, bytes] : a) {
     ASSERT_TRUE(b.count(name)) << name << " missing after resume";
@@ -348,7 +337,8 @@ bool waitWhileRunning(pid_t pid, const std::function<bool()>& ready) {
 void expectSameAsOneMachine(const std::string& out) {
   const std::string& ref = partsReference();
   for (const char* journal : {"/.paircast/journal-0.jsonl", "/.paircast/journal-1.jsonl"})
-    EXPECT_EQ(journalRecords(ref + journal), journalRecords(out + journal)) << journal;
+    EXPECT_EQ(testing::journalRecords(ref + journal), testing::journalRecords(out + journal))
+        << journal;
   for (const auto& e : fs::recursive_directory_iterator(out))
     EXPECT_EQ(e.path().filename().string().find(".tmp."), std::string::npos)
         << "temporary left: " << e.path();
