@@ -1,5 +1,6 @@
 #include "util/launch_env.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <cstdlib>

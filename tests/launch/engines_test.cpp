@@ -76,6 +76,10 @@ std::string textOf(const std::string& path) {
 class SlurmCluster {
  public:
   SlurmCluster() : dir_(shortTempDir()), started_(Clock::now()) {
+    if (dir_.empty()) {
+      startLog_ = "mkdtemp in /tmp failed";
+      return;
+    }
     const Output check = shell(script() + " check");
     if (check.status != 0) {
       skip_ = check.text.empty() ? "slurm_cluster.sh check failed" : check.text;
@@ -83,6 +87,7 @@ class SlurmCluster {
     }
     // Ports from the test's pid, below the ephemeral range: parallel test runs do not meet.
     const int port = 30000 + static_cast<int>(getpid() % 1300) * 2;
+    starting_ = true;
     const Output start = shell("timeout 60 " + script() + " start " + shellQuoted(dir_) + " " +
                                std::to_string(port));
     up_ = start.status == 0;
@@ -91,8 +96,13 @@ class SlurmCluster {
     if (start.status == 4) skip_ = start.text;
     upSeconds_ = secondsSince(started_);
   }
+  // Stops whatever the start got to, even if it was cut short by its timeout.
   ~SlurmCluster() {
-    if (!up_ && skip_.empty()) return;
+    if (dir_.empty()) return;
+    if (!starting_) {
+      fs::remove_all(dir_);
+      return;
+    }
     const auto stopping = Clock::now();
     shell("timeout 60 " + script() + " stop " + shellQuoted(dir_));
     // Start to stop is about the whole test: the cluster is its first and last step.
@@ -125,7 +135,7 @@ class SlurmCluster {
  private:
   static std::string shortTempDir() {
     char name[] = "/tmp/paircast-slurm.XXXXXX";
-    return mkdtemp(name) ? name : "/tmp";
+    return mkdtemp(name) ? name : "";
   }
   static std::string script() {
     return shellQuoted(testing::sourceDir() + "/tests/launch/slurm_cluster.sh");
@@ -133,7 +143,7 @@ class SlurmCluster {
   std::string dir_, skip_, startLog_;
   Clock::time_point started_;
   double upSeconds_ = 0;
-  bool up_ = false;
+  bool starting_ = false, up_ = false;
 };
 
 #define START_SLURM(cluster)                                               \
