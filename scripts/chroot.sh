@@ -96,9 +96,20 @@ unmount_all() {
   for m in "${mounted[@]}"; do umount "$m" 2>/dev/null || umount -l "$m" || true; done
 }
 
+# No daemon starts when a package is installed inside (slurmd, slurmctld): Debian's policy-rc.d
+# convention, exit status 101. The host's name resolves there as here (Slurm, Gloo).
+deny_service_starts() {
+  [[ -x "$root/usr/sbin/policy-rc.d" ]] && return
+  printf '#!/bin/sh\n# chroot.sh: no service starts in this chroot\nexit 101\n' \
+    >"$root/usr/sbin/policy-rc.d"
+  chmod +x "$root/usr/sbin/policy-rc.d"
+}
+
 make_root
+deny_service_starts
 copy_tree
 cp /etc/resolv.conf "$root/etc/resolv.conf"
+cp /etc/hosts "$root/etc/hosts"
 trap unmount_all EXIT
 mount_into /proc -t proc proc
 mount_into /sys -t sysfs sys
