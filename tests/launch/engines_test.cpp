@@ -430,6 +430,15 @@ TEST(Torchrun, TwoPretrainProcessesEqualOneWithTheDoubledBatch) {
   const auto began = Clock::now();
   const std::string torchrun = "/usr/bin/torchrun";
   if (!fs::exists(torchrun)) GTEST_SKIP() << torchrun << " is not installed (python3-torch)";
+  // Debian 13's torch 2.6 has no libuv, and torchrun's rendezvous asks its TCPStore for libuv
+  // whatever USE_LIBUV says: that torchrun starts no job at all.
+  const Output store = shell(
+      "/usr/bin/python3 -c 'import datetime, torch.distributed as d; "
+      "d.TCPStore(\"127.0.0.1\", 0, 1, True, timeout=datetime.timedelta(seconds=10))' 2>&1");
+  if (store.text.find("use_libuv was requested") != std::string::npos)
+    GTEST_SKIP() << "this torchrun cannot start its rendezvous store (python3-torch built "
+                    "without libuv; docs/scale.md, \"torchrun\")";
+  ASSERT_EQ(store.status, 0) << store.text;
   const std::string dir = testing::scratchDir("torchrun");
   trainAlone(dir + "/one");
   const std::string port = std::to_string(20000 + (getpid() + 11) % 10000);

@@ -10,8 +10,8 @@
 # Job ids start at PORT, so that the rendezvous ports srun's tasks take from them (20000 + id mod
 # 10000) differ between clusters.
 #
-# Auth: auth/none and cred/none where the plugins exist (Slurm 22.05, Debian 12); else auth/slurm
-# and cred/slurm with a key generated into DIR (Slurm >= 23.11, which dropped the none plugins).
+# Auth: auth/none and cred/none where the plugins exist (Slurm 22.05 and 24.11, Debian 12 and 13);
+# else auth/slurm and cred/slurm with a key generated into DIR (untested).
 set -euo pipefail
 
 die() { echo "slurm_cluster: $*" >&2; exit 1; }
@@ -87,6 +87,12 @@ FirstJobId=$port
 NodeName=localhost NodeAddr=127.0.0.1 CPUs=$(nproc) State=UNKNOWN
 PartitionName=test Nodes=localhost Default=YES MaxTime=INFINITE State=UP
 CONF
+  # slurmd >= 23 sets up its cgroup plugin even for proctrack/linuxproc and task/none, and stops
+  # where no cgroup filesystem is mounted (a chroot); CgroupPlugin=disabled (23.02 on) skips it.
+  # 22.05 knows no such value and needs none.
+  local major
+  major=$(slurmd -V | sed -nE 's/^slurm(-wlm)? ([0-9]+)\..*/\2/p')
+  if ((${major:-0} >= 23)); then echo "CgroupPlugin=disabled" > "$dir/cgroup.conf"; fi
 }
 
 start() {
