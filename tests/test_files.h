@@ -37,4 +37,15 @@ inline std::map<std::string, nlohmann::json> journalRecords(const std::string& p
   return last;
 }
 
+// Whether `out` holds a temporary (".NAME.tmp.*", util/atomic_file.h) of a file whose name
+// starts with `prefix` ("pairs-0-").
+inline bool hasTemporary(const std::string& out, const std::string& prefix) {
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(out, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind("." + prefix, 0) == 0 && name.find(".tmp.") != std::string::npos) return true;
+  }
+  return false;
+}
+
 }  // namespace paircast::testing

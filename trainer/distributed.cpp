@@ -105,9 +105,12 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
   // Each rank binds an address of its own node: the master's loopback when the job is one machine
   // by hand, else the address this node's hostname resolves to (as torch's default device).
   const bool loopback = host == "localhost" || host.rfind("127.", 0) == 0 || host == "::1";
-  options->devices.push_back(ifname     ? c10d::ProcessGroupGloo::createDeviceForInterface(*ifname)
-                             : loopback ? c10d::ProcessGroupGloo::createDeviceForHostname(host)
-                                        : c10d::ProcessGroupGloo::createDefaultDevice());
+  if (ifname)
+    options->devices.push_back(c10d::ProcessGroupGloo::createDeviceForInterface(*ifname));
+  else if (loopback)
+    options->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname(host));
+  else
+    options->devices.push_back(c10d::ProcessGroupGloo::createDefaultDevice());
   options->threads = 2;
   d->impl_->group =
       c10::make_intrusive<c10d::ProcessGroupGloo>(d->impl_->store, d->rank_, world, options);

@@ -207,7 +207,8 @@ class Pretraining {
           torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
       allowTf32();
     }
-    if (const std::string blas = pthreadOpenBlas(); lead_ && !device_.is_cuda() && !blas.empty())
+    if (const std::string blas = lead_ && !device_.is_cuda() ? pthreadOpenBlas() : "";
+        !blas.empty())
       std::fprintf(stderr,
                    "pretrain: warning: LibTorch runs on the pthread OpenBLAS (%s), 1.2-10x slower "
                    "on the CPU than libopenblas0-openmp; scripts/setup.sh selects that one\n",

@@ -312,16 +312,6 @@ bool running(pid_t pid) {
   return waitid(P_PID, pid, &info, WEXITED | WNOHANG | WNOWAIT) == 0 && info.si_pid == 0;
 }
 
-// Whether `out` holds a temporary of a file whose name starts with `prefix` ("pairs-0-").
-bool hasTemporary(const std::string& out, const std::string& prefix) {
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(out, ec)) {
-    const std::string name = e.path().filename().string();
-    if (name.rfind("." + prefix, 0) == 0 && name.find(".tmp.") != std::string::npos) return true;
-  }
-  return false;
-}
-
 // Waits until `ready`; false when `pid` ends first or a minute passes.
 bool waitWhileRunning(pid_t pid, const std::function<bool()>& ready) {
   for (const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
@@ -356,7 +346,7 @@ TEST(GeneratePairs, PartsStartedApartIntoOneFolderMakeOneMachinesOutput) {
   const std::string out = testing::scratchDir("parts") + "/out";
   const pid_t part0 = testing::spawnProcess(partArgs(out, 0));
   // Part 1 starts while part 0 writes a shard: it must leave part 0's temporaries alone.
-  ASSERT_TRUE(waitWhileRunning(part0, [&] { return hasTemporary(out, "pairs-0-"); }))
+  ASSERT_TRUE(waitWhileRunning(part0, [&] { return testing::hasTemporary(out, "pairs-0-"); }))
       << "part 0 ended before it wrote a shard";
   const pid_t part1 = testing::spawnProcess(partArgs(out, 1));
   EXPECT_EQ(testing::waitProcess(part1), 0);
@@ -368,14 +358,15 @@ TEST(GeneratePairs, APartKilledAndRerunBesideAnotherMakesOneMachinesOutput) {
   partsReference();
   const std::string out = testing::scratchDir("parts") + "/out";
   const pid_t part0 = testing::spawnProcess(partArgs(out, 0));
-  ASSERT_TRUE(waitWhileRunning(part0, [&] { return hasTemporary(out, "pairs-0-"); }));
+  ASSERT_TRUE(waitWhileRunning(part0, [&] { return testing::hasTemporary(out, "pairs-0-"); }));
   // Part 1 is killed while it writes a shard, leaving its temporary, and rerun while part 0 goes
   // on: the rerun removes its own leftovers and none of part 0's.
   const pid_t part1 = testing::spawnProcess(partArgs(out, 1));
-  const bool writing = waitWhileRunning(part1, [&] { return hasTemporary(out, "pairs-1-"); });
+  const bool writing =
+      waitWhileRunning(part1, [&] { return testing::hasTemporary(out, "pairs-1-"); });
   kill(part1, SIGKILL);
   EXPECT_EQ(testing::waitProcess(part1), -SIGKILL);
-  EXPECT_TRUE(writing && hasTemporary(out, "pairs-1-"))
+  EXPECT_TRUE(writing && testing::hasTemporary(out, "pairs-1-"))
       << "part 1 was not killed while writing a shard: the test did not test its cleanup";
   EXPECT_TRUE(running(part0)) << "part 0 ended before part 1 was rerun: the parts did not overlap";
   EXPECT_EQ(testing::runProcess(partArgs(out, 1)), 0);

@@ -17,6 +17,7 @@
 #include "dataset/generate_job.h"
 #include "model/checkpoint.h"
 #include "test_files.h"
+#include "test_pairs.h"
 #include "test_paths.h"
 #include "test_process.h"
 #include "util/atomic_file.h"
@@ -304,16 +305,6 @@ TEST(Slurm, ArrayTasksWithoutASceneFailWithOneLineAndSbatchWaitFails) {
   EXPECT_TRUE(fs::exists(dir + "/out/index-0.json")) << "task 0 did its part";
 }
 
-// Whether `out` holds a temporary of a file whose name starts with `prefix`.
-bool hasTemporary(const std::string& out, const std::string& prefix) {
-  std::error_code ec;
-  for (const auto& e : fs::directory_iterator(out, ec)) {
-    const std::string name = e.path().filename().string();
-    if (name.rfind("." + prefix, 0) == 0 && name.find(".tmp.") != std::string::npos) return true;
-  }
-  return false;
-}
-
 TEST(Slurm, ACancelledArrayTaskSubmittedAgainEndsWithTheSameBytes) {
   const std::string dir = testing::scratchDir("cancel");
   START_SLURM(cluster);
@@ -326,7 +317,7 @@ TEST(Slurm, ACancelledArrayTaskSubmittedAgainEndsWithTheSameBytes) {
   bool writing = false;
   for (const auto end = Clock::now() + std::chrono::seconds(120); !writing && Clock::now() < end;
        std::this_thread::sleep_for(std::chrono::milliseconds(2)))
-    writing = hasTemporary(out, "pairs-1-");
+    writing = testing::hasTemporary(out, "pairs-1-");
   const Output cancel = cluster.run("scancel " + job + "_1", 20);
   EXPECT_EQ(cancel.status, 0) << cancel.text;
   ASSERT_TRUE(cluster.waitForEmptyQueue(job, 180)) << "the array did not end";
@@ -346,27 +337,8 @@ TEST(Slurm, ACancelledArrayTaskSubmittedAgainEndsWithTheSameBytes) {
 
 // ---- training ----
 
-// 32 pairs of the shipped room at 64x64 in shards of 16, once per test process.
 const std::string& trainingPairs() {
-  static const std::string dir = [] {
-    const std::string d =
-        (fs::path(::testing::TempDir()) / "paircast" / ("launch_pairs." + std::to_string(getpid())))
-            .string();
-    fs::remove_all(d);
-    GenerateConfig g;
-    g.scenes = {scenesDir() + "/room/room.obj"};
-    g.out = d;
-    g.pairsPerScene = 32;
-    g.pair.resolution = 64;
-    g.shardSize = 16;
-    g.progress = false;
-    runGenerate(g);
-    return d;
-  }();
-  static const struct Cleanup {
-    ~Cleanup() { fs::remove_all(dir); }
-  } cleanup;
-  return dir;
+  return testing::roomPairs();
 }
 
 // pretrain's arguments after --data and --out: 3 steps of the tiny model at 32x32 (as

@@ -15,6 +15,7 @@
 #include "model/checkpoint.h"
 #include "model/reconstruct.h"
 #include "test_errors.h"
+#include "test_pairs.h"
 #include "test_paths.h"
 #include "test_process.h"
 #include "trainer/augment.h"
@@ -30,29 +31,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// 32 pairs of the shipped room at 64x64, generated once for all the tests.
 const std::string& pairsDir() {
-  static const std::string dir = [] {
-    // One folder per test process: ctest runs the tests of this file in parallel processes.
-    const std::string d = (fs::path(::testing::TempDir()) / "paircast" /
-                           ("trainer_pairs." + std::to_string(getpid())))
-                              .string();
-    fs::remove_all(d);
-    GenerateConfig g;
-    g.scenes = {testing::sourceDir() + "/scenes/room/room.obj"};
-    g.out = d;
-    g.pairsPerScene = 32;
-    g.pair.resolution = 64;
-    g.shardSize = 16;
-    g.croco = true;
-    g.progress = false;
-    runGenerate(g);
-    return d;
-  }();
-  static const struct Cleanup {
-    ~Cleanup() { fs::remove_all(dir); }
-  } cleanup;
-  return dir;
+  return testing::roomPairs();
 }
 
 TrainConfig tinyRun(const std::string& out) {
