@@ -27,7 +27,7 @@ import torch
 from torch.utils.data import IterableDataset, get_worker_info
 
 from . import Error, PairStream, ShardReader, ShardSet
-from ._paircast import prefault
+from ._paircast import ShardBatches, prefault
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -216,8 +216,12 @@ class ShardPairs(_Pairs):
 
     def __init__(self, pattern, crop=None, normalize=True, return_dict=False, depth=False,
                  shuffle=False, seed=0, rank=None, world_size=None, dtype="float32",
-                 batch_size=None, drop_last=False):
+                 batch_size=None, drop_last=False, buffers=4):
         super().__init__(seed, crop, normalize, return_dict, rank, world_size)
+        if int(buffers) < 1:
+            raise ValueError(f"buffers must be positive, not {buffers}")
+        self.buffers = int(buffers)
+        self._ring = None
         if batch_size is not None:
             if int(batch_size) < 1:
                 raise ValueError(f"batch_size must be positive, not {batch_size}")
@@ -249,6 +253,7 @@ class ShardPairs(_Pairs):
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_shards"] = None  # rebuilt where it is unpickled (spawned workers)
+        state["_ring"] = None
         return state
 
     def _index(self):
@@ -258,13 +263,18 @@ class ShardPairs(_Pairs):
             self._shards = shards, {path: (first, count) for path, first, count in shards.ranges()}
         return self._shards
 
-    def __iter__(self):
+    def _mine(self):
+        """(files, by_file, part, parts): this reader's shards in this epoch's order, whether it
+        reads them whole (by_file) or every parts-th sample of all of them."""
         part, parts, _ = reader_part(self.rank, self.world_size)
         files = list(self.files)
         if self.shuffle:  # the same order in every reader, so the split stays disjoint
             np.random.default_rng([self.seed, self.epoch]).shuffle(files)
         by_file = len(files) >= parts
-        mine = files[part::parts] if by_file else files
+        return (files[part::parts] if by_file else files), by_file, part, parts
+
+    def __iter__(self):
+        mine, by_file, part, parts = self._mine()
         if self.return_dict or self.depth:
             yield from self._samples(mine, by_file, part, parts)
         elif self.batch_size is not None:
@@ -321,14 +331,18 @@ class ShardPairs(_Pairs):
             yield self._as_output(torch.from_numpy(image1)), self._as_output(torch.from_numpy(image2))
 
     def _batches(self, files, by_file, part, parts):
-        """Batches of (image1, image2), decoded straight into (shared) batch tensors."""
+        """Batches of (image1, image2), decoded straight into (shared) batch tensors, from a ring
+        of `buffers` of them made once and reused."""
         dtype = torch.float32 if self._dtype() == "float32" else torch.uint8
         h, w = self.crop
-        batch, filled = None, 0
+        if self._ring is None or self._ring[0] != (get_worker_info() is None):
+            ring = [[_batch_tensor((self.batch_size, 3, h, w), dtype) for _ in range(2)]
+                    for _ in range(self.buffers)]
+            self._ring = (get_worker_info() is None, ring, [[b.numpy() for b in r] for r in ring])
+        _, ring, arrays = self._ring
+        made, filled = 0, 0
         for shards, i, other, box1, box2 in self._plan(files, by_file, part, parts):
-            if batch is None:
-                batch = [_batch_tensor((self.batch_size, 3, h, w), dtype) for _ in range(2)]
-                views = [b.numpy() for b in batch]
+            batch, views = ring[made % self.buffers], arrays[made % self.buffers]
             try:
                 shards.decode_into(i, 0, box1[0], box1[1], views[0][filled])
                 shards.decode_into(i, other, box2[0], box2[1], views[1][filled])
@@ -338,9 +352,144 @@ class ShardPairs(_Pairs):
             filled += 1
             if filled == self.batch_size:
                 yield self._as_output(batch[0]), self._as_output(batch[1])
-                batch, filled = None, 0
+                made, filled = made + 1, 0
         if filled and not self.drop_last:
+            batch = ring[made % self.buffers]
             yield self._as_output(batch[0][:filled]), self._as_output(batch[1][:filled])
+
+
+class ShardLoader:
+    """Batches of pairs from paircast's tar shards, decoded by C++ threads (the GIL released)
+    straight into a ring of batch tensors made once and reused: a DataLoader replacement that
+    allocates nothing per batch in its steady state.
+
+        loader = ShardLoader("pairs/pairs-*.tar", batch_size=64, crop=224, threads=2)
+        for epoch in range(epochs):
+            loader.set_epoch(epoch)
+            for view1, view2 in loader:   # [B, 3, 224, 224] float32, normalised
+                ...
+
+    The batches are those of ShardPairs(pattern, crop=crop, batch_size=batch_size, ...) with the
+    same seed, epoch, shuffle and split, sample for sample and bit for bit; rank and world_size
+    (torch.distributed's by default) split the shards as ShardPairs does. A pair that does not
+    decode is skipped with a RuntimeWarning, as there.
+
+    A batch is a view of the loader's own memory: it stays valid until `keep` more batches have
+    been taken (keep=1: until the next one), then its buffer is filled again. Clone what must
+    live longer. dtype="uint8" yields the crops as stored ([B, 3, h, w] uint8, 4 times fewer
+    bytes), to be normalised on the GPU with paircast.torch.normalize; pin_memory=True makes the
+    buffers pinned host memory, for copies to CUDA with non_blocking=True. prefetch: batches
+    decoded ahead of the one taken.
+    """
+
+    def __init__(self, pattern, batch_size=64, crop=224, threads=2, dtype="float32",
+                 pin_memory=False, shuffle=False, seed=0, rank=None, world_size=None,
+                 drop_last=False, normalize=True, keep=1, prefetch=2):
+        if int(threads) < 1 or int(prefetch) < 1 or int(keep) < 1:
+            raise ValueError(f"threads, prefetch and keep must be positive, not {threads}, "
+                             f"{prefetch}, {keep}")
+        self._pairs = ShardPairs(pattern, crop=crop, normalize=normalize, shuffle=shuffle,
+                                 seed=seed, rank=rank, world_size=world_size, dtype=dtype,
+                                 batch_size=batch_size, drop_last=drop_last)
+        self.batch_size = self._pairs.batch_size
+        self.threads, self.keep, self.prefetch = int(threads), int(keep), int(prefetch)
+        self.pin_memory = bool(pin_memory)
+        if self.pin_memory and not torch.cuda.is_available():
+            raise ValueError("pin_memory=True needs CUDA, and this torch sees no CUDA device")
+        self._buffers = None  # made on the first iteration, kept for the loader's life
+
+    @property
+    def files(self):
+        return self._pairs.files
+
+    def set_epoch(self, epoch):
+        """The crops (and, with shuffle, the shard order) of the next iteration."""
+        self._pairs.set_epoch(epoch)
+
+    def _ring(self):
+        """[(view1, view2)] tensors decoded into, and their output form (float32 in [0, 1] for
+        normalize=False, divided into a second ring)."""
+        if self._buffers is None:
+            h, w = self._pairs.crop
+            raw = torch.float32 if self._pairs._dtype() == "float32" else torch.uint8
+            shape = (self.batch_size, 3, h, w)
+
+            def tensor(dtype):
+                return torch.empty(shape, dtype=dtype, pin_memory=self.pin_memory)
+
+            depth = self.keep + self.prefetch
+            decoded = [(tensor(raw), tensor(raw)) for _ in range(depth)]
+            outputs = decoded
+            if self._pairs.dtype == "float32" and not self._pairs.normalize:
+                outputs = [(tensor(torch.float32), tensor(torch.float32))
+                           for _ in range(depth)]
+            self._buffers = decoded, outputs
+        return self._buffers
+
+    def __iter__(self):
+        pairs = self._pairs
+        mine, by_file, part, parts = pairs._mine()
+        shards, ranges = pairs._index()
+        capacity = sum(ranges[f][1] for f in mine)
+        decoded, outputs = self._ring()
+        core = ShardBatches(shards, [(a.numpy(), b.numpy()) for a, b in decoded],
+                            threads=self.threads, prefetch=self.prefetch, keep=self.keep,
+                            drop_last=pairs.drop_last, capacity=capacity)
+        plan, planned = pairs._plan(mine, by_file, part, parts), False
+        try:
+            while True:
+                planned = planned or self._top_up(core, plan)
+                got = core.next()
+                if got is None:
+                    return
+                buffer, size, skipped = got
+                for message in skipped:
+                    warnings.warn(f"{message}, skipped", RuntimeWarning)
+                if buffer < 0:
+                    continue
+                yield self._output(decoded[buffer], outputs[buffer], size)
+        finally:
+            core.close()
+
+    def _top_up(self, core, plan):
+        """Plans pairs, a batch at a time, until the threads have all they may fill. Returns
+        True once the plan is complete."""
+        while core.planned() < core.wanted():
+            chunk = []
+            for _, i, other, box1, box2 in plan:
+                chunk.append((i, other, box1[0], box1[1], box2[0], box2[1]))
+                if len(chunk) == self.batch_size:
+                    break
+            if len(chunk) < self.batch_size:
+                core.plan(chunk, True)
+                return True
+            core.plan(chunk, False)
+        return False
+
+    def _output(self, decoded, output, size):
+        if output is not decoded:  # normalize=False: uint8 divided into float32 in [0, 1]
+            for src, dst in zip(decoded, output):
+                torch.div(src[:size], 255.0, out=dst[:size])
+        a, b = output
+        return (a, b) if size == len(a) else (a[:size], b[:size])
+
+    def __len__(self):
+        """Batches per epoch (pairs with one view, which have no pair, counted as pairs)."""
+        mine, by_file, part, parts = self._pairs._mine()
+        _, ranges = self._pairs._index()
+        total = sum(ranges[f][1] for f in mine)
+        pairs = total if by_file else len(range(part, total, parts))
+        b = self.batch_size
+        return pairs // b if self._pairs.drop_last else -(-pairs // b)
+
+
+def normalize(images, out=None):
+    """uint8 [..., 3, h, w] crops (ShardLoader(dtype="uint8"), on any device) to float32
+    normalised with ImageNet's mean and std, as dtype="float32" decodes them."""
+    mean = torch.tensor(IMAGENET_MEAN, device=images.device).view(3, 1, 1)
+    std = torch.tensor(IMAGENET_STD, device=images.device).view(3, 1, 1)
+    out = torch.div(images, 255.0, out=out)
+    return out.sub_(mean).div_(std)
 
 
 def _batch_tensor(shape, dtype):

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <numeric>
 #include <thread>
 
 #include "dataset/generate_job.h"
@@ -25,6 +26,7 @@
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
+#include "util/random.h"
 
 namespace paircast {
 namespace {
@@ -117,6 +119,52 @@ TEST(BatchLoader, TheSeedChangesTheMasksAndTheDataOrder) {
   EXPECT_FALSE(torch::allclose(a.img1.mean({1, 2, 3}), b.img1.mean({1, 2, 3}), 0.05, 0.05));
   EXPECT_FALSE(torch::equal(sampleMask(presetConfig("tiny"), 0, "mask", 7),
                             sampleMask(presetConfig("tiny"), 1, "mask", 7)));
+}
+
+// The batches as the loader has always made them, from their position alone: iteration i of
+// rank r holds pairs perm_e[(b W + r) B + j] of epoch e = i / perEpoch, b = i % perEpoch, each
+// with its crops, jitter, other view and mask drawn from streams keyed by the pair. The loader
+// must give exactly these, whatever its threads and however it fills its buffers.
+Batch referenceBatch(const PairDataset& ds, const TrainConfig& c, int64_t iter, int rank,
+                     int world) {
+  const int64_t perEpoch = static_cast<int64_t>(ds.size()) / (c.batchSize * world);
+  const int64_t epoch = iter / perEpoch, b = iter % perEpoch;
+  std::vector<int64_t> perm(ds.size());
+  std::iota(perm.begin(), perm.end(), 0);
+  Rng order(mixSeed(c.seed, "epoch", static_cast<uint64_t>(epoch)));
+  for (size_t i = perm.size() - 1; i > 0; --i) std::swap(perm[i], perm[order.below(i + 1)]);
+  const std::string e = std::to_string(epoch);
+  std::vector<torch::Tensor> a, v, m;
+  for (int j = 0; j < c.batchSize; ++j) {
+    const auto k = static_cast<size_t>(perm[(b * world + rank) * c.batchSize + j]);
+    const auto [x, y] = ds.encoded(k, mixSeed(c.seed, "viewaug" + e, k));
+    Rng rng(mixSeed(c.seed, "aug" + e, k));
+    AugmentOptions ao;
+    ao.size = c.model.img_size;
+    const auto [p, q] = augmentEncodedPair(x, y, ao, rng);
+    a.push_back(p);
+    v.push_back(q);
+    m.push_back(sampleMask(c.model, c.seed, "mask" + e, k));
+  }
+  return {torch::stack(a), torch::stack(v), torch::stack(m)};
+}
+
+TEST(BatchLoader, GivesThePositionKeyedBatchesWhateverItsThreads) {
+  const PairDataset ds = PairDataset::fromShards({pairsDir() + "/pairs-*.tar"});
+  TrainConfig c = tinyRun(testing::scratchDir("ring"));
+  c.batchSize = 3;
+  for (const int world : {1, 2})
+    for (const int workers : {1, 3}) {
+      c.workers = workers;
+      const int rank = world - 1;
+      BatchLoader loader({Source{&ds, 1.0, "shards"}}, c, 2, rank, world);
+      for (int64_t iter = 2; iter < 2 + 2 * loader.perEpoch() + 1; ++iter) {
+        const Batch got = loader.get(iter), want = referenceBatch(ds, c, iter, rank, world);
+        ASSERT_TRUE(torch::equal(got.img1, want.img1)) << iter << " " << workers << " " << world;
+        ASSERT_TRUE(torch::equal(got.img2, want.img2)) << iter;
+        ASSERT_TRUE(torch::equal(got.mask, want.mask)) << iter;
+      }
+    }
 }
 
 // The mae task's forward pass ignores the reference view whatever it holds; croco's does not.
