@@ -546,21 +546,22 @@ class PyShardSet {
   ShardSet set_;
 };
 
-// ShardBatches (shard/shard_batches.h) for paircast.torch.ShardLoader: batches of pairs decoded
-// by threads, with the GIL released, into the loader's own tensors (numpy views of them, kept
-// alive here), planned from Python with ShardPairs' random draws.
+// ShardBatches (shard/shard_batches.h) for paircast.torch.ShardLoader: batches of pairs drawn and
+// decoded by threads, with the GIL released, into the loader's own tensors (numpy views of
+// them, kept alive here).
 class PyShardBatches {
  public:
   // buffers: [(view1, view2)] numpy arrays, each C-contiguous [B, 3, H, W], float32 or uint8.
-  PyShardBatches(py::object shards, py::list buffers, int threads, int prefetch, int keep,
-                 bool dropLast, size_t capacity)
+  PyShardBatches(py::object shards, py::list buffers, std::vector<size_t> order, uint64_t seed,
+                 uint64_t epoch, int threads, int prefetch, int keep, bool dropLast)
       : shards_(std::move(shards)), arrays_(buffers) {
     ShardBatches::Options o;
     o.threads = threads;
     o.prefetch = prefetch;
     o.keep = keep;
     o.dropLast = dropLast;
-    o.capacity = capacity;
+    o.seed = seed;
+    o.epoch = epoch;
     std::vector<std::array<void*, 2>> pointers;
     bool first = true, isFloat = false;
     for (py::handle pair : buffers) {
@@ -569,10 +570,12 @@ class PyShardBatches {
       std::array<void*, 2> p{};
       for (int k = 0; k < 2; ++k) {
         auto a = views[k].cast<py::array>();
-        const bool f = py::isinstance<py::array_t<float>>(a), u = py::isinstance<py::array_t<uint8_t>>(a);
+        const bool f = py::isinstance<py::array_t<float>>(a),
+                   u = py::isinstance<py::array_t<uint8_t>>(a);
         if ((!f && !u) || a.ndim() != 4 || a.shape(1) != 3 || !a.writeable() ||
             !(a.flags() & py::array::c_style))
-          throw py::value_error("buffers must be writable C-contiguous [B, 3, H, W] float32 or uint8");
+          throw py::value_error(
+              "buffers must be writable C-contiguous [B, 3, H, W] float32 or uint8 arrays");
         if (first) {
           isFloat = f;
           o.batchSize = static_cast<int>(a.shape(0));
@@ -588,38 +591,17 @@ class PyShardBatches {
       pointers.push_back(p);
     }
     o.layout = isFloat ? PixelLayout::kNormalizedFloatCHW : PixelLayout::kUint8CHW;
-    batches_ = std::make_unique<ShardBatches>(shards_.cast<const PyShardSet&>().set(), o,
-                                              std::move(pointers));
+    const ShardSet& set = shards_.cast<const PyShardSet&>().set();
+    batches_ = std::make_unique<ShardBatches>(set, std::move(order), o, std::move(pointers));
   }
 
-  // Appends [(sample, view, top1, left1, top2, left2)]; final: the plan is complete.
-  void plan(const std::vector<std::array<int64_t, 6>>& pairs, bool final) {
-    std::vector<PairPlan> plans;
-    plans.reserve(pairs.size());
-    for (const auto& p : pairs) {
-      if (p[0] < 0) throw py::index_error("a negative sample index");
-      PairPlan q;
-      q.sample = static_cast<size_t>(p[0]);
-      q.view = static_cast<int>(p[1]);
-      q.first = {static_cast<int>(p[2]), static_cast<int>(p[3]), height(), width()};
-      q.second = {static_cast<int>(p[4]), static_cast<int>(p[5]), height(), width()};
-      if (q.view < 1 || q.view >= shards_.cast<const PyShardSet&>().set()[q.sample].record.views)
-        throw py::index_error("view " + std::to_string(q.view) + " of sample " +
-                              std::to_string(q.sample));
-      plans.push_back(q);
-    }
-    live()->plan(plans, final);
-  }
-  size_t planned() { return live()->planned(); }
-  size_t wanted() { return live()->wanted(); }
-
-  // (buffer, size, [messages of skipped pairs]), buffer -1 when the plan must grow first; None
-  // after the last batch.
+  // (buffer, size, [messages of the pairs skipped]), or None after the last batch.
   py::object next() {
+    if (!batches_) throw Error("the loader's batches are closed");
     std::optional<ShardBatches::Batch> b;
     {
       py::gil_scoped_release release;
-      b = live()->next();
+      b = batches_->next();
     }
     if (!b) return py::none();
     return py::make_tuple(b->buffer, b->size, b->skipped);
@@ -631,13 +613,6 @@ class PyShardBatches {
   }
 
  private:
-  ShardBatches* live() {
-    if (!batches_) throw Error("the loader's batches are closed");
-    return batches_.get();
-  }
-  int height() { return static_cast<int>(arrays_[0].cast<py::tuple>()[0].cast<py::array>().shape(2)); }
-  int width() { return static_cast<int>(arrays_[0].cast<py::tuple>()[0].cast<py::array>().shape(3)); }
-
   py::object shards_;
   py::list arrays_;
   std::unique_ptr<ShardBatches> batches_;
@@ -776,17 +751,15 @@ PYBIND11_MODULE(_paircast, m) {
            "or uint8 array, such as one slot of a batch tensor's numpy view.");
 
   py::class_<PyShardBatches>(m, "ShardBatches",
-                             "Batches of pairs decoded by threads into the caller's buffers "
-                             "(paircast.torch.ShardLoader's engine)")
-      .def(py::init<py::object, py::list, int, int, int, bool, size_t>(), py::arg("shards"),
-           py::arg("buffers"), py::arg("threads") = 2, py::arg("prefetch") = 2,
-           py::arg("keep") = 1, py::arg("drop_last") = false, py::arg("capacity"))
-      .def("plan", &PyShardBatches::plan, py::arg("pairs"), py::arg("final") = false,
-           "Appends [(sample, view, top1, left1, top2, left2)] to the plan")
-      .def("planned", &PyShardBatches::planned)
-      .def("wanted", &PyShardBatches::wanted, "pairs the plan should hold for the threads")
+                             "Batches of pairs drawn as ShardPairs draws them and decoded by "
+                             "threads into the caller's buffers (ShardLoader's engine)")
+      .def(py::init<py::object, py::list, std::vector<size_t>, uint64_t, uint64_t, int, int, int,
+                    bool>(),
+           py::arg("shards"), py::arg("buffers"), py::arg("order"), py::arg("seed") = 0,
+           py::arg("epoch") = 0, py::arg("threads") = 2, py::arg("prefetch") = 2,
+           py::arg("keep") = 1, py::arg("drop_last") = false)
       .def("next", &PyShardBatches::next,
-           "(buffer, size, skipped messages), buffer -1 if the plan must grow; None at the end")
+           "(buffer, size, messages of the pairs skipped), or None after the last batch")
       .def("close", &PyShardBatches::close);
 
   m.def("prefault", &prefaultPy, py::arg("array"),

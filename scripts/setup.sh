@@ -22,7 +22,7 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config ccache
   libembree-dev libassimp-dev libeigen3-dev libopenimageio-dev openimageio-tools
   libgtest-dev libtorch-dev libopenblas0-openmp libgloo-dev
-  nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev libjpeg-dev
+  nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev libjpeg-dev zlib1g-dev
   libboost-dev  # Boost.Math: the t quantiles of the sweep's confidence intervals
   slurmctld slurmd slurm-client  # the engine tests (tests/launch/) run a one-node Slurm cluster
   # The Python package (python/): pybind11, numpy, and its tests and pip install.

@@ -43,6 +43,10 @@ int main(int argc, char** argv) {
                "fused one (LibTorch >= 2.1)");
   app.add_option("--seed", c.seed, "Random seed");
   app.add_option("--workers", c.workers, "Data worker threads")->check(CLI::Range(1, 256));
+  app.add_option("--batch-format", c.batchFormat,
+                 "What the data threads hand over: float32 (normalised), uint8 (crops, jittered "
+                 "and normalised on the device: a quarter of the bytes), or auto (uint8 on CUDA)")
+      ->check(CLI::IsMember({"auto", "float32", "uint8"}));
   app.add_option("--save-every", c.saveEvery, "Iterations between checkpoints");
   app.add_option("--keep-every", c.keepEvery, "Keep checkpoint-<epoch>.pth every K epochs");
   app.add_option("--log-every", c.logEvery, "Iterations between log lines")

@@ -21,14 +21,32 @@ namespace paircast {
 class PairDataset;
 
 struct Batch {
-  torch::Tensor img1, img2;  // [B, 3, S, S] normalised
+  torch::Tensor img1, img2;  // [B, 3, S, S] normalised float32, or uint8 crops (see jitter)
   torch::Tensor mask;        // [B, N] bool, true = masked
+  // For uint8 batches: each image's colour jitter, [B, 4] float32 (the order of brightness,
+  // contrast and saturation packed as 100 a + 10 b + c, then the three factors), applied by
+  // finishBatch. Undefined for float32 batches.
+  torch::Tensor jitter1, jitter2;
+  bool isUint8() const { return jitter1.defined(); }
 };
+
+// The batch on `device`, float32 and normalised: a float32 batch is copied; a uint8 one is
+// copied (a quarter of the bytes) and jittered and normalised there (jitterAndNormalizeBatch).
+// non_blocking copies: the buffers are pinned on CUDA, and the caller's next synchronisation
+// (the loss's .item()) comes before the loader may fill them again.
+Batch finishBatch(const Batch& batch, const torch::Device& device);
+
+// Whether `c` asks for uint8 batches (batchFormat, "auto" on `device`). Throws paircast::Error
+// on an unknown format.
+bool uint8Batches(const TrainConfig& c);
 
 // CroCo's RandomMask (argsort(noise) < num_mask) with the noise drawn from a stream keyed by
 // the sample, so that masks do not depend on how samples are split over batches and ranks.
 torch::Tensor sampleMask(const CroCoConfig& m, uint64_t seed, const std::string& stream,
                          uint64_t key);
+// The same into `out` (numPatches() bools).
+void sampleMaskInto(const CroCoConfig& m, uint64_t seed, const std::string& stream, uint64_t key,
+                    bool* out);
 
 // One weighted data source: a dataset on disk, or the live stream (dataset == nullptr).
 struct Source {

@@ -403,12 +403,14 @@ class Pretraining {
   // accumulation. Returns the loss averaged over the ranks; a non-finite one skips the step.
   double step(const Batch& batch) {
     torch::Tensor loss;
+    // On CUDA the batch is pinned uint8, finished there; the loss's .item() below waits for the
+    // copies before the loader may fill the buffer again.
+    const Batch b = finishBatch(batch, device_);
     {
       // On CUDA: bf16 or fp16 autocast; the loss itself in float32.
       AutocastGuard autocast(device_.is_cuda() && c_.amp != "none",
                              c_.amp == "fp16" ? at::kHalf : at::kBFloat16);
-      auto out = pretrainForward(model_, c_.task, batch.img1.to(device_), batch.img2.to(device_),
-                                 batch.mask.to(device_));
+      auto out = pretrainForward(model_, c_.task, b.img1, b.img2, b.mask);
       loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
     }
     if (iter_ == c_.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();

@@ -53,6 +53,11 @@ struct TrainConfig {
   int scaleGrowthInterval = 2000;
   uint64_t seed = 0;
   int workers = 2;
+  // What the loader's threads hand over: "float32" (cropped, jittered, normalised), "uint8"
+  // (the crops as decoded, with their jitter draws, finished on the device: a quarter of the
+  // bytes), or "auto": uint8 on CUDA, float32 on the CPU. The batches are the same either way
+  // (float32's bit for bit, uint8's within float rounding).
+  std::string batchFormat = "auto";
   int64_t saveEvery = 100;  // iterations between checkpoints (rounded up to accumIter)
   int keepEvery = 0;        // keep checkpoint-<epoch>.pth every K epochs (0: never)
   int64_t logEvery = 1;

@@ -430,41 +430,20 @@ class ShardLoader:
         pairs = self._pairs
         mine, by_file, part, parts = pairs._mine()
         shards, ranges = pairs._index()
-        capacity = sum(ranges[f][1] for f in mine)
+        order = [i for f in mine for i in range(ranges[f][0], ranges[f][0] + ranges[f][1])]
         decoded, outputs = self._ring()
         core = ShardBatches(shards, [(a.numpy(), b.numpy()) for a, b in decoded],
-                            threads=self.threads, prefetch=self.prefetch, keep=self.keep,
-                            drop_last=pairs.drop_last, capacity=capacity)
-        plan, planned = pairs._plan(mine, by_file, part, parts), False
+                            order if by_file else order[part::parts], seed=pairs.seed,
+                            epoch=pairs.epoch, threads=self.threads, prefetch=self.prefetch,
+                            keep=self.keep, drop_last=pairs.drop_last)
         try:
-            while True:
-                planned = planned or self._top_up(core, plan)
-                got = core.next()
-                if got is None:
-                    return
+            while (got := core.next()) is not None:
                 buffer, size, skipped = got
                 for message in skipped:
                     warnings.warn(f"{message}, skipped", RuntimeWarning)
-                if buffer < 0:
-                    continue
                 yield self._output(decoded[buffer], outputs[buffer], size)
         finally:
             core.close()
-
-    def _top_up(self, core, plan):
-        """Plans pairs, a batch at a time, until the threads have all they may fill. Returns
-        True once the plan is complete."""
-        while core.planned() < core.wanted():
-            chunk = []
-            for _, i, other, box1, box2 in plan:
-                chunk.append((i, other, box1[0], box1[1], box2[0], box2[1]))
-                if len(chunk) == self.batch_size:
-                    break
-            if len(chunk) < self.batch_size:
-                core.plan(chunk, True)
-                return True
-            core.plan(chunk, False)
-        return False
 
     def _output(self, decoded, output, size):
         if output is not decoded:  # normalize=False: uint8 divided into float32 in [0, 1]

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <numeric>
+#include <set>
 #include <thread>
 
 #include "dataset/generate_job.h"
@@ -165,6 +166,35 @@ TEST(BatchLoader, GivesThePositionKeyedBatchesWhateverItsThreads) {
         ASSERT_TRUE(torch::equal(got.mask, want.mask)) << iter;
       }
     }
+}
+
+// uint8 batches (CUDA's, here on the CPU) carry the same crops and draws: finished by
+// finishBatch they equal the float32 batches within float rounding, for every jitter order.
+TEST(BatchLoader, Uint8BatchesFinishedOnTheDeviceEqualTheFloatOnes) {
+  const PairDataset ds = PairDataset::fromShards({pairsDir() + "/pairs-*.tar"});
+  TrainConfig c = tinyRun(testing::scratchDir("uint8"));
+  c.batchSize = 8;
+  c.workers = 2;
+  c.batchFormat = "float32";
+  BatchLoader floats({Source{&ds, 1.0, "shards"}}, c, 0, 0, 1);
+  c.batchFormat = "uint8";
+  BatchLoader bytes({Source{&ds, 1.0, "shards"}}, c, 0, 0, 1);
+  std::set<int> orders;
+  for (int64_t iter = 0; iter < 4; ++iter) {
+    const Batch f = floats.get(iter), u = bytes.get(iter);
+    ASSERT_TRUE(u.isUint8());
+    EXPECT_EQ(u.img1.scalar_type(), torch::kUInt8);
+    EXPECT_TRUE(torch::equal(f.mask, u.mask));
+    const Batch done = finishBatch(u, torch::kCPU);
+    EXPECT_TRUE(torch::allclose(done.img1, f.img1, 0, 1e-5)) << iter;
+    EXPECT_TRUE(torch::allclose(done.img2, f.img2, 0, 1e-5)) << iter;
+    for (int i = 0; i < c.batchSize; ++i) orders.insert(u.jitter1[i][0].item<int>());
+    EXPECT_TRUE(torch::equal(finishBatch(f, torch::kCPU).img1, f.img1));  // float32: copied
+  }
+  EXPECT_GE(orders.size(), 4u);  // several of the six orders were compared
+  c.batchFormat = "float16";
+  EXPECT_ERROR_CONTAINS(BatchLoader({Source{&ds, 1.0, "shards"}}, c, 0, 0, 1),
+                        "the batch format must be auto, float32 or uint8, not 'float16'");
 }
 
 // The mae task's forward pass ignores the reference view whatever it holds; croco's does not.
