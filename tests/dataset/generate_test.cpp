@@ -47,6 +47,18 @@ GenerateConfig smallConfig(const std::vector<std::string>& scenes, const std::st
   return c;
 }
 
+// `b` holds the files of `a`, byte for byte (the summaries aside), and its journal's records.
+void expectSameOutput(const std::string& a, const std::string& b) {
+  EXPECT_EQ(testing::journalRecords(a + "/.paircast/journal.jsonl"),
+            testing::journalRecords(b + "/.paircast/journal.jsonl"));
+  const auto filesA = testing::fileTree(a), filesB = testing::fileTree(b);
+  EXPECT_EQ(filesA.size(), filesB.size());
+  for (const auto& [name, bytes] : filesA) {
+    ASSERT_TRUE(filesB.count(name)) << name << " missing from " << b;
+    EXPECT_TRUE(bytes == filesB.at(name)) << name << " differs in " << b;
+  }
+}
+
 TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
   const std::string dir = testing::scratchDir("band");
   GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
@@ -164,12 +176,7 @@ TEST(GeneratePairs, OutputIsIdenticalWhateverTheJobCount) {
   three.croco = true;
   runGenerate(one);
   runGenerate(three);
-  const auto a = testing::fileTree(dir + "/one"), b = testing::fileTree(dir + "/three");
-  ASSERT_EQ(a.size(), b.size());
-  for (const auto& [name, bytes] : a) {
-    ASSERT_TRUE(b.count(name)) << name;
-    EXPECT_TRUE(bytes == b.at(name)) << name << " differs";
-  }
+  expectSameOutput(dir + "/one", dir + "/three");
 }
 
 TEST(GeneratePairs, BadScenesAreSkippedAndListed) {
@@ -254,16 +261,9 @@ TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {
   }
   ASSERT_EQ(runCommand(args(dir + "/killed"), -1), 0);
   EXPECT_GE(kills, 1) << "no run was killed before it finished; the test did not test resuming";
-  const auto a = testing::fileTree(dir + "/clean"), b = testing::fileTree(dir + "/killed");
   // The journal of the resumed run may hold a record twice (a sample redone after the kill);
   // the last record of each key is the same as the clean run's.
-  EXPECT_EQ(testing::journalRecords(dir + "/clean/.paircast/journal.jsonl"),
-            testing::journalRecords(dir + "/killed/.paircast/journal.jsonl"));
-  ASSERT_EQ(a.size(), b.size());
-  for (const auto& [name, bytes] : a) {
-    ASSERT_TRUE(b.count(name)) << name << " missing after resume";
-    EXPECT_TRUE(bytes == b.at(name)) << name << " differs after resume";
-  }
+  expectSameOutput(dir + "/clean", dir + "/killed");
 }
 
 // Two parts of one job (--shard-index i --num-shards 2) over the shipped scenes, as a Slurm array
