@@ -1,6 +1,7 @@
 // generate_pairs in stages: plan the work (scenes, what a killed run already finished), load each
-// scene when a worker first needs it, make samples on the workers, write them in order on the
-// calling thread (journal, shards, CroCo files), then summarise from the journal.
+// scene when a worker first needs it and check that it has valid views, make samples on the
+// workers, write them in order on the calling thread (journal, shards, CroCo files), then
+// summarise from the journal.
 #include "dataset/generate_job.h"
 
 #include <omp.h>
@@ -40,6 +41,10 @@ using Clock = SteadyClock;
 constexpr auto since = secondsSince;
 
 constexpr int kHistogramBins = 20;
+// A scene is skipped as having no valid views when this many of its first indices (or all it has,
+// if fewer) have no sample: one index's failure says little, since a scene whose floor is only
+// partly valid fails most of its indices and still makes many pairs (docs/dataset.md).
+constexpr uint64_t kViewCheckIndices = 32;
 
 int histogramBin(double covis) {
   return std::clamp(static_cast<int>(covis * kHistogramBins), 0, kHistogramBins - 1);
@@ -97,8 +102,13 @@ struct SceneJob {
   std::string error;               // why the scene is skipped; empty when usable
   std::atomic<size_t> pending{0};  // items of this run not yet finished
   nlohmann::json stats;            // scene_stats entry, once loaded
+  // [indices checked] the attempts the check for valid views made (null where it read the
+  // journal), each taken by its item's worker. Filled once, before any item of the scene is made,
+  // and never resized after: workers touch only their own index's slot.
+  std::vector<std::optional<Attempt>> checked;
 
   void release() {
+    checked.clear();
     generator.reset();
     sampler.reset();
     caster.reset();
@@ -204,8 +214,10 @@ class GenerateRun {
   void prepareScene(SceneJob& job);
   void loadScene(SceneJob& job);
   void checkViews(SceneJob& job);
+  bool hasSample(SceneJob& job, uint64_t index);
   void skipScene(SceneJob& job);
   Attempt generateAt(const SceneJob& job, uint64_t index) const;
+  Attempt takeAttempt(SceneJob& job, uint64_t index) const;
   Result failedResult(const SceneJob& job, const Item& item, const GenerationCost& spent);
   Result keptResult(const SceneJob& job, const Item& item, const PairSample& sample,
                     const GenerationCost& spent);
@@ -412,17 +424,17 @@ void GenerateRun::finishItem(size_t i, Result r) {
   produced_.notify_all();
 }
 
-// One sample: generated, encoded, its CroCo files written; the journal record and shard entry
-// go to the writer.
+// One sample: generated (or taken from the scene's check), encoded, its CroCo files written; the
+// journal record and shard entry go to the writer.
 Result GenerateRun::makeItem(const Item& item) {
   SceneJob& job = *scenes_[item.scene];
   prepareScene(job);
   if (!job.error.empty()) {
-    Result skipped;  // nothing recorded
+    Result skipped;  // nothing recorded: a resumed run checks the scene again
     skipped.done = true;
     return skipped;
   }
-  const Attempt a = generateAt(job, item.index);
+  const Attempt a = takeAttempt(job, item.index);
   candidates_ += a.spent.candidateCovis.size();
   screened_ += a.spent.screened;
   falseRejections_ += a.spent.falseRejections;
@@ -476,11 +488,26 @@ void GenerateRun::loadScene(SceneJob& job) {
   job.generator = std::make_unique<PairGenerator>(*job.scene, *job.caster, *job.sampler, po);
 }
 
-// A scene whose first sample cannot be made has no usable views: skip it whole.
+// The scene has valid views unless its first kViewCheckIndices indices all have no sample. The
+// check stops at the first index with one, so a scene whose index 0 has a sample costs what it
+// always did; what it generates is kept for the items, so no index is made twice.
 void GenerateRun::checkViews(SceneJob& job) {
-  const nlohmann::json rec0 = journal_->find(sampleKey(job.name, 0));
-  if (rec0.is_object() ? rec0.value("failed", false) : !job.generator->generate(cfg_.seed, 0))
-    job.error = "no valid views (no sample found for index 0)";
+  const uint64_t n = std::min<uint64_t>(kViewCheckIndices, cfg_.pairsPerScene);
+  for (uint64_t k = 0; k < n; ++k)
+    if (hasSample(job, k)) return;
+  job.checked.clear();  // failures only, of a scene that writes nothing
+  job.error = "no valid views (no sample found for " +
+              (n == 1 ? "index 0" : "indices 0 to " + std::to_string(n - 1)) + ")";
+}
+
+// Whether `index` has a sample: as the journal has it (a resumed run), else generated and kept in
+// job.checked for its item.
+bool GenerateRun::hasSample(SceneJob& job, uint64_t index) {
+  const Journal::Has noted = journal_->has(sampleKey(job.name, index));
+  if (noted != Journal::Has::kNo) return noted == Journal::Has::kYes;
+  job.checked.resize(index + 1);
+  job.checked[index] = generateAt(job, index);
+  return job.checked[index]->sample.has_value();
 }
 
 void GenerateRun::skipScene(SceneJob& job) {
@@ -493,6 +520,15 @@ void GenerateRun::skipScene(SceneJob& job) {
 Attempt GenerateRun::generateAt(const SceneJob& job, uint64_t index) const {
   Attempt a;
   a.sample = job.generator->generate(cfg_.seed, index, &a.spent);
+  return a;
+}
+
+// The attempt the scene's check made at `index`, else a new one (the same: a sample is a pure
+// function of seed, scene and index).
+Attempt GenerateRun::takeAttempt(SceneJob& job, uint64_t index) const {
+  if (index >= job.checked.size() || !job.checked[index]) return generateAt(job, index);
+  Attempt a = std::move(*job.checked[index]);
+  job.checked[index].reset();
   return a;
 }
 
