@@ -1,6 +1,7 @@
 // generate_pairs in stages: plan the work (scenes, what a killed run already finished), load each
-// scene when a worker first needs it, make samples on the workers, write them in order on the
-// calling thread (journal, shards, CroCo files), then summarise from the journal.
+// scene when a worker first needs it and check that it has valid views, make samples on the
+// workers, write them in order on the calling thread (journal, shards, CroCo files), then
+// summarise from the journal.
 #include "dataset/generate_job.h"
 
 #include <omp.h>
@@ -40,6 +41,10 @@ using Clock = SteadyClock;
 constexpr auto since = secondsSince;
 
 constexpr int kHistogramBins = 20;
+// A scene is skipped as having no valid views when this many of its first indices (or all it has,
+// if fewer) have no sample: one index's failure says little, since a scene whose floor is only
+// partly valid fails most of its indices and still makes many pairs (docs/dataset.md).
+constexpr uint64_t kViewCheckIndices = 32;
 
 int histogramBin(double covis) {
   return std::clamp(static_cast<int>(covis * kHistogramBins), 0, kHistogramBins - 1);
@@ -78,6 +83,12 @@ uint64_t residentBytes() {
   return resident * static_cast<uint64_t>(::sysconf(_SC_PAGESIZE));
 }
 
+// What one generate() call gave: a sample or none, and what it cost either way.
+struct Attempt {
+  std::optional<PairSample> sample;
+  GenerationCost spent;
+};
+
 // Per-scene state, created once by the first worker that needs it, and freed when the worker
 // that finishes its last sample is done with it: items are in scene order, so a run over
 // thousands of scenes holds only the few its workers are on.
@@ -91,8 +102,13 @@ struct SceneJob {
   std::string error;               // why the scene is skipped; empty when usable
   std::atomic<size_t> pending{0};  // items of this run not yet finished
   nlohmann::json stats;            // scene_stats entry, once loaded
+  // [indices checked] the attempts the check for valid views made (null where it read the
+  // journal), each taken by its item's worker. Filled once, before any item of the scene is made,
+  // and never resized after: workers touch only their own index's slot.
+  std::vector<std::optional<Attempt>> checked;
 
   void release() {
+    checked.clear();
     generator.reset();
     sampler.reset();
     caster.reset();
@@ -175,6 +191,7 @@ class GenerateRun {
  private:
   // Planning.
   void planScenes();
+  void openOutputs();
   void planItems();
   std::string crocoStem(const SceneJob& s, uint64_t k) const {
     return (fs::path(cfg_.out) / s.name / crocoIndex(k)).string();
@@ -190,10 +207,20 @@ class GenerateRun {
   // Whether a file at the top of --out is this part's: its shards, index, pairs.txt, summary.
   bool ownsFile(const std::string& name) const;
   // Workers.
+  void worker();
+  bool waitForWindow(size_t i);
+  void finishItem(size_t i, Result r);
+  Result makeItem(const Item& item);
   void prepareScene(SceneJob& job);
   void loadScene(SceneJob& job);
-  void worker();
-  Result makeItem(const Item& item);
+  void checkViews(SceneJob& job);
+  bool hasSample(SceneJob& job, uint64_t index);
+  void skipScene(SceneJob& job);
+  Attempt generateAt(const SceneJob& job, uint64_t index) const;
+  Attempt takeAttempt(SceneJob& job, uint64_t index) const;
+  Result failedResult(const SceneJob& job, const Item& item, const GenerationCost& spent);
+  Result keptResult(const SceneJob& job, const Item& item, const PairSample& sample,
+                    const GenerationCost& spent);
   // Adds an attempt's generation times, and encode and write seconds, to the time split.
   void addTimes(const GenerationCost& spent, double encode, double write);
   void fail();
@@ -203,7 +230,10 @@ class GenerateRun {
   void addToShard(const EncodedPair& pair);
   void closeShard();
   // Summary.
+  void writeShardIndex(const nlohmann::json& perScene);
   void summariseScene(const SceneJob& job, nlohmann::json& perScene, std::string& pairsTxt);
+  void writeSceneMetadata(const SceneJob& job, const std::string& up,
+                          nlohmann::json multiviews) const;
   void tallyCandidates(const nlohmann::json& note);
   std::map<uint64_t, nlohmann::json> readEntries(const SceneJob& job) const;
   nlohmann::json summaryJson(double seconds) const;
@@ -255,19 +285,24 @@ GenerateRun::GenerateRun(const GenerateConfig& cfg) : cfg_(cfg) {
   jobs_ =
       cfg.jobs > 0 ? cfg.jobs : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   planScenes();
-  makeDirs(cfg.out);
+  openOutputs();
+  if (cfg.shards) inShards_ = completedShards(cfg.out, part_, shardList_);
+  planItems();
+}
+
+// The output folder, cleared of this part's temporaries, and the journal.
+void GenerateRun::openOutputs() {
+  makeDirs(cfg_.out);
   // Temporaries left by a killed run of this part, on this machine or another: only this part's
   // files, the other parts writing into the same folder (their scene folders are theirs too).
-  removeStaleTemporaries(cfg.out, [this](const std::string& name) { return ownsFile(name); });
-  const fs::path bookkeeping = fs::path(cfg.out) / ".paircast";
+  removeStaleTemporaries(cfg_.out, [this](const std::string& name) { return ownsFile(name); });
+  const fs::path bookkeeping = fs::path(cfg_.out) / ".paircast";
   makeDirs(bookkeeping.string());
   const std::string journalName = "journal" + part_ + ".jsonl";
   removeStaleTemporaries(bookkeeping.string(),
                          [&](const std::string& name) { return name == journalName; });
   journal_ =
       std::make_unique<Journal>((bookkeeping / journalName).string(), recordKey, recordFailed);
-  if (cfg.shards) inShards_ = completedShards(cfg.out, part_, shardList_);
-  planItems();
 }
 
 bool GenerateRun::ownsFile(const std::string& name) const {
@@ -355,22 +390,71 @@ void GenerateRun::fail() {
   consumed_.notify_all();
 }
 
+void GenerateRun::worker() {
+  // OpenMP's thread count is per thread: each worker renders on one core.
+  omp_set_num_threads(1);
+  try {
+    while (!stop_) {
+      const size_t i = nextItem_++;
+      if (i >= items_.size() || !waitForWindow(i)) return;
+      finishItem(i, makeItem(items_[i]));
+    }
+  } catch (...) {
+    fail();
+  }
+}
+
+// Waits until item i is within the window of slots ahead of the writer; false when the run stops.
+bool GenerateRun::waitForWindow(size_t i) {
+  const size_t window = static_cast<size_t>(4 * jobs_ + 4);
+  std::unique_lock<std::mutex> lock(mu_);
+  consumed_.wait(lock, [&] { return stop_ || i < nextToWrite_ + window; });
+  return !stop_;
+}
+
+// Frees the item's scene when it was the scene's last, and hands the result to the writer.
+void GenerateRun::finishItem(size_t i, Result r) {
+  SceneJob& job = *scenes_[items_[i].scene];
+  if (--job.pending == 0) {  // no other worker holds an item of it
+    if (job.scene) --scenesLoaded_;
+    job.release();
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  results_[i] = std::move(r);
+  produced_.notify_all();
+}
+
+// One sample: generated (or taken from the scene's check), encoded, its CroCo files written; the
+// journal record and shard entry go to the writer.
+Result GenerateRun::makeItem(const Item& item) {
+  SceneJob& job = *scenes_[item.scene];
+  prepareScene(job);
+  if (!job.error.empty()) {
+    Result skipped;  // nothing recorded: a resumed run checks the scene again
+    skipped.done = true;
+    return skipped;
+  }
+  const Attempt a = takeAttempt(job, item.index);
+  candidates_ += a.spent.candidateCovis.size();
+  screened_ += a.spent.screened;
+  falseRejections_ += a.spent.falseRejections;
+  Result r =
+      a.sample ? keptResult(job, item, *a.sample, a.spent) : failedResult(job, item, a.spent);
+  r.done = true;
+  return r;
+}
+
+// Once per scene, by the first worker that needs it: load it and check that it has valid views,
+// or skip it whole.
 void GenerateRun::prepareScene(SceneJob& job) {
   std::call_once(job.once, [&] {
     try {
       loadScene(job);
-      // A scene whose first sample cannot be made has no usable views: skip it whole.
-      const nlohmann::json rec0 = journal_->find(sampleKey(job.name, 0));
-      if (rec0.is_object() ? rec0.value("failed", false) : !job.generator->generate(cfg_.seed, 0))
-        job.error = "no valid views (no sample found for index 0)";
+      checkViews(job);
     } catch (const Error& e) {
       job.error = e.what();
     }
-    if (job.error.empty()) return;
-    std::lock_guard<std::mutex> lock(warnMu_);
-    std::fprintf(stderr, "%sgenerate_pairs: warning: skipping scene %s: %s\n",
-                 cfg_.progress ? "\n" : "", job.path.c_str(), job.error.c_str());
-    skipped_.push_back({{"scene", job.path}, {"reason", job.error}});
+    if (!job.error.empty()) skipScene(job);
   });
 }
 
@@ -404,72 +488,83 @@ void GenerateRun::loadScene(SceneJob& job) {
   job.generator = std::make_unique<PairGenerator>(*job.scene, *job.caster, *job.sampler, po);
 }
 
-void GenerateRun::worker() {
-  // OpenMP's thread count is per thread: each worker renders on one core.
-  omp_set_num_threads(1);
-  try {
-    const size_t window = static_cast<size_t>(4 * jobs_ + 4);
-    while (!stop_) {
-      const size_t i = nextItem_++;
-      if (i >= items_.size()) return;
-      {
-        std::unique_lock<std::mutex> lock(mu_);
-        consumed_.wait(lock, [&] { return stop_ || i < nextToWrite_ + window; });
-        if (stop_) return;
-      }
-      Result r = makeItem(items_[i]);
-      SceneJob& job = *scenes_[items_[i].scene];
-      if (--job.pending == 0) {  // no other worker holds an item of it
-        if (job.scene) --scenesLoaded_;
-        job.release();
-      }
-      std::lock_guard<std::mutex> lock(mu_);
-      results_[i] = std::move(r);
-      produced_.notify_all();
-    }
-  } catch (...) {
-    fail();
-  }
+// The scene has valid views unless its first kViewCheckIndices indices all have no sample. The
+// check stops at the first index with one, so a scene whose index 0 has a sample costs what it
+// always did; what it generates is kept for the items, so no index is made twice.
+void GenerateRun::checkViews(SceneJob& job) {
+  const uint64_t n = std::min<uint64_t>(kViewCheckIndices, cfg_.pairsPerScene);
+  for (uint64_t k = 0; k < n; ++k)
+    if (hasSample(job, k)) return;
+  job.checked.clear();  // failures only, of a scene that writes nothing
+  job.error = "no valid views (no sample found for " +
+              (n == 1 ? "index 0" : "indices 0 to " + std::to_string(n - 1)) + ")";
 }
 
-// One sample: generated, encoded, its CroCo files written; the journal record and shard entry
-// go to the writer.
-Result GenerateRun::makeItem(const Item& item) {
-  SceneJob& job = *scenes_[item.scene];
-  prepareScene(job);
+// Whether `index` has a sample: as the journal has it (a resumed run), else generated and kept in
+// job.checked for its item.
+bool GenerateRun::hasSample(SceneJob& job, uint64_t index) {
+  const Journal::Has noted = journal_->has(sampleKey(job.name, index));
+  if (noted != Journal::Has::kNo) return noted == Journal::Has::kYes;
+  job.checked.resize(index + 1);
+  job.checked[index] = generateAt(job, index);
+  return job.checked[index]->sample.has_value();
+}
+
+void GenerateRun::skipScene(SceneJob& job) {
+  std::lock_guard<std::mutex> lock(warnMu_);
+  std::fprintf(stderr, "%sgenerate_pairs: warning: skipping scene %s: %s\n",
+               cfg_.progress ? "\n" : "", job.path.c_str(), job.error.c_str());
+  skipped_.push_back({{"scene", job.path}, {"reason", job.error}});
+}
+
+Attempt GenerateRun::generateAt(const SceneJob& job, uint64_t index) const {
+  Attempt a;
+  a.sample = job.generator->generate(cfg_.seed, index, &a.spent);
+  return a;
+}
+
+// The attempt the scene's check made at `index`, else a new one (the same: a sample is a pure
+// function of seed, scene and index).
+Attempt GenerateRun::takeAttempt(SceneJob& job, uint64_t index) const {
+  if (index >= job.checked.size() || !job.checked[index]) return generateAt(job, index);
+  Attempt a = std::move(*job.checked[index]);
+  job.checked[index].reset();
+  return a;
+}
+
+// The journal's note of an index known to have no sample.
+Result GenerateRun::failedResult(const SceneJob& job, const Item& item,
+                                 const GenerationCost& spent) {
+  addTimes(spent, 0.0, 0.0);
+  ++failedPairs_;
   Result r;
-  r.done = true;
-  if (!job.error.empty()) return r;
-  GenerationCost spent;  // what the attempt cost, with or without a sample
-  std::optional<PairSample> sample = job.generator->generate(cfg_.seed, item.index, &spent);
-  candidates_ += spent.candidateCovis.size();
-  screened_ += spent.screened;
-  falseRejections_ += spent.falseRejections;
-  if (!sample) {
-    addTimes(spent, 0.0, 0.0);
-    ++failedPairs_;
-    r.note = {{"failed", true},
-              {"scene", job.name},
-              {"index", item.index},
-              {"candidates", candidateBins(spent.candidateCovis)}};
-    return r;
-  }
+  r.note = {{"failed", true},
+            {"scene", job.name},
+            {"index", item.index},
+            {"candidates", candidateBins(spent.candidateCovis)}};
+  return r;
+}
+
+// The sample encoded, its CroCo files written, its note, metadata entry and shard entry made.
+Result GenerateRun::keptResult(const SceneJob& job, const Item& item, const PairSample& sample,
+                               const GenerationCost& spent) {
   auto t0 = Clock::now();
-  EncodedPair enc = encodePair(*sample, cfg_.saveDepth, cfg_.jpegQuality);
-  enc.record["candidate_covis"] = sample->candidateCovis;
+  EncodedPair enc = encodePair(sample, cfg_.saveDepth, cfg_.jpegQuality);
+  enc.record["candidate_covis"] = sample.candidateCovis;
   enc.record["screened"] = spent.screened;
   enc.record["up"] = job.scene->up == UpAxis::Z ? "z" : "y";  // resolved (--up auto)
   const double encode = since(t0);
   t0 = Clock::now();
   if (item.forCroco) {
     makeDirs((fs::path(cfg_.out) / job.name).string());
-    writeCrocoSample(crocoStem(job, item.index), enc, sample->camera);
+    writeCrocoSample(crocoStem(job, item.index), enc, sample.camera);
   }
   addTimes(spent, encode, since(t0));
   ++accepted_;
+  Result r;
   r.note = {{"scene", job.name},
             {"index", item.index},
-            {"candidates", candidateBins(sample->candidateCovis)},
+            {"candidates", candidateBins(sample.candidateCovis)},
             {"up", enc.record["up"]}};
   if (enc.record.contains("covis")) r.note["covis"] = enc.record["covis"];
   if (item.forCroco) r.entry = multiviewEntry(enc.record, sampleKey(job.name, item.index));
@@ -564,25 +659,28 @@ nlohmann::json GenerateRun::summarise() {
   for (const auto& job : scenes_)
     if (!skippedPaths.count(job->path)) summariseScene(*job, perScene, pairsTxt);
   if (cfg_.croco) writeFileAtomic(outPath("pairs", ".txt"), pairsTxt);
-  if (cfg_.shards) {
-    for (size_t s = 0; s < shardList_.size(); ++s) shardList_[s]["name"] = shardName(part_, s);
-    const nlohmann::json index = {{"format", "paircast-shards"},
-                                  {"format_version", kShardVersion},
-                                  {"pairs", pairs_},
-                                  {"views", cfg_.pair.views},
-                                  {"shards", shardList_},
-                                  {"pairs_per_scene", perScene},
-                                  {"covis_histogram", histogram_},
-                                  {"depth", cfg_.saveDepth},
-                                  {"covis_masks", cfg_.pair.covisMasks},
-                                  {"resolution", cfg_.pair.resolution},
-                                  {"hfov", cfg_.pair.hfov},
-                                  {"seed", cfg_.seed}};
-    writeFileAtomic(outPath("index", ".json"), index.dump(1) + "\n");
-  }
+  if (cfg_.shards) writeShardIndex(perScene);
   const nlohmann::json summary = summaryJson(since(start_));
   writeFileAtomic(outPath("summary", ".json"), summary.dump(1) + "\n");
   return summary;
+}
+
+// index.json: the shards, and what every pair in them has in common.
+void GenerateRun::writeShardIndex(const nlohmann::json& perScene) {
+  for (size_t s = 0; s < shardList_.size(); ++s) shardList_[s]["name"] = shardName(part_, s);
+  const nlohmann::json index = {{"format", "paircast-shards"},
+                                {"format_version", kShardVersion},
+                                {"pairs", pairs_},
+                                {"views", cfg_.pair.views},
+                                {"shards", shardList_},
+                                {"pairs_per_scene", perScene},
+                                {"covis_histogram", histogram_},
+                                {"depth", cfg_.saveDepth},
+                                {"covis_masks", cfg_.pair.covisMasks},
+                                {"resolution", cfg_.pair.resolution},
+                                {"hfov", cfg_.pair.hfov},
+                                {"seed", cfg_.seed}};
+  writeFileAtomic(outPath("index", ".json"), index.dump(1) + "\n");
 }
 
 // Adds a journal note's candidates to the candidate histogram (their covis, in a journal that
@@ -641,7 +739,12 @@ void GenerateRun::summariseScene(const SceneJob& job, nlohmann::json& perScene,
     pairsTxt += crocoPairLines(job.name, crocoIndex(k), cfg_.pair.views);
   }
   perScene[job.name] = scenePairs;
-  if (!cfg_.croco) return;
+  if (cfg_.croco) writeSceneMetadata(job, up, std::move(multiviews));
+}
+
+// The scene's metadata.json (CroCo layout): the job's settings and its samples' entries.
+void GenerateRun::writeSceneMetadata(const SceneJob& job, const std::string& up,
+                                     nlohmann::json multiviews) const {
   const nlohmann::json meta = {{"scene", job.path},
                                {"views_count", cfg_.pair.views},
                                {"size", cfg_.pairsPerScene},

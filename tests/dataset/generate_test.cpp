@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -45,6 +46,18 @@ GenerateConfig smallConfig(const std::vector<std::string>& scenes, const std::st
   c.jobs = 2;
   c.progress = false;
   return c;
+}
+
+// `b` holds the files of `a`, byte for byte (the summaries aside), and its journal's records.
+void expectSameOutput(const std::string& a, const std::string& b) {
+  EXPECT_EQ(testing::journalRecords(a + "/.paircast/journal.jsonl"),
+            testing::journalRecords(b + "/.paircast/journal.jsonl"));
+  const auto filesA = testing::fileTree(a), filesB = testing::fileTree(b);
+  EXPECT_EQ(filesA.size(), filesB.size());
+  for (const auto& [name, bytes] : filesA) {
+    ASSERT_TRUE(filesB.count(name)) << name << " missing from " << b;
+    EXPECT_TRUE(bytes == filesB.at(name)) << name << " differs in " << b;
+  }
 }
 
 TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
@@ -164,12 +177,7 @@ TEST(GeneratePairs, OutputIsIdenticalWhateverTheJobCount) {
   three.croco = true;
   runGenerate(one);
   runGenerate(three);
-  const auto a = testing::fileTree(dir + "/one"), b = testing::fileTree(dir + "/three");
-  ASSERT_EQ(a.size(), b.size());
-  for (const auto& [name, bytes] : a) {
-    ASSERT_TRUE(b.count(name)) << name;
-    EXPECT_TRUE(bytes == b.at(name)) << name << " differs";
-  }
+  expectSameOutput(dir + "/one", dir + "/three");
 }
 
 TEST(GeneratePairs, BadScenesAreSkippedAndListed) {
@@ -187,6 +195,107 @@ TEST(GeneratePairs, BadScenesAreSkippedAndListed) {
   GenerateConfig missing = smallConfig({dir + "/does-not-exist"}, dir + "/out2");
   EXPECT_ERROR_CONTAINS(runGenerate(missing),
                         dir + "/does-not-exist: no such scene file, folder or list");
+}
+
+// The room with a band so narrow, and so few tries, that most indices find no sample: with seed 5,
+// indices 0 to 6 have none and index 7 has one (the tests check that they still do).
+GenerateConfig sparseConfig(const std::string& room, const std::string& out) {
+  GenerateConfig c = smallConfig({room}, out);
+  c.pairsPerScene = 8;
+  c.seed = 5;
+  c.pair.minCovis = 0.85;
+  c.pair.maxAttempts = 1;
+  return c;
+}
+
+// "xxxxxxxo": the journal's records of `scene` in index order, x for an index with no sample.
+std::string recordPattern(const std::string& journal, const std::string& scene, int indices) {
+  const auto records = testing::journalRecords(journal);
+  std::string pattern;
+  for (int k = 0; k < indices; ++k) {
+    const auto r = records.find(scene + std::to_string(k));
+    pattern += r == records.end() ? '-' : r->second.value("failed", false) ? 'x' : 'o';
+  }
+  return pattern;
+}
+
+TEST(GeneratePairs, ASceneWhoseFirstIndicesHaveNoSampleIsWritten) {
+  const std::string dir = testing::scratchDir("sparse");
+  const std::string room = writeRoom(dir);
+  GenerateConfig one = sparseConfig(room, dir + "/one"), three = one;
+  one.jobs = 1;
+  three.out = dir + "/three";
+  three.jobs = 3;
+  const nlohmann::json summary = runGenerate(one);
+  runGenerate(three);
+  ASSERT_TRUE(summary["skipped_scenes"].empty()) << summary["skipped_scenes"];
+  ASSERT_EQ(recordPattern(dir + "/one/.paircast/journal.jsonl", "room", 8), "xxxxxxxo")
+      << "the test needs a seed whose first indices have no sample";
+  EXPECT_EQ(summary["pairs"], 1);
+  EXPECT_EQ(summary["failed_pairs"], 7);
+  EXPECT_EQ(ShardIndex::keys(dir + "/one/pairs-000000.tar"),
+            std::vector<std::string>{"room-00000007"});
+  expectSameOutput(dir + "/one", dir + "/three");
+}
+
+TEST(GeneratePairs, AResumedRunChecksTheFirstIndicesFromTheJournal) {
+  // A run killed after journaling indices 0 to 2 (no sample) and before any shard: the resumed
+  // run reads those from the journal, generates the rest, and ends as an uninterrupted run.
+  const std::string dir = testing::scratchDir("sparse_resume");
+  const std::string room = writeRoom(dir);
+  const GenerateConfig clean = sparseConfig(room, dir + "/clean");
+  GenerateConfig resumed = sparseConfig(room, dir + "/resumed");
+  runGenerate(clean);
+  fs::create_directories(dir + "/resumed/.paircast");
+  std::ifstream in(dir + "/clean/.paircast/journal.jsonl");
+  std::ofstream head(dir + "/resumed/.paircast/journal.jsonl");
+  std::string line;
+  for (int k = 0; k < 3 && std::getline(in, line); ++k) head << line << "\n";
+  head.close();
+  ASSERT_EQ(recordPattern(dir + "/resumed/.paircast/journal.jsonl", "room", 8), "xxx-----");
+  const nlohmann::json summary = runGenerate(resumed);
+  EXPECT_EQ(summary["pairs"], 1);
+  EXPECT_EQ(summary["pairs_this_run"], 1);
+  EXPECT_EQ(summary["failed_pairs"], 4);  // indices 3 to 6, this run
+  expectSameOutput(dir + "/clean", dir + "/resumed");
+}
+
+TEST(GeneratePairs, ASceneWithNoValidViewIsSkippedWithItsReason) {
+  // A walled yard with no roof, its walls lower than the cameras: every view is half sky.
+  const std::string dir = testing::scratchDir("sky");
+  const std::string room = writeRoom(dir);
+  testing::writeBoxesObj(dir + "/yard.obj", {{{-5.1f, -0.1f, -5.1f}, {5.1f, 0.0f, 5.1f}},
+                                             {{-5.1f, 0.0f, -5.1f}, {-5.0f, 1.0f, 5.1f}},
+                                             {{5.0f, 0.0f, -5.1f}, {5.1f, 1.0f, 5.1f}},
+                                             {{-5.0f, 0.0f, -5.1f}, {5.0f, 1.0f, -5.0f}},
+                                             {{-5.0f, 0.0f, 5.0f}, {5.0f, 1.0f, 5.1f}}});
+  GenerateConfig c = smallConfig({dir + "/yard.obj", room}, dir + "/out");
+  c.pairsPerScene = 40;
+  const nlohmann::json summary = runGenerate(c);
+  EXPECT_EQ(summary["pairs"], 40);  // the room's
+  ASSERT_EQ(summary["skipped_scenes"].size(), 1u);
+  EXPECT_EQ(summary["skipped_scenes"][0]["scene"].get<std::string>(), dir + "/yard.obj");
+  EXPECT_EQ(summary["skipped_scenes"][0]["reason"].get<std::string>(),
+            "no valid views (no sample found for indices 0 to 31)");
+  // Nothing of a skipped scene is recorded: a resumed run checks it again.
+  EXPECT_EQ(recordPattern(dir + "/out/.paircast/journal.jsonl", "yard", 32), std::string(32, '-'));
+}
+
+TEST(GeneratePairs, SimpleRoomWhoseIndexZeroHasNoSampleIsWritten) {
+  // habitat's simple_room: most of its indices have no sample, index 0 among them with seed 2.
+  const std::string shared = testing::sharedScenesDir();
+  if (shared.empty()) GTEST_SKIP() << "../shared/scenes not present";
+  const std::string dir = testing::scratchDir("simple_room");
+  GenerateConfig c = smallConfig({shared + "/simple_room.glb"}, dir + "/out");
+  c.load.up = UpAxis::Z;
+  c.pairsPerScene = 8;
+  c.seed = 2;
+  const nlohmann::json summary = runGenerate(c);
+  ASSERT_TRUE(summary["skipped_scenes"].empty()) << summary["skipped_scenes"];
+  const std::string pattern = recordPattern(dir + "/out/.paircast/journal.jsonl", "simple_room", 8);
+  ASSERT_EQ(pattern[0], 'x') << pattern << ": the test needs a seed whose index 0 has no sample";
+  EXPECT_EQ(summary["pairs"].get<size_t>(), std::count(pattern.begin(), pattern.end(), 'o'));
+  EXPECT_GE(summary["pairs"].get<int>(), 1);
 }
 
 TEST(GeneratePairs, ScenesAreFreedOnceTheirPairsAreDone) {
@@ -254,16 +363,9 @@ TEST(GeneratePairs, KilledRunsResumeToTheSameBytes) {
   }
   ASSERT_EQ(runCommand(args(dir + "/killed"), -1), 0);
   EXPECT_GE(kills, 1) << "no run was killed before it finished; the test did not test resuming";
-  const auto a = testing::fileTree(dir + "/clean"), b = testing::fileTree(dir + "/killed");
   // The journal of the resumed run may hold a record twice (a sample redone after the kill);
   // the last record of each key is the same as the clean run's.
-  EXPECT_EQ(testing::journalRecords(dir + "/clean/.paircast/journal.jsonl"),
-            testing::journalRecords(dir + "/killed/.paircast/journal.jsonl"));
-  ASSERT_EQ(a.size(), b.size());
-  for (const auto& [name, bytes] : a) {
-    ASSERT_TRUE(b.count(name)) << name << " missing after resume";
-    EXPECT_TRUE(bytes == b.at(name)) << name << " differs after resume";
-  }
+  expectSameOutput(dir + "/clean", dir + "/killed");
 }
 
 // Two parts of one job (--shard-index i --num-shards 2) over the shipped scenes, as a Slurm array
