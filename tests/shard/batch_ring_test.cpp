@@ -51,8 +51,11 @@ TEST(BatchRing, GivesBatchesInOrderAndNeverWritesAHeldBuffer) {
     });
     std::vector<int> order;  // buffers taken, the last `keep` of them held
     int64_t expected = 0;
-    while (auto b = ring.next()) {
+    while (true) {
+      // Taking the next batch lets go of the one that leaves the last `keep`.
       if (order.size() >= 2) r.held[order[order.size() - 2]] = false;
+      auto b = ring.next();
+      if (!b) break;
       r.held[b->buffer] = true;
       order.push_back(b->buffer);
       EXPECT_EQ(b->batch, expected++);
