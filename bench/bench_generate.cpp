@@ -2,7 +2,9 @@
 //   - the render limit: 1 / (two RGB+depth renders at the output resolution), with --jobs workers
 //     rendering views of that scene on one core each, as generate_pairs' workers do;
 //   - generate_pairs' accepted pairs/s with screening (the default) and without, the efficiency
-//     (pairs/s / limit), the time split, and the scene's load and build figures;
+//     (pairs/s / limit), the stage table (screening, the full renders kept and those wasted on
+//     views that end in no sample, JPEG, covis, poses, writing) with the count of full renders
+//     per pair, and the scene's load and build figures;
 //   - the false-rejection rate of screening (an audited run: screened-out candidates are also
 //     rendered at full resolution, and those that would have been kept are counted);
 //   - depth-only against RGB+depth render time.
@@ -276,8 +278,9 @@ int main(int argc, char** argv) {
           "    screening turned down %.0f views, references and candidates (%.0f candidates "
           "tried; %.0f indices without a sample), false rejections %.4f (%.0f of %.0f)\n    "
           "RGB+depth / depth-only render %.2fx (%.2f / %.2f ms; depth at 1/4 size %.3f ms)\n"
-          "    time: render %4.1f%%  screen %4.1f%%  sampling %4.1f%%  covis %4.1f%%  encode "
-          "%4.1f%%  write %4.1f%%\n",
+          "    stages: screening %4.1f%%  full renders kept %4.1f%%  full renders wasted %4.1f%%  "
+          "JPEG %4.1f%%  covis %4.1f%%  poses %4.1f%%  writing %4.1f%%\n"
+          "    full renders: %.0f, %.0f kept, %.2f per pair\n",
           name.c_str(), stats["triangles"].get<size_t>(), stats["load_seconds"].get<double>(),
           stats["build_seconds"].get<double>(), stats["bytes"].get<double>() / 1e6, rate,
           limit.pairsPerSecond(), rate / limit.pairsPerSecond(), plainRate, rate / plainRate,
@@ -286,9 +289,11 @@ int main(int argc, char** argv) {
           falseRate, screening["false_rejections"].get<double>(),
           screening["screened"].get<double>(), limit.rgbDepthSeconds / limit.depthSeconds,
           1e3 * limit.rgbDepthSeconds, 1e3 * limit.depthSeconds, 1e3 * limit.screenDepthSeconds,
-          100 * split["render"].get<double>(), 100 * split["screen"].get<double>(),
-          100 * split["sampling"].get<double>(), 100 * split["covis"].get<double>(),
-          100 * split["encode"].get<double>(), 100 * split["write"].get<double>());
+          100 * split["screen"].get<double>(), 100 * split["render_kept"].get<double>(),
+          100 * split["render_wasted"].get<double>(), 100 * split["encode"].get<double>(),
+          100 * split["covis"].get<double>(), 100 * split["sampling"].get<double>(),
+          100 * split["write"].get<double>(), sum["renders"]["full"].get<double>(),
+          sum["renders"]["kept"].get<double>(), sum["renders"]["per_pair"].get<double>());
       std::fflush(stdout);
       results.push_back({{"scene", name},
                          {"pairs_per_second", rate},
@@ -300,7 +305,8 @@ int main(int argc, char** argv) {
                          {"rgb_depth_over_depth", limit.rgbDepthSeconds / limit.depthSeconds},
                          {"acceptance", sum["acceptance"]},
                          {"scene_stats", stats},
-                         {"time_split", split}});
+                         {"time_split", split},
+                         {"renders", sum["renders"]}});
       GenerateConfig c;
       c.scenes = {scenes[s].path};
       c.load.up = scenes[s].up;

@@ -262,6 +262,8 @@ class GenerateRun {
       falseRejections_{0};
   std::mutex timeMu_;
   double tRender_ = 0, tScreen_ = 0, tSampling_ = 0, tCovis_ = 0, tEncode_ = 0, tWrite_ = 0;
+  double tRenderKept_ = 0;                   // of tRender_, the renders of the views kept
+  uint64_t fullRenders_ = 0, keptRenders_ = 0;  // full-resolution renders, and those kept
   std::mutex warnMu_;
   std::vector<nlohmann::json> skipped_;
   std::atomic<int> scenesLoaded_{0}, scenesPeak_{0};
@@ -575,6 +577,9 @@ Result GenerateRun::keptResult(const SceneJob& job, const Item& item, const Pair
 void GenerateRun::addTimes(const GenerationCost& spent, double encode, double write) {
   std::lock_guard<std::mutex> lock(timeMu_);
   tRender_ += spent.renderSeconds;
+  tRenderKept_ += spent.keptRenderSeconds;
+  fullRenders_ += spent.fullRenders;
+  keptRenders_ += spent.keptRenders;
   tScreen_ += spent.screenSeconds;
   tSampling_ += std::max(
       0.0, spent.totalSeconds - spent.renderSeconds - spent.screenSeconds - spent.covisSeconds);
@@ -783,8 +788,15 @@ nlohmann::json GenerateRun::summaryJson(double seconds) const {
             {"audited", cfg_.pair.auditScreening}}},
           {"covis_histogram", histogram_},
           {"candidate_covis_histogram", candidateHistogram_},
+          {"renders",
+           {{"full", fullRenders_},
+            {"kept", keptRenders_},
+            {"wasted", fullRenders_ - keptRenders_},
+            {"per_pair", accepted_ ? static_cast<double>(fullRenders_) / accepted_ : 0.0}}},
           {"time_split",
            {{"render", tRender_ / split},
+            {"render_kept", tRenderKept_ / split},
+            {"render_wasted", (tRender_ - tRenderKept_) / split},
             {"screen", tScreen_ / split},
             {"sampling", tSampling_ / split},
             {"covis", tCovis_ / split},
@@ -792,6 +804,8 @@ nlohmann::json GenerateRun::summaryJson(double seconds) const {
             {"write", tWrite_ / split}}},
           {"time_seconds",
            {{"render", tRender_},
+            {"render_kept", tRenderKept_},
+            {"render_wasted", tRender_ - tRenderKept_},
             {"screen", tScreen_},
             {"sampling", tSampling_},
             {"covis", tCovis_},

@@ -106,6 +106,8 @@ struct PairGenerator::View {
   Image8 rgb;         // [H, W, 3], empty until rendered
   double valid = 0;   // share of depth's pixels with depth > 0
   CovisResult covis;  // against view 0, full resolution
+  double renderSeconds = 0;  // its full-resolution renders
+  int renders = 0;
 };
 
 PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
@@ -151,6 +153,10 @@ std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
     found->index = index;
     found->seed = seed;
     finish(views, *found, cost);
+    for (const View& v : views) {  // the renders that end in the sample; the rest were wasted
+      cost.keptRenderSeconds += v.renderSeconds;
+      cost.keptRenders += v.renders;
+    }
     found->candidateCovis = cost.candidateCovis;
   }
   cost.totalSeconds = since(start);
@@ -277,7 +283,11 @@ void PairGenerator::renderFull(View& v, bool rgb, GenerationCost& cost) const {
   } else {
     caster_.renderDepth(v.at.camera, v.depth);
   }
-  cost.renderSeconds += since(t0);
+  const double seconds = since(t0);
+  cost.renderSeconds += seconds;
+  ++cost.fullRenders;
+  v.renderSeconds += seconds;
+  ++v.renders;
 }
 
 // Colour for views rendered depth-first, the visibility matrix, the masks, then the views move

@@ -112,6 +112,8 @@ struct GenerationCost {
   size_t screened = 0;                // candidates and references turned down by screening
   size_t falseRejections = 0;         // of those, the ones full resolution would have kept (audit)
   double renderSeconds = 0;           // full resolution
+  double keptRenderSeconds = 0;       // of those, the renders of the views in the sample
+  size_t fullRenders = 0, keptRenders = 0;
   double screenSeconds = 0;           // screening: low-resolution renders and covis estimates
   double covisSeconds = 0;
   double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
