@@ -88,27 +88,31 @@ TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
 }
 
 // The summary splits the full-resolution renders into those of views kept in a sample and those
-// wasted: with screening, each kept view is rendered once in full (colour with depth), so a pair
-// keeps exactly two, and the seconds add up.
+// wasted, and the seconds add up. With screening (64 px and more) each kept view is rendered once
+// in full, colour with depth; without it (48 px), depth first and colour once kept: two each.
 TEST(GeneratePairs, SummaryCountsTheFullRendersKeptAndWasted) {
-  const std::string dir = testing::scratchDir("renders");
-  GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
-  c.pair.minCovis = 0.5;
-  c.pair.maxCovis = 0.6;  // narrow: some full renders end in no pair
-  const nlohmann::json summary = runGenerate(c);
-  const auto pairs = summary["pairs_this_run"].get<uint64_t>();
-  ASSERT_GT(pairs, 0u);
-  const auto& renders = summary["renders"];
-  EXPECT_EQ(renders["kept"].get<uint64_t>(), 2 * pairs);
-  EXPECT_EQ(renders["full"].get<uint64_t>(),
-            renders["kept"].get<uint64_t>() + renders["wasted"].get<uint64_t>());
-  EXPECT_DOUBLE_EQ(renders["per_pair"].get<double>(),
-                   renders["full"].get<double>() / static_cast<double>(pairs));
-  const auto& t = summary["time_seconds"];
-  EXPECT_GT(t["render_kept"].get<double>(), 0);
-  EXPECT_GE(t["render_wasted"].get<double>(), 0);
-  EXPECT_NEAR(t["render_kept"].get<double>() + t["render_wasted"].get<double>(),
-              t["render"].get<double>(), 1e-9);
+  for (const int resolution : {48, 64}) {
+    const std::string dir = testing::scratchDir("renders" + std::to_string(resolution));
+    GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
+    c.pair.resolution = resolution;
+    c.pair.minCovis = 0.5;
+    c.pair.maxCovis = 0.6;  // narrow: some full renders end in no pair
+    const nlohmann::json summary = runGenerate(c);
+    const auto pairs = summary["pairs_this_run"].get<uint64_t>();
+    ASSERT_GT(pairs, 0u);
+    const auto& renders = summary["renders"];
+    EXPECT_EQ(renders["kept"].get<uint64_t>(), (resolution < 64 ? 4 : 2) * pairs) << resolution;
+    EXPECT_GT(renders["wasted"].get<uint64_t>(), 0u) << resolution;
+    EXPECT_EQ(renders["full"].get<uint64_t>(),
+              renders["kept"].get<uint64_t>() + renders["wasted"].get<uint64_t>());
+    EXPECT_DOUBLE_EQ(renders["per_pair"].get<double>(),
+                     renders["full"].get<double>() / static_cast<double>(pairs));
+    const auto& t = summary["time_seconds"];
+    EXPECT_GT(t["render_kept"].get<double>(), 0);
+    EXPECT_GE(t["render_wasted"].get<double>(), 0);
+    EXPECT_NEAR(t["render_kept"].get<double>() + t["render_wasted"].get<double>(),
+                t["render"].get<double>(), 1e-9);
+  }
 }
 
 TEST(GeneratePairs, CrocoLayoutHasTheOfficialNamesAndKeys) {
