@@ -197,6 +197,24 @@ void jitterAndNormalizeInto(AugmentScratch& s, const AugmentOptions& o, Rng& rng
 AugmentScratch::AugmentScratch(int s)
     : size(s), crop(s, s, 3), planes(size_t{3} * s * s), gray(torch::empty({s, s})) {}
 
+namespace {
+
+// randomCrop's draws and the crop decoded as [3][S S] uint8 into `chw`, when `e` is a JPEG at
+// least S x S; false (and no draws) otherwise.
+bool decodeCrop(const EncodedImage& e, int size, Rng& rng, uint8_t* chw) {
+  if (!isJpeg(e)) return false;
+  const JpegSize full = jpegSize(e.bytes.data(), e.bytes.size(), e.name);
+  if (full.width < size || full.height < size) return false;
+  CropBox box;
+  box.height = box.width = size;
+  box.top = static_cast<int>(rng.below(full.height - size + 1));
+  box.left = static_cast<int>(rng.below(full.width - size + 1));
+  decodeJpegCrop(e.bytes.data(), e.bytes.size(), e.name, box, PixelLayout::kUint8CHW, chw);
+  return true;
+}
+
+}  // namespace
+
 void augmentEncodedPairInto(const EncodedImage& a, const EncodedImage& b, const AugmentOptions& o,
                             Rng& rng, AugmentScratch& s, torch::Tensor out1, torch::Tensor out2) {
   PAIRCAST_CHECK(s.size == o.size);
@@ -207,21 +225,12 @@ void augmentEncodedPairInto(const EncodedImage& a, const EncodedImage& b, const 
     torch::Tensor& out = *outs[k];
     PAIRCAST_CHECK(out.is_contiguous() && out.scalar_type() == torch::kFloat32 &&
                    out.numel() == 3 * static_cast<int64_t>(o.size) * o.size);
-    if (isJpeg(e)) {
-      const JpegSize full = jpegSize(e.bytes.data(), e.bytes.size(), e.name);
-      if (full.width >= o.size && full.height >= o.size) {
-        CropBox box;
-        box.height = box.width = o.size;
-        box.top = static_cast<int>(rng.below(full.height - o.size + 1));
-        box.left = static_cast<int>(rng.below(full.width - o.size + 1));
-        decodeJpegCrop(e.bytes.data(), e.bytes.size(), e.name, box, PixelLayout::kUint8CHW,
-                       s.crop.data.data());
-        unitFloat(s.crop.data.data(), static_cast<int64_t>(o.size) * o.size, s.planes.data());
-        jitterAndNormalizeInto(s, o, rng, out.data_ptr<float>());
-        continue;
-      }
+    if (decodeCrop(e, o.size, rng, s.crop.data.data())) {
+      unitFloat(s.crop.data.data(), static_cast<int64_t>(o.size) * o.size, s.planes.data());
+      jitterAndNormalizeInto(s, o, rng, out.data_ptr<float>());
+    } else {
+      out.copy_(jitterAndNormalize(cropEncoded(e, o.size, rng), o, rng));
     }
-    out.copy_(jitterAndNormalize(cropEncoded(e, o.size, rng), o, rng));
   }
 }
 
@@ -236,20 +245,8 @@ void cropEncodedPairInto(const EncodedImage& a, const EncodedImage& b, const Aug
     torch::Tensor& out = *outs[k];
     PAIRCAST_CHECK(out.is_contiguous() && out.scalar_type() == torch::kUInt8 &&
                    out.numel() == 3 * static_cast<int64_t>(o.size) * o.size);
-    bool done = false;
-    if (isJpeg(e)) {
-      const JpegSize full = jpegSize(e.bytes.data(), e.bytes.size(), e.name);
-      if (full.width >= o.size && full.height >= o.size) {
-        CropBox box;
-        box.height = box.width = o.size;
-        box.top = static_cast<int>(rng.below(full.height - o.size + 1));
-        box.left = static_cast<int>(rng.below(full.width - o.size + 1));
-        decodeJpegCrop(e.bytes.data(), e.bytes.size(), e.name, box, PixelLayout::kUint8CHW,
-                       out.data_ptr<uint8_t>());
-        done = true;
-      }
-    }
-    if (!done) out.copy_((cropEncoded(e, o.size, rng) * 255).round().clamp(0, 255));
+    if (!decodeCrop(e, o.size, rng, out.data_ptr<uint8_t>()))
+      out.copy_((cropEncoded(e, o.size, rng) * 255).round().clamp(0, 255));
     Jitter j;
     if (o.colorJitter) j = drawJitter(o, rng);
     draws[k][0] = static_cast<float>(100 * j.order[0] + 10 * j.order[1] + j.order[2]);
