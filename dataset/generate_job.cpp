@@ -262,7 +262,7 @@ class GenerateRun {
       falseRejections_{0};
   std::mutex timeMu_;
   double tRender_ = 0, tScreen_ = 0, tSampling_ = 0, tCovis_ = 0, tEncode_ = 0, tWrite_ = 0;
-  double tRenderKept_ = 0;                   // of tRender_, the renders of the views kept
+  double tRenderKept_ = 0;                      // of tRender_, the renders of the views kept
   uint64_t fullRenders_ = 0, keptRenders_ = 0;  // full-resolution renders, and those kept
   std::mutex warnMu_;
   std::vector<nlohmann::json> skipped_;

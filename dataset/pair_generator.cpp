@@ -103,9 +103,9 @@ struct PairGenerator::View {
   // Per screening stage: [S, S, 1]. A reference gets its later stages when a candidate first
   // reaches them (most references never need them), hence mutable.
   mutable std::vector<ImageF> screenDepth;
-  Image8 rgb;         // [H, W, 3], empty until rendered
-  double valid = 0;   // share of depth's pixels with depth > 0
-  CovisResult covis;  // against view 0, full resolution
+  Image8 rgb;                // [H, W, 3], empty until rendered
+  double valid = 0;          // share of depth's pixels with depth > 0
+  CovisResult covis;         // against view 0, full resolution
   double renderSeconds = 0;  // its full-resolution renders
   int renders = 0;
 };

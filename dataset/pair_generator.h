@@ -114,7 +114,7 @@ struct GenerationCost {
   double renderSeconds = 0;           // full resolution
   double keptRenderSeconds = 0;       // of those, the renders of the views in the sample
   size_t fullRenders = 0, keptRenders = 0;
-  double screenSeconds = 0;           // screening: low-resolution renders and covis estimates
+  double screenSeconds = 0;  // screening: low-resolution renders and covis estimates
   double covisSeconds = 0;
   double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
 };

@@ -13,9 +13,10 @@ PairPlan drawPair(const ShardSet& set, size_t sample, uint64_t seed, uint64_t ep
                   int width) {
   const IndexedSample& s = set[sample];
   const std::string& scene = s.record.scene;
-  const uLong crc = crc32(0L, reinterpret_cast<const Bytef*>(scene.data()),
-                          static_cast<uInt>(scene.size()));
-  NumpyGenerator rng({seed, epoch, static_cast<uint64_t>(crc), static_cast<uint64_t>(s.record.index)});
+  const uLong crc =
+      crc32(0L, reinterpret_cast<const Bytef*>(scene.data()), static_cast<uInt>(scene.size()));
+  NumpyGenerator rng(
+      {seed, epoch, static_cast<uint64_t>(crc), static_cast<uint64_t>(s.record.index)});
   PairPlan p;
   p.sample = sample;
   const int views = s.record.views;
@@ -51,7 +52,8 @@ ShardBatches::ShardBatches(const ShardSet& set, std::vector<size_t> order, const
                 std::to_string(buffers_.size()) + " given");
   for (size_t i : order_)
     if (i >= set_.size())
-      throw Error("ShardBatches: sample " + std::to_string(i) + " of " + std::to_string(set_.size()));
+      throw Error("ShardBatches: sample " + std::to_string(i) + " of " +
+                  std::to_string(set_.size()));
   BatchRing::Options r;
   r.threads = o.threads;
   r.batchSize = o.batchSize;
@@ -75,7 +77,8 @@ bool ShardBatches::fill(int64_t item, int slot, int buffer) {
   const size_t element = o_.layout == PixelLayout::kUint8CHW ? 1 : sizeof(float);
   const size_t offset = size_t{3} * o_.height * o_.width * element * slot;
   try {
-    set_.decodeView(sample, 0, p.first, o_.layout, static_cast<char*>(buffers_[buffer][0]) + offset);
+    set_.decodeView(sample, 0, p.first, o_.layout,
+                    static_cast<char*>(buffers_[buffer][0]) + offset);
     set_.decodeView(sample, p.view, p.second, o_.layout,
                     static_cast<char*>(buffers_[buffer][1]) + offset);
     return true;
@@ -101,17 +104,15 @@ std::optional<ShardBatches::Batch> ShardBatches::next() {
       return out;
     }
     // Drop the failed pairs and redo this batch and the ones after it.
-    ring_->redo(
-        [&] {
-          const int64_t first = r->batch * o_.batchSize;
-          std::lock_guard<std::mutex> lock(errorsMu_);
-          for (int slot : r->failed) out.skipped.push_back(errors_[first + slot]);
-          for (auto it = r->failed.rbegin(); it != r->failed.rend(); ++it)
-            order_.erase(order_.begin() + first + *it);
-          errors_.clear();
-          return static_cast<int64_t>(order_.size());
-        },
-        true);
+    ring_->redo([&] {
+      const int64_t first = r->batch * o_.batchSize;
+      std::lock_guard<std::mutex> lock(errorsMu_);
+      for (int slot : r->failed) out.skipped.push_back(errors_[first + slot]);
+      for (auto it = r->failed.rbegin(); it != r->failed.rend(); ++it)
+        order_.erase(order_.begin() + first + *it);
+      errors_.clear();
+      return static_cast<int64_t>(order_.size());
+    });
   }
 }
 

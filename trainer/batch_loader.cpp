@@ -102,8 +102,9 @@ class BatchLoader::Impl {
     single_ = sources_.size() == 1 && sources_[0].dataset;
     uint8_ = uint8Batches(c);
     if (uint8_ && live_)
-      throw Error("uint8 batches (--batch-format) read shards and CroCo folders; live pairs "
-                  "(--live) need --batch-format float32");
+      throw Error(
+          "uint8 batches (--batch-format) read shards and CroCo folders; live pairs "
+          "(--live) need --batch-format float32");
     BatchRing::Options o;
     o.threads = std::max(1, c.workers);
     o.batchSize = c.batchSize;

@@ -11,7 +11,6 @@ BatchRing::BatchRing(const Options& o, Fill fill)
       depth_(depthOf(o)),
       fill_(std::move(fill)),
       items_(o.items),
-      final_(o.final),
       taken_(o.first),
       issue_(o.first * o.batchSize),
       buffers_(depth_) {
@@ -28,19 +27,19 @@ BatchRing::~BatchRing() {
   for (auto& t : threads_) t.join();
 }
 
-int64_t BatchRing::batchesKnown() const {
+int64_t BatchRing::batches() const {
   const int64_t b = o_.batchSize;
-  return final_ && !o_.dropLast ? (items_ + b - 1) / b : items_ / b;
+  return o_.dropLast ? items_ / b : (items_ + b - 1) / b;
 }
 
 int64_t BatchRing::issueLimit() const {
-  return final_ && o_.dropLast ? items_ / o_.batchSize * o_.batchSize : items_;
+  return std::min(items_, batches() * o_.batchSize);
 }
 
 int BatchRing::sizeOf(int64_t batch) const {
   const int64_t begin = batch * o_.batchSize, end = begin + o_.batchSize;
   if (end <= items_) return o_.batchSize;
-  if (!final_ || batch >= batchesKnown()) return 0;
+  if (batch >= batches()) return 0;
   return static_cast<int>(items_ - begin);
 }
 
@@ -60,7 +59,8 @@ void BatchRing::work() {
     cv_.wait(lock, [&] { return stop_ || failure_ || canIssue(); });
     if (stop_ || failure_) return;
     const int64_t item = issue_++, batch = item / o_.batchSize;
-    const int slot = static_cast<int>(item % o_.batchSize), buffer = static_cast<int>(batch % depth_);
+    const int slot = static_cast<int>(item % o_.batchSize),
+              buffer = static_cast<int>(batch % depth_);
     if (slot == 0) buffers_[buffer] = BufferState{batch, 0, {}};
     const uint64_t generation = generation_;
     ++inFlight_;
@@ -87,9 +87,7 @@ void BatchRing::work() {
 std::optional<BatchRing::Ready> BatchRing::next() {
   std::unique_lock<std::mutex> lock(mu_);
   const int64_t batch = taken_;
-  cv_.wait(lock, [&] {
-    return failure_ || complete(batch) || (final_ && batch >= batchesKnown());
-  });
+  cv_.wait(lock, [&] { return failure_ || complete(batch) || batch >= batches(); });
   if (failure_) std::rethrow_exception(failure_);
   if (!complete(batch)) return std::nullopt;
   const BufferState& s = buffers_[batch % depth_];
@@ -100,17 +98,7 @@ std::optional<BatchRing::Ready> BatchRing::next() {
   return r;
 }
 
-void BatchRing::extend(int64_t items, bool final) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    PAIRCAST_CHECK(items >= items_ && !final_);
-    items_ = items;
-    final_ = final;
-  }
-  cv_.notify_all();
-}
-
-void BatchRing::redo(const std::function<int64_t()>& edit, bool final) {
+void BatchRing::redo(const std::function<int64_t()>& edit) {
   std::unique_lock<std::mutex> lock(mu_);
   PAIRCAST_CHECK(taken_ > o_.first);
   paused_ = true;
@@ -120,7 +108,6 @@ void BatchRing::redo(const std::function<int64_t()>& edit, bool final) {
   for (BufferState& s : buffers_)
     if (s.batch >= batch) s = BufferState{};
   items_ = edit();
-  final_ = final;
   taken_ = batch;
   issue_ = batch * o_.batchSize;
   paused_ = false;

@@ -4,9 +4,8 @@
 // before (batch b - depth). The loaders of the pre-trainer (trainer/batch_loader.h) and of
 // Python (paircast.torch.ShardLoader, shard/shard_batches.h) are this ring with their own fill.
 //
-// Items are numbered over the whole run: batch b holds items [b B, min((b + 1) B, items)). The
-// count of items may grow while the ring runs (extend(), for a consumer that plans ahead of the
-// workers) and is final once the consumer says so; the last batch may then be short.
+// Items are numbered over the whole run: batch b holds items [b B, min((b + 1) B, items)), so
+// the last batch may be short.
 #pragma once
 
 #include <condition_variable>
@@ -30,19 +29,18 @@ class BatchRing {
   struct Options {
     int threads = 1;
     int batchSize = 1;
-    int prefetch = 2;    // batches filled ahead of the one the consumer takes
-    int keep = 1;        // batches the consumer holds: the last `keep` returned stay intact
-    int64_t first = 0;   // the first batch
-    int64_t items = 0;   // items known so far
-    bool final = true;   // no more items will come
+    int prefetch = 2;   // batches filled ahead of the one the consumer takes
+    int keep = 1;       // batches the consumer holds: the last `keep` returned stay intact
+    int64_t first = 0;  // the first batch
+    int64_t items = 0;  // items in the run
     bool dropLast = false;
   };
 
   struct Ready {
     int64_t batch = 0;
     int buffer = 0;
-    int size = 0;                    // items in the batch (batchSize but for a short last one)
-    std::vector<int> failed;         // slots whose fill returned false
+    int size = 0;             // items in the batch (batchSize but for a short last one)
+    std::vector<int> failed;  // slots whose fill returned false
   };
 
   BatchRing(const Options& o, Fill fill);
@@ -57,17 +55,15 @@ class BatchRing {
   // The next batch, filled; nullopt after the last one. The buffers of the `keep` batches
   // returned last are not written until the consumer takes another. Rethrows a fill's exception.
   std::optional<Ready> next();
-  // More items for the run (`final`: no more after them).
-  void extend(int64_t items, bool final);
   // Redoes the batch next() returned last, and the ones after it. With the workers stopped,
   // `edit` changes the consumer's plan (drops the failed items) and returns the count of items
-  // known now; `final` says whether more will come.
-  void redo(const std::function<int64_t()>& edit, bool final);
+  // left.
+  void redo(const std::function<int64_t()>& edit);
 
  private:
-  // Under mu_: batches that exist with the items known; the items a worker may take; the size
-  // of a batch (0 while unknown); whether it is filled.
-  int64_t batchesKnown() const;
+  // Under mu_: the batches of the run; the items a worker may take; the size of a batch (0 past
+  // the last); whether it is filled.
+  int64_t batches() const;
   int64_t issueLimit() const;
   int sizeOf(int64_t batch) const;
   bool complete(int64_t batch) const;
@@ -80,10 +76,9 @@ class BatchRing {
   std::mutex mu_;
   std::condition_variable cv_;
   int64_t items_;
-  bool final_;
-  int64_t taken_;       // the next batch next() returns
-  int64_t issue_;       // the next item a worker takes
-  int inFlight_ = 0;    // fills under way
+  int64_t taken_;            // the next batch next() returns
+  int64_t issue_;            // the next item a worker takes
+  int inFlight_ = 0;         // fills under way
   uint64_t generation_ = 0;  // bumped by redo(): fills of an older one are discarded
   struct BufferState {
     int64_t batch = -1;

@@ -35,7 +35,8 @@ std::array<uint64_t, 4> seedState(const std::vector<uint64_t>& entropy) {
     return r ^ (r >> 16);
   };
   std::array<uint32_t, kPoolSize> pool{};
-  for (int i = 0; i < kPoolSize; ++i) pool[i] = hashmix(i < static_cast<int>(in.size()) ? in[i] : 0);
+  for (int i = 0; i < kPoolSize; ++i)
+    pool[i] = hashmix(i < static_cast<int>(in.size()) ? in[i] : 0);
   for (int s = 0; s < kPoolSize; ++s)
     for (int d = 0; d < kPoolSize; ++d)
       if (s != d) pool[d] = mix(pool[d], hashmix(pool[s]));
@@ -50,12 +51,14 @@ std::array<uint64_t, 4> seedState(const std::vector<uint64_t>& entropy) {
     state[i] = v ^ (v >> 16);
   }
   std::array<uint64_t, 4> out{};
-  for (int i = 0; i < 4; ++i) out[i] = state[2 * i] | (static_cast<uint64_t>(state[2 * i + 1]) << 32);
+  for (int i = 0; i < 4; ++i)
+    out[i] = state[2 * i] | (static_cast<uint64_t>(state[2 * i + 1]) << 32);
   return out;
 }
 
 using u128 = unsigned __int128;
-constexpr u128 kMultiplier = (static_cast<u128>(2549297995355413924ULL) << 64) | 4865540595714422341ULL;
+constexpr u128 kMultiplier =
+    (static_cast<u128>(2549297995355413924ULL) << 64) | 4865540595714422341ULL;
 
 }  // namespace
 

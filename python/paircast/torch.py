@@ -426,14 +426,19 @@ class ShardLoader:
             self._buffers = decoded, outputs
         return self._buffers
 
+    def _order(self):
+        """This reader's samples of this epoch, in order, as ShardPairs reads them."""
+        mine, by_file, part, parts = self._pairs._mine()
+        _, ranges = self._pairs._index()
+        order = [i for f in mine for i in range(ranges[f][0], ranges[f][0] + ranges[f][1])]
+        return order if by_file else order[part::parts]
+
     def __iter__(self):
         pairs = self._pairs
-        mine, by_file, part, parts = pairs._mine()
-        shards, ranges = pairs._index()
-        order = [i for f in mine for i in range(ranges[f][0], ranges[f][0] + ranges[f][1])]
+        shards, _ = pairs._index()
         decoded, outputs = self._ring()
         core = ShardBatches(shards, [(a.numpy(), b.numpy()) for a, b in decoded],
-                            order if by_file else order[part::parts], seed=pairs.seed,
+                            self._order(), seed=pairs.seed,
                             epoch=pairs.epoch, threads=self.threads, prefetch=self.prefetch,
                             keep=self.keep, drop_last=pairs.drop_last)
         try:
@@ -454,10 +459,7 @@ class ShardLoader:
 
     def __len__(self):
         """Batches per epoch (pairs with one view, which have no pair, counted as pairs)."""
-        mine, by_file, part, parts = self._pairs._mine()
-        _, ranges = self._pairs._index()
-        total = sum(ranges[f][1] for f in mine)
-        pairs = total if by_file else len(range(part, total, parts))
+        pairs = len(self._order())
         b = self.batch_size
         return pairs // b if self._pairs.drop_last else -(-pairs // b)
 

@@ -1,5 +1,5 @@
-// BatchRing: batches in order, each buffer left alone while the consumer holds it, a plan that
-// grows, a redone batch, a worker's error rethrown, and a stop at any point.
+// BatchRing: batches in order, each buffer left alone while the consumer holds it, a run that
+// starts at a later batch, a redone batch, a worker's error rethrown, and a stop at any point.
 #include "util/batch_ring.h"
 
 #include <gtest/gtest.h>
@@ -31,14 +31,13 @@ struct Recorder {
   std::atomic<int> calls{0};
 };
 
-BatchRing::Options options(int threads, int batch, int64_t items, bool final = true) {
+BatchRing::Options options(int threads, int batch, int64_t items) {
   BatchRing::Options o;
   o.threads = threads;
   o.batchSize = batch;
   o.prefetch = 2;
   o.keep = 2;
   o.items = items;
-  o.final = final;
   return o;
 }
 
@@ -46,9 +45,8 @@ TEST(BatchRing, GivesBatchesInOrderAndNeverWritesAHeldBuffer) {
   for (int threads : {1, 3}) {
     const auto o = options(threads, 4, 50);
     Recorder r(o);
-    BatchRing ring(o, [&](int64_t item, int64_t, int slot, int buffer) {
-      return r.fill(item, slot, buffer);
-    });
+    BatchRing ring(
+        o, [&](int64_t item, int64_t, int slot, int buffer) { return r.fill(item, slot, buffer); });
     std::vector<int> order;  // buffers taken, the last `keep` of them held
     int64_t expected = 0;
     while (true) {
@@ -75,37 +73,29 @@ TEST(BatchRing, DropsAShortLastBatchWhenAsked) {
   auto o = options(2, 4, 10);
   o.dropLast = true;
   Recorder r(o);
-  BatchRing ring(o, [&](int64_t item, int64_t, int slot, int buffer) {
-    return r.fill(item, slot, buffer);
-  });
+  BatchRing ring(
+      o, [&](int64_t item, int64_t, int slot, int buffer) { return r.fill(item, slot, buffer); });
   int batches = 0;
   while (ring.next()) ++batches;
   EXPECT_EQ(batches, 2);
   EXPECT_EQ(r.calls, 8);  // the two items of the short batch were never filled
 }
 
-TEST(BatchRing, WaitsForAPlanThatGrows) {
-  auto o = options(2, 3, 0, false);
+TEST(BatchRing, StartsAtItsFirstBatch) {
+  auto o = options(2, 3, 20);
   o.first = 5;  // a run that resumes at batch 5: items from 15
   Recorder r(o);
-  BatchRing ring(o, [&](int64_t item, int64_t, int slot, int buffer) {
-    return r.fill(item, slot, buffer);
-  });
-  std::thread planner([&] {
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    ring.extend(19, false);  // batch 5 whole, batch 6 not yet
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    ring.extend(20, true);   // batch 6 ends short
-  });
+  BatchRing ring(
+      o, [&](int64_t item, int64_t, int slot, int buffer) { return r.fill(item, slot, buffer); });
   auto first = ring.next();
   ASSERT_TRUE(first);
   EXPECT_EQ(first->batch, 5);
   EXPECT_EQ(r.slots[first->buffer][0], 15);
   auto second = ring.next();
   ASSERT_TRUE(second);
-  EXPECT_EQ(second->size, 2);
+  EXPECT_EQ(second->size, 2);  // batch 6 ends short
   EXPECT_FALSE(ring.next());
-  planner.join();
+  EXPECT_EQ(r.calls, 5);  // the items before batch 5 were never filled
 }
 
 TEST(BatchRing, RedoesABatchWithoutItsFailedItems) {
@@ -123,13 +113,11 @@ TEST(BatchRing, RedoesABatchWithoutItsFailedItems) {
   b = ring.next();
   ASSERT_TRUE(b);
   EXPECT_EQ(b->failed, (std::vector<int>{1, 3}));
-  ring.redo(
-      [&] {
-        plan.erase(plan.begin() + 7);
-        plan.erase(plan.begin() + 5);
-        return static_cast<int64_t>(plan.size());
-      },
-      true);
+  ring.redo([&] {
+    plan.erase(plan.begin() + 7);
+    plan.erase(plan.begin() + 5);
+    return static_cast<int64_t>(plan.size());
+  });
   b = ring.next();
   ASSERT_TRUE(b && b->failed.empty());
   EXPECT_EQ(b->batch, 1);

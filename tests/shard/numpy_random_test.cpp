@@ -12,7 +12,7 @@ namespace {
 
 struct Expected {
   std::vector<uint64_t> entropy;
-  std::vector<int64_t> crops;  // integers(0, 33) five times
+  std::vector<int64_t> crops;          // integers(0, 33) five times
   int64_t view, zero, thousand, wide;  // integers(1, 3), (0, 1), (0, 1000), (0, 2^32 - 1)
 };
 
