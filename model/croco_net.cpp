@@ -112,7 +112,8 @@ CrossAttentionImpl::CrossAttentionImpl(int dim, int heads_, double rope)
 }
 
 torch::Tensor CrossAttentionImpl::forward(const torch::Tensor& query, const torch::Tensor& mem,
-                                          const torch::Tensor& qpos, const torch::Tensor& kpos) {
+                                          const torch::Tensor& qpos, const torch::Tensor& kpos,
+                                          torch::Tensor* scores) {
   const int64_t B = query.size(0), Nq = query.size(1), Nk = mem.size(1), C = query.size(2);
   auto split = [&](const torch::Tensor& t, int64_t n) {
     return t.reshape({B, n, heads, C / heads}).permute({0, 2, 1, 3});
@@ -123,6 +124,8 @@ torch::Tensor CrossAttentionImpl::forward(const torch::Tensor& query, const torc
     q = applyRope2d(q, qpos, ropeFreq);
     k = applyRope2d(k, kpos, ropeFreq);
   }
+  if (scores)
+    *scores = torch::matmul(q, k.transpose(-2, -1)) / std::sqrt(static_cast<double>(C / heads));
   return linear(proj, attention(q, k, v).transpose(1, 2).reshape({B, Nq, C}));
 }
 
@@ -149,9 +152,11 @@ DecoderBlockImpl::DecoderBlockImpl(int dim, int heads, int mlpRatio, bool normMe
 }
 
 torch::Tensor DecoderBlockImpl::forward(const torch::Tensor& x0, const torch::Tensor& y,
-                                        const torch::Tensor& xpos, const torch::Tensor& ypos) {
+                                        const torch::Tensor& xpos, const torch::Tensor& ypos,
+                                        torch::Tensor* crossScores) {
   auto x = x0 + attn(norm1(x0), xpos);
-  if (y.defined()) x = x + cross_attn(norm2(x), norm_y ? norm_y(y) : y, xpos, ypos);
+  if (y.defined())
+    x = x + cross_attn->forward(norm2(x), norm_y ? norm_y(y) : y, xpos, ypos, crossScores);
   return x + mlp(norm3(x));
 }
 
@@ -247,7 +252,10 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
 }
 
 CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor& img2,
-                                  const torch::Tensor& mask) {
+                                  const torch::Tensor& mask, torch::Tensor* crossScores) {
+  if (crossScores && (config_.decoder != "cross" || !img2.defined()))
+    throw Error("cross-attention scores need the cross decoder and a second image");
+  if (crossScores) *crossScores = torch::Tensor();
   const int64_t B = img1.size(0), N = config_.numPatches();
   if (mask.dim() != 2 || mask.size(0) != B || mask.size(1) != N ||
       mask.scalar_type() != torch::kBool)
@@ -269,7 +277,15 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
   torch::Tensor out;
   if (config_.decoder == "cross") {
     out = f1;
-    for (auto& blk : *dec_blocks) out = blk->as<DecoderBlock>()->forward(out, f2, pos, pos);
+    torch::Tensor layer;
+    for (auto& blk : *dec_blocks) {
+      out = blk->as<DecoderBlock>()->forward(out, f2, pos, pos, crossScores ? &layer : nullptr);
+      if (crossScores) {
+        auto mean = layer.mean(1);  // over heads: [B, N, N]
+        *crossScores = crossScores->defined() ? *crossScores + mean : mean;
+      }
+    }
+    if (crossScores) *crossScores = *crossScores / static_cast<double>(dec_blocks->size());
   } else if (f2.defined()) {
     out = torch::cat({f1 + view_embed1, f2 + view_embed2}, 1);  // [B, 2N, Dd]
     auto pos2 = pos.defined() ? torch::cat({pos, pos}, 1) : pos;
@@ -312,10 +328,15 @@ torch::Tensor normalizePatches(const torch::Tensor& target) {
 
 torch::Tensor maskedMse(const torch::Tensor& prediction, const torch::Tensor& mask,
                         const torch::Tensor& target, bool normPix) {
-  auto t = normPix ? normalizePatches(target) : target;
-  auto perPatch = (prediction - t).pow(2).mean(-1);  // [B, N]
+  auto perPatch = patchLosses(prediction, target, normPix);  // [B, N]
   auto m = mask.to(perPatch.dtype());
   return (perPatch * m).sum() / m.sum();
+}
+
+torch::Tensor patchLosses(const torch::Tensor& prediction, const torch::Tensor& target,
+                          bool normPix) {
+  auto t = normPix ? normalizePatches(target) : target;
+  return (prediction - t).pow(2).mean(-1);
 }
 
 torch::Tensor imagenetNormalize(const torch::Tensor& x) {

@@ -45,7 +45,7 @@ TORCH_MODULE(Attention);
 struct CrossAttentionImpl : torch::nn::Module {
   CrossAttentionImpl(int dim, int heads, double ropeFreq);
   torch::Tensor forward(const torch::Tensor& q, const torch::Tensor& kv, const torch::Tensor& qpos,
-                        const torch::Tensor& kpos);
+                        const torch::Tensor& kpos, torch::Tensor* scores = nullptr);
   torch::nn::Linear projq{nullptr}, projk{nullptr}, projv{nullptr}, proj{nullptr};
   int heads;
   double ropeFreq;
@@ -64,11 +64,12 @@ TORCH_MODULE(Block);
 
 // The official DecoderBlock: self-attention, cross-attention to the second image, MLP. With y
 // undefined there is no second image: the cross-attention attends to nothing, and as a softmax
-// over an empty memory contributes nothing, its residual branch is skipped.
+// over an empty memory contributes nothing, its residual branch is skipped. `crossScores`, when
+// given, receives the cross-attention's pre-softmax scores q k^T / sqrt(Dh), [B, H, N, Ny].
 struct DecoderBlockImpl : torch::nn::Module {
   DecoderBlockImpl(int dim, int heads, int mlpRatio, bool normMem, double ropeFreq);
   torch::Tensor forward(const torch::Tensor& x, const torch::Tensor& y, const torch::Tensor& xpos,
-                        const torch::Tensor& ypos);
+                        const torch::Tensor& ypos, torch::Tensor* crossScores = nullptr);
   torch::nn::LayerNorm norm1{nullptr}, norm2{nullptr}, norm3{nullptr}, norm_y{nullptr};
   Attention attn{nullptr};
   CrossAttention cross_attn{nullptr};
@@ -99,8 +100,11 @@ class CroCoNetImpl : public torch::nn::Module {
   // auto-completion (MAE): image 1 is completed from its own visible patches only, and the
   // decoder gets no reference (the cross decoder's cross-attention attends to nothing, the cat
   // decoder sees image 1's tokens alone). The parameters are the same either way.
+  // `crossScores`, when given (cross decoder and img2 only), receives the decoder's
+  // cross-attention scores before the softmax, averaged over blocks and heads: [B, N, N], image
+  // 1's patches (queries) against image 2's (keys). ZeroCo reads them as a cost volume.
   CroCoOutput forward(const torch::Tensor& img1, const torch::Tensor& img2,
-                      const torch::Tensor& mask);
+                      const torch::Tensor& mask, torch::Tensor* crossScores = nullptr);
   torch::Tensor randomMask(int64_t batch, const torch::Device& device) const;
 
   // Encoder: features [B, Nv, D] of the visible patches (all when mask is undefined).
@@ -135,6 +139,9 @@ torch::Tensor normalizePatches(const torch::Tensor& target);
 // MaskedMSE with norm_pix_loss: mean over the masked patches of the per-patch mean squared error.
 torch::Tensor maskedMse(const torch::Tensor& prediction, const torch::Tensor& mask,
                         const torch::Tensor& target, bool normPix = true);
+// The loss of every patch, [B, N]: the mean squared error against the (normalised) target.
+torch::Tensor patchLosses(const torch::Tensor& prediction, const torch::Tensor& target,
+                          bool normPix = true);
 
 // ImageNet mean and std, as the official transforms normalise images.
 torch::Tensor imagenetNormalize(const torch::Tensor& rgb01);  // [B, 3, S, S] in [0, 1]

@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # The co-visibility ablation of docs/covis_ablation.md, as measured there: bins 0.15, 0.55 and
-# 0.95 and the mae baseline, 3 seeds each, on the shipped scenes plus six random floor plans and
-# two scan-like rooms, with the shipped studio held out. About an hour on 2 cores.
+# 0.95, CroCo's own set (uniform 0.50: covis >= 0.5) and the mae baseline, 3 seeds each, on the
+# shipped scenes plus six random floor plans and two scan-like rooms. Held out: the shipped
+# studio and a seventh random floor plan, so that the reference-use probe has a view 2 from
+# another scene. The tiny model at 64 px with 8 px patches (an 8 x 8 grid), 640 steps of 16 per
+# run: the budget the pilot of docs/covis_ablation.md chose. About 55 minutes on 2 cores.
 # Usage: scripts/covis_ablation.sh [OUT] [extra covis_sweep options]   (OUT: runs/ablation)
 # Rerun the same line to resume a killed sweep.
 set -euo pipefail
@@ -16,9 +19,14 @@ if [[ ! -f $SCENES/.done ]]; then
   build/tools/make_scenes --scan replica --triangles 100000 --seed 4 --out "$SCENES"
   touch "$SCENES/.done"
 fi
+if [[ ! -f $SCENES/heldout/.done ]]; then
+  build/tools/make_scenes --random 1 --seed 99 --out "$SCENES/heldout"
+  touch "$SCENES/heldout/.done"
+fi
 exec build/tools/covis_sweep \
   --scenes scenes/room scenes/apartment "$SCENES"/random_7_{0..5} "$SCENES/scan_replica_4" \
   "$SCENES/scan_scannet_3_vh_clean_2.ply" \
-  --heldout scenes/studio --up auto \
-  --mode bin --centers 0.15,0.55,0.95 --baseline mae --seeds 3 \
-  --pairs-per-set 1024 --steps 1200 --out "$OUT/sweep" "$@"
+  --heldout scenes/studio "$SCENES/heldout/random_99_0" --up auto \
+  --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds 3 \
+  --img-size 64 --patch-size 8 --resolution 73 --pairs-per-set 1024 --steps 640 \
+  --out "$OUT/sweep" "$@"

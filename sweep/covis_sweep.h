@@ -32,6 +32,9 @@ struct SweepSet {
 // The set of `mode` at `center`. Throws paircast::Error when the centre is not on the buckets'
 // grid (bin: 0.05, 0.15, ...; uniform: a multiple of 0.05 below 1).
 SweepSet makeSweepSet(const std::string& mode, double center);
+// The set a name gives, "<mode>_<centre>" (bin_0.55, uniform_0.50); throws paircast::Error
+// naming it when it is not one.
+SweepSet parseSweepSet(const std::string& name);
 
 // Pairs needed from each bucket so that every set of n pairs can be drawn (sets share pairs).
 std::vector<int> bucketDemand(const std::vector<SweepSet>& sets, int n);
@@ -53,6 +56,9 @@ struct SweepConfig {
   std::vector<std::string> modes = {"bin", "uniform"};
   // The defaults fit the shipped scenes on 2 cores in about 25 minutes (docs/covis_ablation.md).
   std::vector<double> centers = {0.15, 0.35, 0.55, 0.75, 0.95};
+  // When given, the sets trained instead of every mode at every centre: "<mode>_<centre>", e.g.
+  // bin_0.55 or uniform_0.50 (CroCo's own set: covis >= 0.5).
+  std::vector<std::string> sets;
   int pairsPerSet = 512;
   int64_t steps = 700;
   std::string preset = "tiny";
@@ -67,14 +73,20 @@ struct SweepConfig {
   // Baselines trained like every set, each at most once: "mae" (auto-completion: view 1 alone,
   // no reference view, on the pairs of referenceSet).
   std::vector<std::string> baselines;
-  int jobs = 0;                // render threads (0: all cores)
-  int workers = 2;             // trainer data threads
-  int evalPairs = 64;          // held-out pairs at covis in [0.45, 0.55]
-  int probeViews = 1024;       // held-out views in two halves, each fitting a probe for the other
+  int jobs = 0;           // render threads (0: all cores)
+  int workers = 2;        // trainer data threads
+  int evalPairs = 64;     // held-out pairs at covis in [0.45, 0.55]
+  int probeViews = 1024;  // held-out views in two halves, each fitting a probe for the other
+  // The mechanism probes (mechanism_probe.h): pairs per held-out scene, covis in the band.
+  int mechanismPairs = 48;
+  double mechanismMinCovis = 0.3, mechanismMaxCovis = 0.7;
   double minWalkScale = 0.05;  // the pool's second views walk log-uniformly from this scale up
   bool reports = true;         // a dataset report per set
   bool progress = true;
 };
+
+// The sets of a config: its `sets`, else every mode at every centre, mode by mode.
+std::vector<SweepSet> planSets(const SweepConfig& config);
 
 // One training run of a sweep: a set, or a baseline, with one of the seeds.
 struct SweepRun {

@@ -8,6 +8,7 @@
 
 #include "sweep/sweep_stats.h"
 #include "util/atomic_file.h"
+#include "util/error.h"
 #include "util/html.h"
 #include "util/plot.h"
 
@@ -16,20 +17,43 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// The metrics the verdicts compare, each with its better direction and a name for the page.
+// The metrics every run is evaluated on, each with its better direction, a name for the page,
+// whether the verdicts judge it, and whether it needs a reference view (mae has none).
 struct Metric {
   const char* key;
   bool higherIsBetter;
   const char* label;
+  bool judged;
+  bool needsReference;
 };
-const Metric kEvaluated[] = {{"xv_loss", false, "held-out completion loss (covis ~0.5)"},
-                             {"probe_delta1", true, "depth probe delta1"},
-                             {"probe_absrel", false, "depth probe AbsRel"},
-                             {"probe_rmse", false, "depth probe RMSE (m)"}};
+const Metric kEvaluated[] = {
+    {"xv_loss", false, "held-out completion loss (covis ~0.5)", true, false},
+    {"probe_delta1", true, "depth probe delta1", true, false},
+    {"probe_absrel", false, "depth probe AbsRel", true, false},
+    {"probe_rmse", false, "depth probe RMSE (m)", true, false},
+    {"ref_gain", true, "reference use, 1 - L_true / L_other", true, true},
+    {"ref_gain_covisible", true, "reference use on covisible patches", true, true},
+    {"ref_gain_hidden", true, "reference use on hidden patches (about 0 expected)", false, true},
+    {"xattn_pck1", true, "cross-attention correspondence PCK@1 patch", true, true},
+    {"xattn_epe", false, "cross-attention correspondence error (patches)", true, true},
+    {"enc_pck1", true, "encoder-feature correspondence PCK@1 patch", true, false}};
+
+// The probes each claim is judged on, one verdict each.
+const char* const kClaimProbes[] = {"xv_loss", "ref_gain_covisible", "xattn_pck1", "enc_pck1",
+                                    "probe_delta1"};
+
+const Metric& metric(const std::string& key) {
+  for (const Metric& m : kEvaluated)
+    if (key == m.key) return m;
+  PAIRCAST_CHECK_MSG(false, "unknown sweep metric");
+  return kEvaluated[0];
+}
 
 // Whether two runs' figures of `m` can be compared: the completion loss only between models of
-// the same task (mae completes without the reference view), the probe always.
+// the same task (mae completes without the reference view), the probes that need a reference
+// only between models that have one, the others always.
 bool comparable(const Metric& m, const std::string& taskA, const std::string& taskB) {
+  if (m.needsReference) return taskA != "mae" && taskB != "mae";
   return std::string(m.key) != "xv_loss" || taskA == taskB;
 }
 
@@ -64,10 +88,11 @@ std::string withInterval(double mean, double halfWidth) {
   return b;
 }
 
-// Every run's value of `metric`, by set, in order of first appearance.
+// Every run's value of `metric`, by set, in order of first appearance, with its seed index.
 struct RunValues {
   std::vector<std::string> sets;
   std::map<std::string, std::vector<double>> values;
+  std::map<std::string, std::vector<int>> seeds;
   std::map<std::string, std::string> task;
 };
 
@@ -77,8 +102,18 @@ RunValues byset(const nlohmann::json& runs, const std::string& metric) {
     const std::string set = run.at("set");
     if (!r.values.count(set)) r.sets.push_back(set), r.task[set] = text(run, "task");
     r.values[set].push_back(numberOrNan(run, metric));
+    r.seeds[set].push_back(run.value("seed_index", 0));
   }
   return r;
+}
+
+// One set's values, with their seeds.
+struct SetValues {
+  std::vector<double> values;
+  std::vector<int> seeds;
+};
+SetValues of(const RunValues& v, const std::string& set) {
+  return {v.values.at(set), v.seeds.at(set)};
 }
 
 // ---- results.csv and results_runs.csv ----
@@ -114,9 +149,16 @@ std::string runsCsv(const nlohmann::json& runs, const nlohmann::json& randomRuns
 
 // ---- the verdicts ----
 
-// a minus b in the metric's better direction (> 0: a is better), with Welch's interval.
-Interval gain(const std::vector<double>& a, const std::vector<double>& b, const Metric& m) {
-  Interval d = differenceInterval95(a, b);
+// a minus b in the metric's better direction (> 0: a is better). Runs with the same seeds start
+// from the same weights and draw the same masks, so they are compared seed by seed (a paired
+// t-interval); others with Welch's interval.
+bool paired(const SetValues& a, const SetValues& b) {
+  return a.seeds == b.seeds && a.seeds.size() >= 2;
+}
+
+Interval gain(const SetValues& a, const SetValues& b, const Metric& m) {
+  Interval d = paired(a, b) ? pairedDifferenceInterval95(a.values, b.values)
+                            : differenceInterval95(a.values, b.values);
   if (!m.higherIsBetter) d.mean = -d.mean;
   return d;
 }
@@ -139,9 +181,10 @@ std::string listOf(const std::vector<std::string>& items) {
 }
 
 // Against the best set and against the random encoder, for one metric. The completion loss of
-// a baseline with another task (mae completes without a reference) is not compared.
+// a baseline with another task (mae completes without a reference) is not compared, nor are
+// the probes that need a reference.
 std::vector<std::string> metricVerdicts(const Metric& m, const RunValues& v,
-                                        const std::vector<double>& random) {
+                                        const SetValues& random) {
   auto mean = [&](const std::string& s) { return interval95(v.values.at(s)).mean; };
   std::vector<std::string> sets;  // those with a figure (a set whose every run failed has none)
   for (const auto& s : v.sets)
@@ -154,14 +197,14 @@ std::vector<std::string> metricVerdicts(const Metric& m, const RunValues& v,
   std::vector<std::string> beyond, within, beats, notBeats;
   for (const auto& s : sets) {
     if (s != best) {
-      const Interval d = gain(v.values.at(s), v.values.at(best), m);
+      const Interval d = gain(of(v, s), of(v, best), m);
       (excludesZero(d) ? beyond : within).push_back(s + " (" + signedInterval(d) + ")");
     }
-    const Interval r = gain(v.values.at(s), random, m);
+    const Interval r = gain(of(v, s), random, m);
     (excludesZero(r) && r.mean > 0 ? beats : notBeats)
         .push_back(s + " (" + signedInterval(r) + ")");
   }
-  const Interval b = interval95(v.values.at(best)), rnd = interval95(random);
+  const Interval b = interval95(v.values.at(best)), rnd = interval95(random.values);
   if (!std::isfinite(b.halfWidth))
     return {std::string(m.label) + ": the best is " + best + ", " +
             withInterval(b.mean, b.halfWidth) +
@@ -175,46 +218,43 @@ std::vector<std::string> metricVerdicts(const Metric& m, const RunValues& v,
               ") by more than the interval: " + listOf(beats) + ". Not: " + listOf(notBeats) + "."};
 }
 
-// A claim that `a` beats each of `others` on the depth probe's metrics (and on the completion
-// loss when all are cross-view sets): "holds" when it wins every comparison beyond the
-// interval, "does not hold" when it loses one beyond it, else "unresolved at this scale".
+// A claim that `a` beats each of `others` on one probe: "holds" when it wins every comparison
+// beyond the interval, "does not hold" when it loses one beyond it, else "is not resolved at
+// this scale". A probe that some of them cannot be compared on says why.
 std::string claimVerdict(const std::string& claim, const std::string& a,
-                         const std::vector<std::string>& others,
-                         const std::map<std::string, RunValues>& values) {
-  int wins = 0, losses = 0, total = 0;
-  bool intervals = true;
+                         const std::vector<std::string>& others, const Metric& m,
+                         const RunValues& v) {
+  const std::string head = claim + ", on the " + m.label + ": ";
+  for (const auto& o : others)
+    if (!comparable(m, v.task.at(a), v.task.at(o)))
+      return head + "not compared: " + o +
+             (m.needsReference ? " has no reference view, so this probe has no figure for it."
+                               : " is another task, whose loss is not comparable.");
+  int wins = 0, losses = 0;
+  bool intervals = true, allPaired = true;
   std::string detail;
-  for (const Metric& m : kEvaluated) {
-    const RunValues& v = values.at(m.key);
-    bool same = true;
-    for (const auto& o : others) same = same && comparable(m, v.task.at(a), v.task.at(o));
-    if (!same) continue;
-    for (const auto& o : others) {
-      const Interval d = gain(v.values.at(a), v.values.at(o), m);
-      ++total;
-      intervals = intervals && std::isfinite(d.halfWidth);
-      if (excludesZero(d)) ++(d.mean > 0 ? wins : losses);
-      detail +=
-          std::string(detail.empty() ? "" : "; ") + m.key + " vs " + o + " " + signedInterval(d);
-    }
+  for (const auto& o : others) {
+    const Interval d = gain(of(v, a), of(v, o), m);
+    if (d.n == 0) return head + "no figures (the runs of " + a + " or " + o + " lack this probe).";
+    intervals = intervals && std::isfinite(d.halfWidth);
+    allPaired = allPaired && paired(of(v, a), of(v, o));
+    if (excludesZero(d)) ++(d.mean > 0 ? wins : losses);
+    detail += std::string(detail.empty() ? "" : "; ") + "vs " + o + " " + signedInterval(d);
   }
-  const char* verdict = !intervals      ? "cannot be judged with one seed (use --seeds 3)"
-                        : wins == total ? "holds"
-                        : losses > 0    ? "does not hold"
-                                        : "is not resolved at this scale";
-  return claim + ": " + verdict + " (" + a + " is ahead by more than the interval in " +
-         std::to_string(wins) + " of " + std::to_string(total) +
-         " comparisons and behind by more than it in " + std::to_string(losses) + "; its gains " +
-         "with their 95 % intervals, positive when " + a + " is better: " + detail + ").";
+  const int total = static_cast<int>(others.size());
+  const char* verdict =
+      !intervals      ? "cannot be judged with fewer than 2 seeds with figures (use --seeds 3)"
+      : wins == total ? "holds"
+      : losses > 0    ? "does not hold"
+                      : "is not resolved at this scale";
+  return head + verdict + " (" + a + "'s gain, positive when it is better, with the " +
+         (allPaired ? "paired 95 % interval over the seeds" : "95 % Welch interval") + ": " +
+         detail + ").";
 }
 
-// The paper's claims about the reference set (the bin set nearest 0.5, which mae trains on),
-// where the sweep has the runs they need.
-std::vector<std::string> claimVerdicts(const nlohmann::json& runs, const std::string& reference,
-                                       const std::map<std::string, RunValues>& values) {
-  const RunValues& any = values.begin()->second;
-  if (!any.values.count(reference)) return {};
-  std::vector<std::pair<double, std::string>> bins;  // (centre, set) of the bin sets
+// The bin sets' names, by centre.
+std::vector<std::string> binSets(const nlohmann::json& runs) {
+  std::vector<std::pair<double, std::string>> bins;
   for (const auto& r : runs) {
     const nlohmann::json center = r.value("center", nlohmann::json());
     if (r.value("mode", "") == "bin" && center.is_number())
@@ -222,34 +262,50 @@ std::vector<std::string> claimVerdicts(const nlohmann::json& runs, const std::st
   }
   std::sort(bins.begin(), bins.end());
   bins.erase(std::unique(bins.begin(), bins.end()), bins.end());
-  std::vector<std::string> out;
+  std::vector<std::string> names;
+  for (const auto& b : bins) names.push_back(b.second);
+  return names;
+}
+
+// The paper's claims about the reference set (the bin set nearest 0.5, which mae trains on),
+// where the sweep has the runs they need: a verdict on each probe of kClaimProbes.
+std::vector<std::string> claimVerdicts(const nlohmann::json& runs, const std::string& reference,
+                                       const std::map<std::string, RunValues>& values) {
+  const RunValues& any = values.begin()->second;
+  if (!any.values.count(reference)) return {};
+  const std::vector<std::string> bins = binSets(runs);
+  std::vector<std::pair<std::string, std::vector<std::string>>> claims;
   // Claim 1: against the lowest and the highest bin, those that are not the reference itself.
-  const bool referenceIsABin =
-      std::any_of(bins.begin(), bins.end(), [&](const auto& b) { return b.second == reference; });
-  std::vector<std::string> ends, sides;
-  if (referenceIsABin && bins.front().second != reference)
-    ends.push_back(bins.front().second), sides.push_back("low");
-  if (referenceIsABin && bins.back().second != reference)
-    ends.push_back(bins.back().second), sides.push_back("high");
-  if (!ends.empty())
-    out.push_back(claimVerdict("Claim 1, covis near 0.5 beats " + sides.front() +
-                                   (sides.size() > 1 ? " and " + sides.back() : "") + " covis",
-                               reference, ends, values));
+  if (std::find(bins.begin(), bins.end(), reference) != bins.end()) {
+    std::vector<std::string> ends, sides;
+    if (bins.front() != reference) ends.push_back(bins.front()), sides.push_back("low");
+    if (bins.back() != reference) ends.push_back(bins.back()), sides.push_back("high");
+    if (!ends.empty())
+      claims.push_back({"Claim 1, covis near 0.5 beats " + sides.front() +
+                            (sides.size() > 1 ? " and " + sides.back() : "") + " covis",
+                        ends});
+  }
   if (any.values.count("mae"))
-    out.push_back(claimVerdict("Claim 2, cross-view completion beats auto-completion (MAE)",
-                               reference, {"mae"}, values));
+    claims.push_back({"Claim 2, cross-view completion beats auto-completion (MAE)", {"mae"}});
+  std::vector<std::string> out;
+  for (const auto& [claim, others] : claims)
+    for (const char* probe : kClaimProbes)
+      out.push_back(claimVerdict(claim, reference, others, metric(probe), values.at(probe)));
   return out;
 }
 
 // ---- the plots and the page ----
 
 // One line per mode over the covis centres, with error bars.
-std::vector<plot::Series> modeSeries(const SweepConfig& c, const nlohmann::json& rows,
-                                     const Metric& m) {
+std::vector<plot::Series> modeSeries(const nlohmann::json& rows, const Metric& m) {
   const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd"};
   const std::string mean = std::string(m.key) + "_mean", ci = std::string(m.key) + "_ci95";
+  std::vector<std::string> modes;  // of the cross-view sets, in order of appearance
+  for (const auto& r : rows)
+    if (r["center"].is_number() && std::find(modes.begin(), modes.end(), r["mode"]) == modes.end())
+      modes.push_back(r["mode"]);
   std::vector<plot::Series> series;
-  for (const auto& mode : c.modes) {
+  for (const auto& mode : modes) {
     plot::Series s;
     s.label = mode;
     s.color = colors[series.size() % 4];
@@ -263,7 +319,7 @@ std::vector<plot::Series> modeSeries(const SweepConfig& c, const nlohmann::json&
 }
 
 // A baseline's mean as a dashed line over the centres, its interval in the legend.
-plot::Series baselineSeries(const SweepConfig& c, std::string label, const char* color,
+plot::Series baselineSeries(const nlohmann::json& rows, std::string label, const char* color,
                             const nlohmann::json& row, const Metric& m) {
   const double mean = numberOrNan(row, std::string(m.key) + "_mean");
   if (const double e = numberOrNan(row, std::string(m.key) + "_ci95"); std::isfinite(e))
@@ -273,7 +329,11 @@ plot::Series baselineSeries(const SweepConfig& c, std::string label, const char*
   base.color = color;
   base.dashed = true;
   base.markers = false;
-  base.x = {c.centers.front(), c.centers.back()};
+  base.x = {INFINITY, -INFINITY};  // the sets' centres
+  for (const auto& r : rows)
+    if (r["center"].is_number())
+      base.x = {std::min(base.x[0], r["center"].get<double>()),
+                std::max(base.x[1], r["center"].get<double>())};
   base.y = {mean, mean};
   return base;
 }
@@ -291,16 +351,17 @@ bool offTheScale(const std::vector<plot::Series>& series, double y) {
 // random encoder, which goes in the title instead when it is off the scale.
 void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann::json& random) {
   for (const Metric& m : kEvaluated) {
-    std::vector<plot::Series> series = modeSeries(c, rows, m);
+    if (!m.judged) continue;
+    std::vector<plot::Series> series = modeSeries(rows, m);
     for (const auto& r : rows)
       if (r["task"] != "croco" && comparable(m, r["task"], "croco"))
-        series.push_back(baselineSeries(c, text(r, "set"), "#d62728", r, m));
+        series.push_back(baselineSeries(rows, text(r, "set"), "#d62728", r, m));
     std::string title = m.label;
     const double randomMean = numberOrNan(random, std::string(m.key) + "_mean");
     if (offTheScale(series, randomMean))
       title += "; random encoder " + html::number(randomMean, "%.3f");
     else
-      series.push_back(baselineSeries(c, "random", "#7f7f7f", random, m));
+      series.push_back(baselineSeries(rows, "random", "#7f7f7f", random, m));
     title += std::string(m.higherIsBetter ? ", higher" : ", lower") + " is better";
     writeFileAtomic(
         (fs::path(c.out) / (std::string("plot_") + m.key + ".svg")).string(),
@@ -313,13 +374,19 @@ std::string cell(const nlohmann::json& r, const std::string& metric) {
   return std::isfinite(mean) ? withInterval(mean, numberOrNan(r, metric + "_ci95")) : "";
 }
 
+// The table's probe columns, after the set's seeds, mean covis and train loss.
+const char* const kTableMetrics[] = {"xv_loss",         "probe_delta1", "probe_absrel",
+                                     "probe_rmse",      "ref_gain",     "ref_gain_covisible",
+                                     "ref_gain_hidden", "xattn_pck1",   "xattn_epe",
+                                     "enc_pck1"};
+
 // summary.html: what was trained, the verdicts, the plots, and the table of sets and baselines.
 std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
   const nlohmann::json& rows = results.at("rows");
   const nlohmann::json& random = results.at("random_encoder");
   const nlohmann::json& constant = results.at("constant_depth");
   std::string page =
-      html::pageStart("covis_sweep results", html::style(1300)) +
+      html::pageStart("covis_sweep results", html::style(1500)) +
       html::heading(1, "Co-visibility sweep") +
       html::paragraph(std::to_string(rows.size()) + " training sets and baselines of " +
                       std::to_string(c.pairsPerSet) + " pairs, each trained with " +
@@ -327,33 +394,128 @@ std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
                       std::to_string(c.steps) + " steps of " + std::to_string(c.batchSize) +
                       " at " + std::to_string(c.imgSize) +
                       " px), evaluated on held-out scenes. Figures are means over "
-                      "the seeds \u00b1 the half-width of a 95 % t-interval. Data: " +
+                      "the seeds \u00b1 the half-width of a 95 % t-interval; differences between "
+                      "runs of the same seeds are paired. mae has no reference view, so its "
+                      "reference-use and cross-attention cells are empty. Data: " +
                       html::link("results.csv", "results.csv") + " (per set), " +
                       html::link("results_runs.csv", "results_runs.csv") + " (per run), " +
+                      html::link("probe_by_covis.csv", "probe_by_covis.csv") +
+                      " (correspondence by the held-out pair's covis), " +
                       html::link("results.json", "results.json") + ".") +
       html::heading(2, "Verdicts");
   for (const auto& v : results.at("verdicts")) page += html::paragraph(plot::escape(v));
   for (const Metric& m : kEvaluated)
-    page += html::image("plot_" + std::string(m.key) + ".svg", m.key) + "\n";
-  page += html::tableStart({"set", "seeds", "mean covis", "train loss", "xv loss", "delta1",
-                            "AbsRel", "RMSE", "dataset"});
+    if (m.judged) page += html::image("plot_" + std::string(m.key) + ".svg", m.key) + "\n";
+  page += html::image("plot_probe_by_covis.svg", "probe_by_covis") + "\n";
+  std::vector<std::string> head = {"set", "seeds", "mean covis", "train loss"};
+  head.insert(head.end(), std::begin(kTableMetrics), std::end(kTableMetrics));
+  head.push_back("dataset");
+  page += html::tableStart(head);
+  auto cells = [&](const nlohmann::json& r, const std::string& seeds, const std::string& covis,
+                   const std::string& trainLoss, const std::string& report) {
+    std::vector<std::string> out = {seeds, covis, trainLoss};
+    for (const char* m : kTableMetrics) out.push_back(cell(r, m));
+    out.push_back(report);
+    return out;
+  };
   for (const auto& r : rows) {
     const std::string set = r["set"].get<std::string>();
     page += html::labelledRow(
         set + (r["task"] == "mae" ? " (xv loss: its own task)" : ""),
-        {std::to_string(r.value("seeds", 0)), num(r, "mean_covis"), cell(r, "train_loss"),
-         cell(r, "xv_loss"), cell(r, "probe_delta1"), cell(r, "probe_absrel"),
-         cell(r, "probe_rmse"),
-         c.reports ? html::link("sets/" + text(r, "trained_on") + "/report.html", "report") : "-"});
+        cells(r, std::to_string(r.value("seeds", 0)), num(r, "mean_covis"), cell(r, "train_loss"),
+              c.reports ? html::link("sets/" + text(r, "trained_on") + "/report.html", "report")
+                        : "-"));
   }
-  page += html::labelledRow(
-      "random encoder",
-      {std::to_string(random.value("seeds", 0)), "", "", cell(random, "xv_loss"),
-       cell(random, "probe_delta1"), cell(random, "probe_absrel"), cell(random, "probe_rmse"), ""});
-  page += html::labelledRow("constant depth (no encoder)",
-                            {"", "", "", "", num(constant, "probe_delta1"),
-                             num(constant, "probe_absrel"), num(constant, "probe_rmse"), ""});
+  page += html::labelledRow("random encoder",
+                            cells(random, std::to_string(random.value("seeds", 0)), "", "", ""));
+  std::vector<std::string> floor(std::size(kTableMetrics) + 4, "");
+  floor[4] = num(constant, "probe_delta1");
+  floor[5] = num(constant, "probe_absrel");
+  floor[6] = num(constant, "probe_rmse");
+  page += html::labelledRow("constant depth (no encoder)", floor);
   return page + html::tableEnd() + html::pageEnd();
+}
+
+// ---- probe_by_covis.csv and its plot ----
+
+const char* const kByCovisMetrics[] = {"xattn_pck1", "xattn_epe", "enc_pck1"};
+
+// A row per set (and the random encoder) and covis bin of the held-out pairs: the mean over the
+// seeds of each correspondence figure, with its 95 % interval.
+nlohmann::json probeByCovis(const nlohmann::json& runs, const nlohmann::json& randomRuns) {
+  std::vector<std::string> order;
+  std::map<std::pair<std::string, double>, std::vector<nlohmann::json>> cells;
+  std::map<std::string, std::string> task;
+  for (const auto* list : {&runs, &randomRuns})
+    for (const auto& r : *list) {
+      const std::string set = r.at("set");
+      if (!task.count(set)) order.push_back(set), task[set] = text(r, "task");
+      for (const auto& bin : r.value("probe_by_covis", nlohmann::json::array()))
+        cells[{set, bin.at("covis_lo").get<double>()}].push_back(bin);
+    }
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& set : order)
+    for (const auto& [key, bins] : cells) {
+      if (key.first != set) continue;
+      nlohmann::json row = {{"set", set},
+                            {"task", task[set]},
+                            {"covis_lo", key.second},
+                            {"covis_hi", bins.front().at("covis_hi")},
+                            {"pairs", bins.front().at("pairs")},
+                            {"seeds", bins.size()}};
+      for (const char* m : kByCovisMetrics) {
+        std::vector<double> v;
+        for (const auto& b : bins) v.push_back(numberOrNan(b, m));
+        const Interval i = interval95(v);
+        row[std::string(m) + "_mean"] = i.mean;
+        row[std::string(m) + "_ci95"] = i.halfWidth;
+      }
+      out.push_back(row);
+    }
+  return out;
+}
+
+std::string probeByCovisCsv(const nlohmann::json& rows) {
+  std::string csv = "set,task,covis_lo,covis_hi,pairs,seeds";
+  for (const char* m : kByCovisMetrics) csv += std::string(",") + m + "_mean," + m + "_ci95";
+  csv += "\n";
+  for (const auto& r : rows) {
+    csv += text(r, "set") + "," + text(r, "task") + "," + num(r, "covis_lo") + "," +
+           num(r, "covis_hi") + "," + std::to_string(r.value("pairs", 0)) + "," +
+           std::to_string(r.value("seeds", 0));
+    for (const char* m : kByCovisMetrics)
+      csv += "," + num(r, std::string(m) + "_mean") + "," + num(r, std::string(m) + "_ci95");
+    csv += "\n";
+  }
+  return csv;
+}
+
+// Cross-attention PCK (solid) and encoder PCK (dashed) against the held-out pair's covis, a
+// colour per set.
+std::string probeByCovisPlot(const nlohmann::json& rows) {
+  const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728", "#7f7f7f"};
+  std::vector<std::string> sets;
+  for (const auto& r : rows)
+    if (std::find(sets.begin(), sets.end(), text(r, "set")) == sets.end())
+      sets.push_back(text(r, "set"));
+  std::vector<plot::Series> series;
+  for (size_t k = 0; k < sets.size(); ++k)
+    for (const char* m : {"xattn_pck1", "enc_pck1"}) {
+      plot::Series s;
+      s.label = sets[k] + (std::string(m) == "enc_pck1" ? " (encoder)" : " (cross-attention)");
+      s.color = colors[k % 6];
+      s.dashed = std::string(m) == "enc_pck1";
+      for (const auto& r : rows) {
+        const double y = numberOrNan(r, std::string(m) + "_mean");
+        if (text(r, "set") != sets[k] || !std::isfinite(y)) continue;
+        s.x.push_back(numberOrNan(r, "covis_lo") + 0.05);
+        s.y.push_back(y);
+        s.yErr.push_back(numberOrNan(r, std::string(m) + "_ci95"));
+      }
+      if (!s.x.empty()) series.push_back(s);
+    }
+  return plot::lines(series, {"correspondence PCK@1 patch by the held-out pair's covis",
+                              "covis of the held-out pair (bins of 0.1)", "PCK@1", 620, 380});
 }
 
 }  // namespace
@@ -403,9 +565,10 @@ std::vector<std::string> sweepVerdicts(const nlohmann::json& results) {
   std::vector<std::string> out;
   for (const Metric& m : kEvaluated) {
     values[m.key] = byset(runs, m.key);
-    const std::vector<double> random =
-        byset(results.at("random_runs"), m.key).values["random_encoder"];
-    for (auto& line : metricVerdicts(m, values[m.key], random)) out.push_back(std::move(line));
+    const RunValues randomValues = byset(results.at("random_runs"), m.key);
+    if (!m.judged || !randomValues.values.count("random_encoder")) continue;
+    for (auto& line : metricVerdicts(m, values[m.key], of(randomValues, "random_encoder")))
+      out.push_back(std::move(line));
   }
   // The claims come first.
   std::vector<std::string> claims =
@@ -422,6 +585,9 @@ void writeSweepReport(const SweepConfig& c, const nlohmann::json& results) {
                   runsCsv(results.at("runs"), results.at("random_runs")));
   writeFileAtomic((out / "results.json").string(), results.dump(1) + "\n");
   writePlots(c, results.at("rows"), results.at("random_encoder"));
+  const nlohmann::json byCovis = probeByCovis(results.at("runs"), results.at("random_runs"));
+  writeFileAtomic((out / "probe_by_covis.csv").string(), probeByCovisCsv(byCovis));
+  writeFileAtomic((out / "plot_probe_by_covis.svg").string(), probeByCovisPlot(byCovis));
   writeFileAtomic((out / "summary.html").string(), summaryPage(c, results));
 }
 

@@ -4,6 +4,8 @@
 #include <boost/math/distributions/students_t.hpp>
 #include <cmath>
 
+#include "util/error.h"
+
 namespace paircast {
 namespace {
 
@@ -63,6 +65,14 @@ Interval differenceInterval95(const std::vector<double>& a, const std::vector<do
       (vx + vy) * (vx + vy) / (vx * vx / (x.size() - 1.0) + vy * vy / (y.size() - 1.0));  // Welch
   r.halfWidth = tQuantile95(df) * std::sqrt(vx + vy);
   return r;
+}
+
+Interval pairedDifferenceInterval95(const std::vector<double>& a, const std::vector<double>& b) {
+  PAIRCAST_CHECK(a.size() == b.size());
+  std::vector<double> d;
+  for (size_t i = 0; i < a.size(); ++i)
+    if (std::isfinite(a[i]) && std::isfinite(b[i])) d.push_back(a[i] - b[i]);
+  return interval95(d);
 }
 
 bool excludesZero(const Interval& d) {

@@ -1,6 +1,7 @@
 // The statistics of a sweep with several seeds per set: each metric's mean over the seeds with
-// the half-width of its 95 % Student t interval, and Welch's interval for the difference of two
-// sets' means, from which summary.html says which differences are larger than their noise.
+// the half-width of its 95 % Student t interval, and the interval of the difference of two sets'
+// means (paired by seed, or Welch's for unpaired runs), from which summary.html says which
+// differences are larger than their noise.
 #pragma once
 
 #include <string>
@@ -26,6 +27,11 @@ Interval interval95(const std::vector<double>& values);
 // degrees of freedom). When both samples have no spread the half-width is 0; with fewer than
 // 2 values in either it is NaN.
 Interval differenceInterval95(const std::vector<double>& a, const std::vector<double>& b);
+
+// The mean of a[i] - b[i] with the 95 % t-interval of those differences: for runs paired by
+// seed, which share their initial weights and masks, so that only their data differs. Pairs
+// with a value that is not finite are left out. a and b must have the same size.
+Interval pairedDifferenceInterval95(const std::vector<double>& a, const std::vector<double>& b);
 
 // Whether an interval of a difference excludes 0: false when its width is unknown (NaN).
 bool excludesZero(const Interval& difference);

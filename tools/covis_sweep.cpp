@@ -8,6 +8,7 @@ using namespace paircast;
 
 int main(int argc, char** argv) {
   SweepConfig c;
+  std::vector<double> mechanismCovis = {c.mechanismMinCovis, c.mechanismMaxCovis};
   CLI::App app{
       "Pre-train on sets of pairs binned by co-visibility, and evaluate each on held-out scenes"};
   app.add_option("--scenes", c.scenes, "Training scenes (files, folders or .txt lists)")
@@ -20,6 +21,10 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->check(CLI::IsMember({"bin", "uniform"}));
   app.add_option("--centers", c.centers, "Covis centres, e.g. 0.05,0.15,...,0.95")->delimiter(',');
+  app.add_option("--sets", c.sets,
+                 "Explicit sets instead of --mode x --centers, e.g. "
+                 "bin_0.15,bin_0.55,uniform_0.50")
+      ->delimiter(',');
   app.add_option("--pairs-per-set", c.pairsPerSet, "Pairs in every set")
       ->check(CLI::Range(1, 10000000));
   app.add_option("--steps", c.steps, "Training iterations per set")
@@ -48,6 +53,12 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--jobs", c.jobs, "Render threads (0: all cores)");
   app.add_option("--eval-pairs", c.evalPairs, "Held-out pairs at covis ~0.5");
+  app.add_option("--mechanism-pairs", c.mechanismPairs,
+                 "Held-out pairs per held-out scene for the mechanism probes");
+  app.add_option("--mechanism-covis", mechanismCovis,
+                 "Covis band of the mechanism probes' pairs, lo,hi")
+      ->delimiter(',')
+      ->expected(2);
   app.add_option("--probe-views", c.probeViews,
                  "Held-out views for the depth probe (two halves, each fits the other's probe)");
   app.add_option("--min-walk-scale", c.minWalkScale,
@@ -57,6 +68,8 @@ int main(int argc, char** argv) {
   app.add_flag("--quiet", quiet, "No progress lines");
   return runTool("covis_sweep", app, argc, argv, [&] {
     c.load.up = parseUpAxis(up);
+    c.mechanismMinCovis = mechanismCovis[0];
+    c.mechanismMaxCovis = mechanismCovis[1];
     c.reports = !noReports;
     c.progress = !quiet;
     if (!quiet) logLaunch("covis_sweep", launchRole(processEnvironment()).describe());

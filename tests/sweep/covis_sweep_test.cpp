@@ -9,6 +9,7 @@
 
 #include "model/checkpoint.h"
 #include "sweep/depth_probe.h"
+#include "sweep/sweep_report.h"
 #include "test_errors.h"
 #include "test_paths.h"
 #include "test_process.h"
@@ -39,6 +40,20 @@ TEST(CovisSweep, BucketsAndSets) {
   EXPECT_ERROR_CONTAINS(makeSweepSet("uniform", 0.33),
                         "uniform centre 0.33 must be a multiple of 0.05");
   EXPECT_ERROR_CONTAINS(makeSweepSet("spread", 0.5), "unknown sweep mode 'spread'");
+}
+
+TEST(CovisSweep, SetsByName) {
+  EXPECT_EQ(parseSweepSet("uniform_0.50").buckets, makeSweepSet("uniform", 0.5).buckets);
+  EXPECT_EQ(parseSweepSet("bin_0.55").name, "bin_0.55");
+  for (const char* bad : {"bin", "bin_", "bin_0.5x", "_0.5"})
+    EXPECT_ERROR_CONTAINS(parseSweepSet(bad), "is not <mode>_<centre>") << bad;
+  EXPECT_ERROR_CONTAINS(parseSweepSet("bin_0.47"), "bin centre 0.47 must be a multiple of 0.05");
+  SweepConfig c;
+  c.sets = {"bin_0.15", "uniform_0.50"};
+  const std::vector<SweepSet> sets = planSets(c);  // instead of every mode at every centre
+  ASSERT_EQ(sets.size(), 2u);
+  EXPECT_EQ(sets[1].name, "uniform_0.50");
+  EXPECT_EQ(referenceSet(sets), "bin_0.15");
 }
 
 TEST(CovisSweep, SetsAreEqualInSizeAndEachPairIsInItsRange) {
@@ -139,8 +154,9 @@ TEST(DepthProbe, FitsDepthThatIsLinearInTheFeatures) {
 
 SweepConfig miniSweep(const std::string& out) {
   SweepConfig c;
-  c.scenes = {testing::sourceDir() + "/scenes/room", testing::sourceDir() + "/scenes/apartment"};
-  c.heldout = {testing::sourceDir() + "/scenes/studio"};
+  // Two held-out scenes, so that every pair has a reference from another scene.
+  c.scenes = {testing::sourceDir() + "/scenes/room"};
+  c.heldout = {testing::sourceDir() + "/scenes/studio", testing::sourceDir() + "/scenes/apartment"};
   c.out = out;
   c.centers = {0.45, 0.75};
   c.pairsPerSet = 16;
@@ -151,6 +167,7 @@ SweepConfig miniSweep(const std::string& out) {
   c.resolution = 64;
   c.evalPairs = 8;
   c.probeViews = 8;
+  c.mechanismPairs = 4;
   c.jobs = 2;
   c.workers = 1;
   c.progress = false;
@@ -175,9 +192,9 @@ std::vector<std::string> miniArgs(const std::string& out) {
   return {covisSweepTool(),
           "--scenes",
           s + "/scenes/room",
-          s + "/scenes/apartment",
           "--heldout",
           s + "/scenes/studio",
+          s + "/scenes/apartment",
           "--out",
           out,
           "--centers",
@@ -198,6 +215,8 @@ std::vector<std::string> miniArgs(const std::string& out) {
           "8",
           "--probe-views",
           "8",
+          "--mechanism-pairs",
+          "4",
           "--jobs",
           "2",
           "--quiet"};
@@ -298,12 +317,29 @@ TEST(CovisSweep, SeedsAndMaeEndToEnd) {
   EXPECT_EQ(csv.substr(0, csv.find('\n')),
             "mode,center,set,task,trained_on,seeds,pairs,mean_covis,train_loss_mean,"
             "train_loss_ci95,xv_loss_mean,xv_loss_ci95,probe_delta1_mean,probe_delta1_ci95,"
-            "probe_absrel_mean,probe_absrel_ci95,probe_rmse_mean,probe_rmse_ci95");
+            "probe_absrel_mean,probe_absrel_ci95,probe_rmse_mean,probe_rmse_ci95,ref_gain_mean,"
+            "ref_gain_ci95,ref_gain_covisible_mean,ref_gain_covisible_ci95,ref_gain_hidden_mean,"
+            "ref_gain_hidden_ci95,xattn_pck1_mean,xattn_pck1_ci95,xattn_epe_mean,xattn_epe_ci95,"
+            "enc_pck1_mean,enc_pck1_ci95");
+  // The mechanism probes: every cross-view run and random encoder has them, mae only enc_pck1.
+  for (const auto& row : r["rows"]) {
+    const bool mae = row["task"] == "mae";
+    EXPECT_EQ(std::isnan(numberOrNan(row, "ref_gain_mean")), mae) << row["set"];
+    EXPECT_EQ(std::isnan(numberOrNan(row, "xattn_pck1_mean")), mae) << row["set"];
+    EXPECT_GE(row["enc_pck1_mean"].get<double>(), 0.0);
+  }
+  EXPECT_EQ(r["config"]["mechanism_pairs"], 8);  // 4 from each held-out scene
+  const std::string byCovis = readFile(clean + "/probe_by_covis.csv");
+  EXPECT_EQ(byCovis.substr(0, byCovis.find('\n')),
+            "set,task,covis_lo,covis_hi,pairs,seeds,xattn_pck1_mean,xattn_pck1_ci95,"
+            "xattn_epe_mean,xattn_epe_ci95,enc_pck1_mean,enc_pck1_ci95");
+  EXPECT_NE(byCovis.find("\nrandom_encoder,croco,"), std::string::npos) << byCovis;
   const std::string runsCsv = readFile(clean + "/results_runs.csv");
   EXPECT_EQ(std::count(runsCsv.begin(), runsCsv.end(), '\n'), 13);  // header, 10 runs, 2 random
-  for (const char* f : {"results.json", "plot_xv_loss.svg", "plot_probe_delta1.svg",
-                        "plot_probe_absrel.svg", "plot_probe_rmse.svg", "summary.html",
-                        "sets/bin_0.45/report.html", "sets/uniform_0.75.keys"})
+  for (const char* f :
+       {"results.json", "plot_xv_loss.svg", "plot_probe_delta1.svg", "plot_xattn_pck1.svg",
+        "plot_probe_by_covis.svg", "plot_probe_absrel.svg", "plot_probe_rmse.svg", "summary.html",
+        "sets/bin_0.45/report.html", "sets/uniform_0.75.keys"})
     EXPECT_TRUE(fs::exists(clean + "/" + f)) << f;
   const std::string html = readFile(clean + "/summary.html");
   EXPECT_NE(html.find("Claim 2, cross-view completion beats auto-completion (MAE)"),
@@ -387,6 +423,18 @@ TEST(CovisSweep, BadSeedsAndBaselinesAreRefused) {
   // The command refuses them before any work, with exit 2.
   for (const auto& [option, value] : {std::pair{"--seeds", "0"}, std::pair{"--baseline", "byol"}})
     EXPECT_EQ(testing::runProcess(withOption(seededArgs(c.out), option, value)), 2) << option;
+  EXPECT_FALSE(fs::exists(c.out + "/pool"));
+  c.baselines = {"mae"};
+  c.sets = {"bin_0.45", "bin_0.45"};
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "set 'bin_0.45' is given twice");
+  c.sets = {"bin_0.47"};
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "bin centre 0.47 must be a multiple of 0.05");
+  c.sets = {};
+  c.mechanismMinCovis = 0.8;
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "must be lo,hi with 0 <= lo < hi <= 1");
+  auto args = seededArgs(c.out);
+  args.insert(args.end(), {"--sets", "bin_0.45,binn_0.45"});
+  EXPECT_EQ(testing::runProcess(args), 2);
   EXPECT_FALSE(fs::exists(c.out + "/pool"));
 }
 

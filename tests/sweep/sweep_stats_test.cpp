@@ -61,6 +61,21 @@ TEST(SweepStats, WelchIntervalOfADifference) {
   EXPECT_FALSE(excludesZero(f));
 }
 
+TEST(SweepStats, PairedIntervalOfADifference) {
+  // Runs that share their seeds' noise: the differences are steady, though each side spreads.
+  const std::vector<double> a = {0.50, 0.60, 0.70}, b = {0.45, 0.56, 0.64};
+  const Interval p = pairedDifferenceInterval95(a, b);  // differences 0.05, 0.04, 0.06
+  EXPECT_NEAR(p.mean, 0.05, 1e-12);
+  EXPECT_NEAR(p.halfWidth, 4.302653 * 0.01 / std::sqrt(3.0), 1e-6);
+  EXPECT_EQ(p.n, 3);
+  EXPECT_TRUE(excludesZero(p));
+  EXPECT_FALSE(excludesZero(differenceInterval95(a, b)));  // Welch's cannot tell
+  // A pair with a non-finite side is left out.
+  const Interval q = pairedDifferenceInterval95({0.5, NAN, 0.7}, {0.45, 0.5, 0.64});
+  EXPECT_EQ(q.n, 2);
+  EXPECT_NEAR(q.mean, 0.055, 1e-12);
+}
+
 nlohmann::json run(const std::string& set, const std::string& task, double center, int seed,
                    double xv, double delta1) {
   return {{"set", set},
@@ -132,23 +147,37 @@ TEST(SweepReport, VerdictsSayWhichDifferencesAreBeyondTheirIntervals) {
   const size_t xv = v.find("held-out completion loss (covis ~0.5): the best");
   ASSERT_NE(xv, std::string::npos);
   EXPECT_EQ(v.substr(xv, v.find('\n', xv) - xv).find("mae"), std::string::npos) << v;
-  EXPECT_NE(v.find("Claim 1, covis near 0.5 beats low and high covis: is not resolved at this "
-                   "scale"),
-            std::string::npos)
-      << v;  // ahead in the probe, level in the completion loss
-  EXPECT_NE(v.find("Claim 2, cross-view completion beats auto-completion (MAE): holds"),
+  // A verdict per probe: ahead in the depth probe, level in the completion loss.
+  const std::string claim1 = "Claim 1, covis near 0.5 beats low and high covis, on the ";
+  EXPECT_NE(v.find(claim1 + "held-out completion loss (covis ~0.5): is not resolved at this scale"),
             std::string::npos)
       << v;
+  EXPECT_NE(v.find(claim1 + "depth probe delta1: holds (bin_0.55's gain, positive when it is "
+                            "better, with the paired 95 % interval over the seeds: vs bin_0.15 "
+                            "+0.100 \u00b1 0.000; vs bin_0.95 +0.100 \u00b1 0.050)"),
+            std::string::npos)
+      << v;
+  const std::string claim2 = "Claim 2, cross-view completion beats auto-completion (MAE), on the ";
+  EXPECT_NE(v.find(claim2 + "depth probe delta1: holds"), std::string::npos) << v;
+  EXPECT_NE(v.find(claim2 + "held-out completion loss (covis ~0.5): not compared: mae is another "
+                            "task"),
+            std::string::npos)
+      << v;
+  EXPECT_NE(v.find(claim2 + "cross-attention correspondence PCK@1 patch: not compared: mae has no "
+                            "reference view"),
+            std::string::npos)
+      << v;
+  EXPECT_NE(v.find(claim1 + "cross-attention correspondence PCK@1 patch: no figures"),
+            std::string::npos)
+      << v;  // these runs have no such probe
   // Without the gap, bin 0.55 wins nothing beyond the intervals.
   const std::string level = joined(sweepVerdicts(syntheticResults(0.0)));
-  EXPECT_NE(level.find("Claim 2, cross-view completion beats auto-completion (MAE): is not "
-                       "resolved at this scale"),
+  EXPECT_NE(level.find(claim2 + "depth probe delta1: is not resolved at this scale"),
             std::string::npos)
       << level;
   // With one seed there are no intervals: nothing is called a difference.
   const std::string one = joined(sweepVerdicts(syntheticResults(0.1, 1)));
-  EXPECT_NE(one.find("Claim 2, cross-view completion beats auto-completion (MAE): cannot be "
-                     "judged with one seed"),
+  EXPECT_NE(one.find(claim2 + "depth probe delta1: cannot be judged with fewer than 2 seeds"),
             std::string::npos)
       << one;
   EXPECT_NE(one.find("depth probe delta1: the best is bin_0.55, 0.490. With one seed there are no "
@@ -157,9 +186,7 @@ TEST(SweepReport, VerdictsSayWhichDifferencesAreBeyondTheirIntervals) {
       << one;
   // A gap the other way is a claim that does not hold.
   const std::string worse = joined(sweepVerdicts(syntheticResults(-0.1)));
-  EXPECT_NE(worse.find("Claim 2, cross-view completion beats auto-completion (MAE): does not hold"),
-            std::string::npos)
-      << worse;
+  EXPECT_NE(worse.find(claim2 + "depth probe delta1: does not hold"), std::string::npos) << worse;
 }
 
 }  // namespace
