@@ -490,8 +490,8 @@ std::string probeByCovisCsv(const nlohmann::json& rows) {
   return csv;
 }
 
-// Cross-attention PCK (solid) and encoder PCK (dashed) against the held-out pair's covis, a
-// colour per set.
+// Cross-attention PCK ("xattn", solid) and encoder PCK ("enc", dashed) against the held-out pair's
+// covis, a colour per set.
 std::string probeByCovisPlot(const nlohmann::json& rows) {
   const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728", "#7f7f7f"};
   std::vector<std::string> sets;
@@ -502,7 +502,7 @@ std::string probeByCovisPlot(const nlohmann::json& rows) {
   for (size_t k = 0; k < sets.size(); ++k)
     for (const char* m : {"xattn_pck1", "enc_pck1"}) {
       plot::Series s;
-      s.label = sets[k] + (std::string(m) == "enc_pck1" ? " (encoder)" : " (cross-attention)");
+      s.label = sets[k] + (std::string(m) == "enc_pck1" ? " enc" : " xattn");
       s.color = colors[k % 6];
       s.dashed = std::string(m) == "enc_pck1";
       for (const auto& r : rows) {
@@ -515,7 +515,7 @@ std::string probeByCovisPlot(const nlohmann::json& rows) {
       if (!s.x.empty()) series.push_back(s);
     }
   return plot::lines(series, {"correspondence PCK@1 patch by the held-out pair's covis",
-                              "covis of the held-out pair (bins of 0.1)", "PCK@1", 620, 380});
+                              "covis of the held-out pair (bins of 0.1)", "PCK@1", 720, 400});
 }
 
 }  // namespace

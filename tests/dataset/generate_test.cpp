@@ -225,12 +225,11 @@ TEST(GeneratePairs, BadScenesAreSkippedAndListed) {
                         dir + "/does-not-exist: no such scene file, folder or list");
 }
 
-// The room with a band so narrow, and so few tries, that most indices find no sample: with seed 5,
-// indices 0 to 6 have none and index 7 has one (the tests check that they still do).
-GenerateConfig sparseConfig(const std::string& room, const std::string& out) {
+// The room with a band so narrow, and so few tries, that most indices find no sample.
+GenerateConfig sparseConfig(const std::string& room, const std::string& out, uint64_t seed) {
   GenerateConfig c = smallConfig({room}, out);
   c.pairsPerScene = 8;
-  c.seed = 5;
+  c.seed = seed;
   c.pair.minCovis = 0.85;
   c.pair.maxAttempts = 1;
   return c;
@@ -247,22 +246,41 @@ std::string recordPattern(const std::string& journal, const std::string& scene, 
   return pattern;
 }
 
+// A seed of sparseConfig whose indices 0 to 2 have no sample and one of 3 to 7 has, with its
+// pattern. Which indices find a sample at so narrow a band depends on the rounding of the
+// machine's Embree build, so the seed is searched for, not fixed.
+std::pair<uint64_t, std::string> sparseSeed(const std::string& room, const std::string& dir) {
+  for (uint64_t seed = 0; seed < 300; ++seed) {
+    const GenerateConfig c = sparseConfig(room, dir + "/search-" + std::to_string(seed), seed);
+    runGenerate(c);
+    const std::string p = recordPattern(c.out + "/.paircast/journal.jsonl", "room", 8);
+    if (p.rfind("xxx", 0) == 0 && p.find('-') == std::string::npos &&
+        p.find('o') != std::string::npos)
+      return {seed, p};
+  }
+  ADD_FAILURE() << "no seed of 300 leaves indices 0 to 2 of the sparse room without a sample";
+  return {0, ""};
+}
+
 TEST(GeneratePairs, ASceneWhoseFirstIndicesHaveNoSampleIsWritten) {
   const std::string dir = testing::scratchDir("sparse");
   const std::string room = writeRoom(dir);
-  GenerateConfig one = sparseConfig(room, dir + "/one"), three = one;
+  const auto [seed, pattern] = sparseSeed(room, dir);
+  GenerateConfig one = sparseConfig(room, dir + "/one", seed), three = one;
   one.jobs = 1;
   three.out = dir + "/three";
   three.jobs = 3;
   const nlohmann::json summary = runGenerate(one);
   runGenerate(three);
   ASSERT_TRUE(summary["skipped_scenes"].empty()) << summary["skipped_scenes"];
-  ASSERT_EQ(recordPattern(dir + "/one/.paircast/journal.jsonl", "room", 8), "xxxxxxxo")
-      << "the test needs a seed whose first indices have no sample";
-  EXPECT_EQ(summary["pairs"], 1);
-  EXPECT_EQ(summary["failed_pairs"], 7);
-  EXPECT_EQ(ShardIndex::keys(dir + "/one/pairs-000000.tar"),
-            std::vector<std::string>{"room-00000007"});
+  ASSERT_EQ(recordPattern(dir + "/one/.paircast/journal.jsonl", "room", 8), pattern);
+  std::vector<std::string> kept;
+  char key[32];
+  for (int k = 0; k < 8; ++k)
+    if (pattern[k] == 'o') std::snprintf(key, sizeof key, "room-%08d", k), kept.push_back(key);
+  EXPECT_EQ(summary["pairs"], kept.size());
+  EXPECT_EQ(summary["failed_pairs"], 8 - kept.size());
+  EXPECT_EQ(ShardIndex::keys(dir + "/one/pairs-000000.tar"), kept);
   expectSameOutput(dir + "/one", dir + "/three");
 }
 
@@ -271,8 +289,9 @@ TEST(GeneratePairs, AResumedRunChecksTheFirstIndicesFromTheJournal) {
   // run reads those from the journal, generates the rest, and ends as an uninterrupted run.
   const std::string dir = testing::scratchDir("sparse_resume");
   const std::string room = writeRoom(dir);
-  const GenerateConfig clean = sparseConfig(room, dir + "/clean");
-  GenerateConfig resumed = sparseConfig(room, dir + "/resumed");
+  const auto [seed, pattern] = sparseSeed(room, dir);
+  const GenerateConfig clean = sparseConfig(room, dir + "/clean", seed);
+  GenerateConfig resumed = sparseConfig(room, dir + "/resumed", seed);
   runGenerate(clean);
   fs::create_directories(dir + "/resumed/.paircast");
   std::ifstream in(dir + "/clean/.paircast/journal.jsonl");
@@ -282,9 +301,10 @@ TEST(GeneratePairs, AResumedRunChecksTheFirstIndicesFromTheJournal) {
   head.close();
   ASSERT_EQ(recordPattern(dir + "/resumed/.paircast/journal.jsonl", "room", 8), "xxx-----");
   const nlohmann::json summary = runGenerate(resumed);
-  EXPECT_EQ(summary["pairs"], 1);
-  EXPECT_EQ(summary["pairs_this_run"], 1);
-  EXPECT_EQ(summary["failed_pairs"], 4);  // indices 3 to 6, this run
+  const auto count = [&](char c) { return std::count(pattern.begin(), pattern.end(), c); };
+  EXPECT_EQ(summary["pairs"], count('o'));
+  EXPECT_EQ(summary["pairs_this_run"], count('o'));
+  EXPECT_EQ(summary["failed_pairs"], count('x') - 3);  // indices 3 to 7 without one, this run
   expectSameOutput(dir + "/clean", dir + "/resumed");
 }
 
