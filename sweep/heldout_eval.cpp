@@ -79,7 +79,7 @@ MechanismPairs mechanismPairs(const SweepConfig& c, const CroCoConfig& mc,
   o.patch = mc.patch_size;
   o.maskedPatches = mc.numMasked();
   o.seed = c.seed + 3;
-  o.threads = c.jobs;
+  o.threads = sweepThreads(c);
   const PairOptions po = mechanismPairOptions(o);
   std::vector<std::unique_ptr<PairGenerator>> gens;
   std::vector<const PairGenerator*> view;

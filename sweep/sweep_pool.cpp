@@ -1,7 +1,5 @@
 #include "sweep/sweep_pool.h"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -105,8 +103,7 @@ nlohmann::json samplePoolRound(const SweepConfig& c,
   for (auto& s : scenes)
     gens.push_back(std::make_unique<PairGenerator>(*s->scene, *s->caster, *s->sampler, po));
   std::vector<std::optional<PairSample>> got(m);
-  const int threads = c.jobs > 0 ? c.jobs : omp_get_num_procs();
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+#pragma omp parallel for schedule(dynamic, 1) num_threads(sweepThreads(c))
   for (int i = 0; i < m; ++i) {
     const uint64_t idx = nextIndex + i;
     got[i] = gens[idx % gens.size()]->generate(c.seed, idx);

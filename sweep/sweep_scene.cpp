@@ -1,5 +1,7 @@
 #include "sweep/sweep_scene.h"
 
+#include <omp.h>
+
 #include <cstdio>
 #include <filesystem>
 
@@ -43,6 +45,10 @@ nlohmann::json readSweepState(const std::string& path) {
     throw Error(path,
                 std::string("unreadable state file (delete it to redo this stage): ") + e.what());
   }
+}
+
+int sweepThreads(const SweepConfig& c) {
+  return c.jobs > 0 ? c.jobs : omp_get_num_procs();
 }
 
 void sweepSay(const SweepConfig& c, const std::string& line) {

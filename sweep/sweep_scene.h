@@ -33,6 +33,9 @@ std::vector<std::unique_ptr<SweepScene>> loadSweepScenes(const std::vector<std::
 // one.
 nlohmann::json readSweepState(const std::string& path);
 
+// The render threads --jobs asks for: all cores at 0.
+int sweepThreads(const SweepConfig& config);
+
 // A progress line on stderr, unless the config turns progress off.
 void sweepSay(const SweepConfig& config, const std::string& line);
 
