@@ -610,41 +610,73 @@ Mesh buildLayout(const LayoutSpec& L) {
   return std::move(b.mesh);
 }
 
-LayoutSpec randomLayout(const std::string& name, uint64_t seed) {
-  constexpr float kMinSide = 3.0f, kDoorOverlap = 1.6f;
-  auto u = [&](uint64_t a, uint64_t b = 0) { return hashUnit(seed, 0x5ca1ab1e + a, b); };
-  auto lerp = [](float a, float b, float t) { return a + (b - a) * t; };
-  auto roundTo = [](float v) { return std::round(v * 20.0f) / 20.0f; };  // 5 cm grid
-  LayoutSpec L;
-  L.name = name;
-  L.seed = seed;
-  L.clearDoorways = true;
-  L.height = roundTo(lerp(2.5f, 3.0f, u(1)));
-  const float W = roundTo(lerp(5.0f, 12.0f, u(2))), D = roundTo(lerp(4.0f, 9.0f, u(3)));
+namespace {
+
+constexpr float kMinRoomSide = 3.0f;
+
+float roundToGrid(float v) {
+  return std::round(v * 20.0f) / 20.0f;  // 5 cm
+}
+
+// Splits the largest room that can be split, across its longer side, until `target` rooms or
+// none can be split; cut positions and kinds drawn by `u`.
+template <typename Draw>
+void splitRooms(LayoutSpec& L, int target, const Draw& u) {
   const RoomKind kinds[] = {RoomKind::Living, RoomKind::Bedroom, RoomKind::Kitchen,
                             RoomKind::Office, RoomKind::Hall};
-  L.rooms.push_back({0, 0, W, D, kinds[static_cast<int>(u(5) * 5.0f) % 5]});
-  const int target = 1 + static_cast<int>(u(4) * 5.0f);
-  // Split the largest room that can be split, across its longer side, until `target` rooms.
-  for (int k = 0; static_cast<int>(L.rooms.size()) < target && k < 16; ++k) {
+  const int maxSplits = std::max(16, 4 * target);
+  for (int k = 0; static_cast<int>(L.rooms.size()) < target && k < maxSplits; ++k) {
     int best = -1;
     float bestArea = 0;
     for (size_t i = 0; i < L.rooms.size(); ++i) {
       const RoomSpec& r = L.rooms[i];
       const float area = (r.x1 - r.x0) * (r.z1 - r.z0);
-      if (std::max(r.x1 - r.x0, r.z1 - r.z0) >= 2 * kMinSide && area > bestArea)
+      if (std::max(r.x1 - r.x0, r.z1 - r.z0) >= 2 * kMinRoomSide && area > bestArea)
         best = static_cast<int>(i), bestArea = area;
     }
     if (best < 0) break;
     RoomSpec a = L.rooms[best], b = a;
     const bool alongX = a.x1 - a.x0 >= a.z1 - a.z0;
-    const float lo = (alongX ? a.x0 : a.z0) + kMinSide, hi = (alongX ? a.x1 : a.z1) - kMinSide;
-    const float cut = roundTo(lerp(lo, hi, u(10 + k)));
+    const float lo = (alongX ? a.x0 : a.z0) + kMinRoomSide;
+    const float hi = (alongX ? a.x1 : a.z1) - kMinRoomSide;
+    const float cut = roundToGrid(lo + (hi - lo) * u(10 + k));
     (alongX ? a.x1 : a.z1) = cut;
     (alongX ? b.x0 : b.z0) = cut;
     b.kind = kinds[static_cast<int>(u(30 + k) * 5.0f) % 5];
     L.rooms[best] = a;
     L.rooms.push_back(b);
+  }
+}
+
+}  // namespace
+
+LayoutSpec randomLayout(const std::string& name, uint64_t seed, int rooms) {
+  constexpr float kDoorOverlap = 1.6f;
+  PAIRCAST_CHECK(rooms >= 0 && rooms <= kMaxLayoutRooms);
+  auto u = [&](uint64_t a, uint64_t b = 0) { return hashUnit(seed, 0x5ca1ab1e + a, b); };
+  auto lerp = [](float a, float b, float t) { return a + (b - a) * t; };
+  LayoutSpec L;
+  L.name = name;
+  L.seed = seed;
+  L.clearDoorways = true;
+  L.height = roundToGrid(lerp(2.5f, 3.0f, u(1)));
+  const RoomKind kinds[] = {RoomKind::Living, RoomKind::Bedroom, RoomKind::Kitchen,
+                            RoomKind::Office, RoomKind::Hall};
+  const RoomKind firstKind = kinds[static_cast<int>(u(5) * 5.0f) % 5];
+  if (rooms == 0) {
+    const float W = roundToGrid(lerp(5.0f, 12.0f, u(2))), D = roundToGrid(lerp(4.0f, 9.0f, u(3)));
+    L.rooms.push_back({0, 0, W, D, firstKind});
+    splitRooms(L, 1 + static_cast<int>(u(4) * 5.0f), u);
+  } else {
+    // A rectangle of 12-20 m^2 a room with sides in ratio 1-1.6, grown by a tenth until the
+    // splits give `rooms` rooms (a cut may leave a piece too small to split again).
+    const float area = rooms * lerp(12.0f, 20.0f, u(2)), aspect = lerp(1.0f, 1.6f, u(3));
+    for (float grow = 1.0f; static_cast<int>(L.rooms.size()) < rooms; grow *= 1.1f) {
+      const float W = roundToGrid(std::max(kMinRoomSide, std::sqrt(grow * area * aspect)));
+      const float D = roundToGrid(std::max(kMinRoomSide, std::sqrt(grow * area / aspect)));
+      L.rooms.assign(1, {0, 0, W, D, firstKind});
+      splitRooms(L, rooms, u);
+    }
   }
   // Doors: a spanning tree over the rooms that share enough wall, plus a chance of more.
   std::vector<int> component(L.rooms.size());
@@ -657,7 +689,7 @@ LayoutSpec randomLayout(const std::string& name, uint64_t seed) {
       if (ci == cj && u(50 + i, j) > 0.3f) continue;  // already connected: rarely a second door
       for (int& c : component)
         if (c == cj) c = ci;
-      const float at = roundTo(lerp(w.from + 0.7f, w.to - 0.7f, u(70 + i, j)));
+      const float at = roundToGrid(lerp(w.from + 0.7f, w.to - 0.7f, u(70 + i, j)));
       L.doors.push_back({static_cast<int>(i), static_cast<int>(j), at});
     }
   }

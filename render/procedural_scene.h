@@ -46,8 +46,11 @@ struct LayoutSpec {
 std::vector<LayoutSpec> shippedLayouts();
 // A random floor plan, deterministic in `seed`: a rectangle of 5-12 m by 4-9 m split into 1-5
 // rooms (each side at least 3 m) of random kinds, every room reachable through doors. For more
-// training scenes than the shipped three (make_scenes --random N).
-LayoutSpec randomLayout(const std::string& name, uint64_t seed);
+// training scenes than the shipped three (make_scenes --random N). With `rooms` > 0, a building of
+// exactly that many rooms instead (make_scenes --rooms): a rectangle of 12-20 m^2 a room, as
+// HM3D's and Matterport3D's houses are, split the same way.
+LayoutSpec randomLayout(const std::string& name, uint64_t seed, int rooms = 0);
+constexpr int kMaxLayoutRooms = 64;
 // Builds the mesh of a layout: structure, textures, furniture.
 Mesh buildLayout(const LayoutSpec& layout);
 

@@ -13,7 +13,7 @@ using namespace paircast;
 int main(int argc, char** argv) {
   std::string out = "scenes";
   bool list = false;
-  int random = 0;
+  int random = 0, rooms = 0;
   uint64_t seed = 0;
   std::string scan;
   size_t triangles = ScanSpec{}.triangles;
@@ -22,6 +22,10 @@ int main(int argc, char** argv) {
   app.add_option("--random", random,
                  "Write N random floor plans (random_<seed>_<i>) instead of the shipped scenes")
       ->check(CLI::Range(1, 100000));
+  app.add_option("--rooms", rooms,
+                 "With --random: buildings of exactly this many rooms (default: 1-5 rooms, "
+                 "5-12 m by 4-9 m)")
+      ->check(CLI::Range(1, kMaxLayoutRooms));
   app.add_option("--seed", seed, "Seed of the random floor plans or of the scan");
   app.add_flag("--list", list, "Only list the scenes");
   app.add_option("--scan", scan,
@@ -42,11 +46,12 @@ int main(int argc, char** argv) {
       return 0;
     }
     std::vector<LayoutSpec> layouts = shippedLayouts();
+    if (rooms > 0 && random == 0) throw OptionError("rooms", "--rooms needs --random N");
     if (random > 0) {
       layouts.clear();
       for (int i = 0; i < random; ++i) {
         const std::string name = "random_" + std::to_string(seed) + "_" + std::to_string(i);
-        layouts.push_back(randomLayout(name, seed * 100003 + static_cast<uint64_t>(i) + 1));
+        layouts.push_back(randomLayout(name, seed * 100003 + static_cast<uint64_t>(i) + 1, rooms));
       }
     }
     for (const LayoutSpec& layout : layouts) {

@@ -130,6 +130,34 @@ TEST(ProceduralScene, RandomLayoutsAreValidEnclosedAndConnected) {
   EXPECT_GE(roomCounts.size(), 4u) << "the plans should vary in their number of rooms";
 }
 
+TEST(ProceduralScene, BuildingsHaveTheRoomsAskedForAndStayConnected) {
+  for (int rooms : {6, 8, 11}) {
+    for (uint64_t seed = 1; seed <= 3; ++seed) {
+      const LayoutSpec layout = randomLayout("building", seed * 31 + rooms, rooms);
+      SCOPED_TRACE(std::to_string(rooms) + " rooms, seed " + std::to_string(seed));
+      ASSERT_EQ(static_cast<int>(layout.rooms.size()), rooms);
+      float area = 0, x1 = 0, z1 = 0;
+      for (const auto& r : layout.rooms) {
+        EXPECT_GE(r.x1 - r.x0, 3.0f - 1e-3f);
+        EXPECT_GE(r.z1 - r.z0, 3.0f - 1e-3f);
+        area += (r.x1 - r.x0) * (r.z1 - r.z0), x1 = std::max(x1, r.x1), z1 = std::max(z1, r.z1);
+      }
+      EXPECT_NEAR(area, x1 * z1, 1e-1f);
+      EXPECT_LE(area, rooms * 20.0f * 1.1f * 1.1f * 1.1f) << "a house, not a hangar";
+      std::vector<int> reached(layout.rooms.size(), 0);
+      reached[0] = 1;
+      for (size_t pass = 0; pass < layout.rooms.size(); ++pass)
+        for (const auto& d : layout.doors)
+          if (reached[d.roomA] || reached[d.roomB]) reached[d.roomA] = reached[d.roomB] = 1;
+      EXPECT_EQ(std::count(reached.begin(), reached.end(), 1), rooms);
+      if (rooms == 6 && seed == 1) {
+        expectValidAndEnclosed(layout);
+        expectDoorsOpen(layout);
+      }
+    }
+  }
+}
+
 TEST(ObjWriter, RoundTripsThroughTheLoader) {
   const Mesh mesh = buildLayout(shippedLayouts().front());
   const std::string path = testing::scratchDir("obj") + "/room.obj";
