@@ -28,7 +28,10 @@
 #include "dataset/pair_generator.h"
 #include "dataset/shard.h"
 #include "dataset/viewpoint_sampler.h"
+#include "render/obj_writer.h"
+#include "render/procedural_scene.h"
 #include "render/ray_caster.h"
+#include "render/scan_scene.h"
 #include "util/atomic_file.h"
 #include "util/image_io.h"
 
@@ -168,13 +171,66 @@ RenderLimit average(const RenderLimit& a, const RenderLimit& b) {
           (a.screenDepthSeconds + b.screenDepthSeconds) / 2};
 }
 
-// Screening settings of a run: resolution (kAutoScreen, 0: off) and the two covis margins.
+// Screening settings of a run: resolution (kAutoScreen, 0: off), margins, the confirm stage and
+// the give-up count.
 struct Screen {
   int resolution = kAutoScreen;
   double margin = PairOptions{}.screenCovisMargin;
   double fineMargin = PairOptions{}.screenFineMargin;
   double frameMargin = PairOptions{}.screenFrameMargin;
+  double sightMargin = PairOptions{}.screenSightMargin;
+  bool confirm = PairOptions{}.screenConfirm;
+  int giveUpAfter = PairOptions{}.giveUpAfter;
 };
+
+// The funnel of summary.json as one line: "name entered>turned down (false rejections) ms/pair".
+std::string funnelText(const nlohmann::json& funnel, const std::vector<std::string>& names,
+                       double pairs) {
+  std::string text;
+  for (size_t k = 0; k < funnel.size(); ++k) {
+    const auto& f = funnel[k];
+    if (f["entered"].get<size_t>() == 0) continue;
+    char part[160];
+    std::snprintf(part, sizeof part, "%s%s %zu>%zu (%zu) %.3f ms", text.empty() ? "" : " | ",
+                  k < names.size() ? names[k].c_str() : "stage", f["entered"].get<size_t>(),
+                  f["turned_down"].get<size_t>(), f["false_rejections"].get<size_t>(),
+                  1e3 * f["seconds"].get<double>() / std::max(pairs, 1.0));
+    text += part;
+  }
+  return text;
+}
+
+// The names of the funnel's slots, from the options' stages.
+std::vector<std::string> funnelNames(bool candidates) {
+  const PairOptions o;
+  std::vector<std::string> names;
+  if (candidates) names = {"bound", "sight"};
+  if (o.screenGlanceSide > 0) names.push_back(candidates ? "(glance)" : "glance");
+  for (const ScreenStageSpec& stage : screenStages(o))
+    names.push_back(std::to_string(stage.side) + "^2");
+  if (const auto confirm = confirmStage(o)) names.push_back(std::to_string(confirm->side) + "^2");
+  return names;
+}
+
+// The scenes the default run adds to scenes/ and ../shared: a building of `rooms` rooms and, when
+// asked, a scan of `scanTriangles` triangles, written under `dir`.
+std::vector<SceneArg> generatedScenes(const std::string& dir, int rooms, size_t scanTriangles) {
+  std::vector<SceneArg> out;
+  if (rooms > 0) {
+    const LayoutSpec layout =
+        randomLayout("building_" + std::to_string(rooms) + "_rooms", 7 * 100003 + 1, rooms);
+    const std::string path = dir + "/" + layout.name + "/" + layout.name + ".obj";
+    writeObj(path, buildLayout(layout));
+    out.push_back({path, UpAxis::Y});
+  }
+  if (scanTriangles > 0) {
+    ScanSpec spec;  // make_scenes --scan scannet's
+    spec.seed = 0;
+    spec.triangles = scanTriangles;
+    out.push_back({writeScan(spec, dir), UpAxis::Z});
+  }
+  return out;
+}
 
 nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, unsigned threads,
                         Screen screen, bool audit) {
@@ -190,7 +246,38 @@ nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, 
   c.pair.screenCovisMargin = screen.margin;
   c.pair.screenFineMargin = screen.fineMargin;
   c.pair.screenFrameMargin = screen.frameMargin;
+  c.pair.screenSightMargin = screen.sightMargin;
+  c.pair.screenConfirm = screen.confirm;
+  c.pair.giveUpAfter = screen.giveUpAfter;
   return runGenerate(c);
+}
+
+// The run's figures as the Markdown tables of docs/benchmarks.md: rates, then the stage table.
+void printStageTable(const nlohmann::json& results) {
+  std::printf(
+      "\n| scene | triangles | pairs/s | limit | efficiency | unscreened | screened / unscreened "
+      "| false rejections | full renders / pair |\n| --- | --- | --- | --- | --- | --- | --- | "
+      "--- | --- |\n");
+  for (const auto& r : results)
+    std::printf("| %s | %zu | %.1f | %.1f | **%.2f** | %.1f | %.2fx | %.4f | %.2f |\n",
+                r["scene"].get<std::string>().c_str(),
+                r["scene_stats"]["triangles"].get<size_t>(), r["pairs_per_second"].get<double>(),
+                r["limit_pairs_per_second"].get<double>(), r["efficiency"].get<double>(),
+                r["unscreened_pairs_per_second"].get<double>(),
+                r["screening_speedup"].get<double>(), r["false_rejection_rate"].get<double>(),
+                r["renders"]["per_pair"].get<double>());
+  std::printf(
+      "\n| scene | screening | full renders kept | full renders wasted | JPEG | covis | poses | "
+      "writing |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const auto& r : results) {
+    const auto& t = r["time_split"];
+    std::printf("| %s | %.1f %% | %.1f %% | %.1f %% | %.1f %% | %.1f %% | %.1f %% | %.1f %% |\n",
+                r["scene"].get<std::string>().c_str(), 100 * t["screen"].get<double>(),
+                100 * t["render_kept"].get<double>(), 100 * t["render_wasted"].get<double>(),
+                100 * t["encode"].get<double>(), 100 * t["covis"].get<double>(),
+                100 * t["sampling"].get<double>(), 100 * t["write"].get<double>());
+  }
+  std::fflush(stdout);
 }
 
 }  // namespace
@@ -221,8 +308,23 @@ int main(int argc, char** argv) {
                  "Margin of the in-frame bound checked before rendering (--min-covis: off)");
   app.add_option("--audit-pairs", auditPairs,
                  "Pairs of the audited run for the false-rejection rate");
+  app.add_option("--screen-sight-margin", screen.sightMargin,
+                 "Margin of the sight-line estimate checked before rendering");
+  app.add_flag("--screen-confirm", screen.confirm, "Add the confirm stage");
+  app.add_option("--give-up-after", screen.giveUpAfter,
+                 "Give a reference up after this many candidates in a row turned down before "
+                 "rendering (0: never)");
+  int buildingRooms = 8;
+  size_t scanTriangles = ScanSpec{}.triangles;
+  app.add_option("--building-rooms", buildingRooms,
+                 "Default run: also a make_scenes floor plan of this many rooms (0: none)")
+      ->check(CLI::Range(0, kMaxLayoutRooms));
+  app.add_option("--scan-triangles", scanTriangles,
+                 "Default run: also a ScanNet-style scan of this many triangles (0: none)");
   CLI11_PARSE(app, argc, argv);
   try {
+    const std::string tmp =
+        (fs::temp_directory_path() / ("bench_generate_" + std::to_string(::getpid()))).string();
     std::vector<SceneArg> scenes;
     if (sceneArgs.empty()) {
       for (const auto& p : expandSceneList({std::string(PAIRCAST_SOURCE_DIR) + "/scenes"}))
@@ -231,11 +333,11 @@ int main(int argc, char** argv) {
         scenes.push_back({sharedDir() + "/scenes/simple_room.glb", UpAxis::Z});
       if (fs::exists(sharedDir() + "/scenes/stage_floor1.glb"))
         scenes.push_back({sharedDir() + "/scenes/stage_floor1.glb", UpAxis::Y});
+      for (const SceneArg& made : generatedScenes(tmp + "/scenes", buildingRooms, scanTriangles))
+        scenes.push_back(made);
     } else {
       for (const auto& p : expandSceneList(sceneArgs)) scenes.push_back({p, parseUpAxis(up)});
     }
-    const std::string tmp =
-        (fs::temp_directory_path() / ("bench_generate_" + std::to_string(::getpid()))).string();
     const unsigned threads = jobs > 0 ? jobs : std::max(1u, std::thread::hardware_concurrency());
     std::printf(
         "threads: %u, %d pairs per scene (unscreened %d, audited %d), 256x256, hfov 60, covis "
@@ -280,7 +382,8 @@ int main(int argc, char** argv) {
           "RGB+depth / depth-only render %.2fx (%.2f / %.2f ms; depth at 1/4 size %.3f ms)\n"
           "    stages: screening %4.1f%%  full renders kept %4.1f%%  full renders wasted %4.1f%%  "
           "JPEG %4.1f%%  covis %4.1f%%  poses %4.1f%%  writing %4.1f%%\n"
-          "    full renders: %.0f, %.0f kept, %.2f per pair\n",
+          "    full renders: %.0f, %.0f kept, %.2f per pair; wasted: %.0f references, %.0f "
+          "candidates\n",
           name.c_str(), stats["triangles"].get<size_t>(), stats["load_seconds"].get<double>(),
           stats["build_seconds"].get<double>(), stats["bytes"].get<double>() / 1e6, rate,
           limit.pairsPerSecond(), rate / limit.pairsPerSecond(), plainRate, rate / plainRate,
@@ -293,7 +396,25 @@ int main(int argc, char** argv) {
           100 * split["render_wasted"].get<double>(), 100 * split["encode"].get<double>(),
           100 * split["covis"].get<double>(), 100 * split["sampling"].get<double>(),
           100 * split["write"].get<double>(), sum["renders"]["full"].get<double>(),
-          sum["renders"]["kept"].get<double>(), sum["renders"]["per_pair"].get<double>());
+          sum["renders"]["kept"].get<double>(), sum["renders"]["per_pair"].get<double>(),
+          sum["renders"]["wasted_references"].get<double>(),
+          sum["renders"]["wasted_candidates"].get<double>());
+      // The audited run's funnel: what each stage turned down, wrongly, and its worker time per
+      // pair.
+      const double auditPairsMade = audit["pairs_this_run"].get<double>();
+      std::printf("    audited funnel, candidates: %s\n    audited funnel, references: %s\n",
+                  funnelText(screening["candidate_funnel"], funnelNames(true), auditPairsMade)
+                      .c_str(),
+                  funnelText(screening["reference_funnel"], funnelNames(false), auditPairsMade)
+                      .c_str());
+      const auto& fast = sum["screening"];
+      std::printf("    funnel, candidates: %s\n    funnel, references: %s\n",
+                  funnelText(fast["candidate_funnel"], funnelNames(true),
+                             sum["pairs_this_run"].get<double>())
+                      .c_str(),
+                  funnelText(fast["reference_funnel"], funnelNames(false),
+                             sum["pairs_this_run"].get<double>())
+                      .c_str());
       std::fflush(stdout);
       results.push_back({{"scene", name},
                          {"pairs_per_second", rate},
@@ -306,7 +427,9 @@ int main(int argc, char** argv) {
                          {"acceptance", sum["acceptance"]},
                          {"scene_stats", stats},
                          {"time_split", split},
-                         {"renders", sum["renders"]}});
+                         {"renders", sum["renders"]},
+                         {"funnel", sum["screening"]},
+                         {"audited_funnel", screening}});
       GenerateConfig c;
       c.scenes = {scenes[s].path};
       c.load.up = scenes[s].up;
@@ -328,6 +451,8 @@ int main(int argc, char** argv) {
         if (fs::exists(stem + "_1_depth.exr")) depthStems.push_back(stem);
       }
     }
+
+    printStageTable(results);
 
     // Co-visibility on one core: ours, best of several passes over the same pairs.
     double oursMs = 0, worstDiff = 0, officialMs = 0;

@@ -75,6 +75,18 @@ bool recordFailed(const nlohmann::json& r) {
   return r.value("failed", false);
 }
 
+// The screening funnel as summary.json keeps it: by stage, the views that entered it, those it
+// turned down, and its seconds.
+nlohmann::json funnelJson(const std::vector<FunnelStage>& funnel) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const FunnelStage& f : funnel)
+    out.push_back({{"entered", f.entered},
+                   {"turned_down", f.rejected},
+                   {"false_rejections", f.falseRejections},
+                   {"seconds", f.seconds}});
+  return out;
+}
+
 // Resident memory of the process, bytes (0 when /proc is not there).
 uint64_t residentBytes() {
   std::ifstream in("/proc/self/statm");
@@ -264,6 +276,7 @@ class GenerateRun {
   double tRender_ = 0, tScreen_ = 0, tSampling_ = 0, tCovis_ = 0, tEncode_ = 0, tWrite_ = 0;
   double tRenderKept_ = 0;                      // of tRender_, the renders of the views kept
   uint64_t fullRenders_ = 0, keptRenders_ = 0;  // full-resolution renders, and those kept
+  GenerationCost spent_;                        // the funnel and the wasted renders, summed
   std::mutex warnMu_;
   std::vector<nlohmann::json> skipped_;
   std::atomic<int> scenesLoaded_{0}, scenesPeak_{0};
@@ -580,6 +593,7 @@ void GenerateRun::addTimes(const GenerationCost& spent, double encode, double wr
   tRenderKept_ += spent.keptRenderSeconds;
   fullRenders_ += spent.fullRenders;
   keptRenders_ += spent.keptRenders;
+  spent_.add(spent);
   tScreen_ += spent.screenSeconds;
   tSampling_ += std::max(
       0.0, spent.totalSeconds - spent.renderSeconds - spent.screenSeconds - spent.covisSeconds);
@@ -785,13 +799,18 @@ nlohmann::json GenerateRun::summaryJson(double seconds) const {
             {"screened", screened_.load()},
             {"candidates_this_run", candidates_.load()},
             {"false_rejections", falseRejections_.load()},
-            {"audited", cfg_.pair.auditScreening}}},
+            {"audited", cfg_.pair.auditScreening},
+            {"references_given_up", spent_.referencesGivenUp},
+            {"candidate_funnel", funnelJson(spent_.candidateFunnel)},
+            {"reference_funnel", funnelJson(spent_.referenceFunnel)}}},
           {"covis_histogram", histogram_},
           {"candidate_covis_histogram", candidateHistogram_},
           {"renders",
            {{"full", fullRenders_},
             {"kept", keptRenders_},
             {"wasted", fullRenders_ - keptRenders_},
+            {"wasted_references", spent_.wastedReferenceRenders},
+            {"wasted_candidates", spent_.wastedCandidateRenders},
             {"per_pair", accepted_ ? static_cast<double>(fullRenders_) / accepted_ : 0.0}}},
           {"time_split",
            {{"render", tRender_ / split},

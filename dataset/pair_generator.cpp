@@ -15,8 +15,19 @@ namespace {
 using Clock = SteadyClock;
 constexpr auto since = secondsSince;
 
-// outOfFrame projects a kFrameScreenSide^2 grid of the reference's pixels.
+// outOfFrame projects about a kFrameScreenSide^2 grid of the reference's pixels.
 constexpr int kFrameScreenSide = 64;
+constexpr int kMaxScreenBatch = 64;
+// How much wider a stage's covis margin is than the next finer one's, below 32x32 (16x16: 0.375
+// with the default 0.15 at 32x32, docs/dataset.md).
+constexpr double kCoarseMarginRatio = 2.5;
+// Screening stages of this side or more take the fine valid margin.
+constexpr int kFineSide = 64;
+// The candidate funnel's slots: the in-frame bound, the sight lines, then the stages.
+constexpr size_t kBoundSlot = 0, kSightSlot = 1, kFirstStageSlot = 2;
+// A sight line stops short of its point by this share of its length, or this many metres if more,
+// so that the surface the point lies on does not block it.
+constexpr float kSightRelTol = 0.02f, kSightAbsTol = 0.05f;
 
 }  // namespace
 
@@ -50,12 +61,14 @@ int screenResolution(const PairOptions& o) {
   return o.resolution >= 64 ? std::max(kMinAutoScreen, o.resolution / kAutoScreenDivisor) : 0;
 }
 
-// The margin at `side`: screenCovisMargin at 32, screenFineMargin at 64, and the same ratio per
-// doubling beyond (a margin of 0 applies as given).
+// The margin at `side`: screenCovisMargin at 32, screenFineMargin at 64, half as much per doubling
+// beyond 64, and kCoarseMarginRatio times as much per halving below 32 (a margin of 0 applies as
+// given).
 double stageMargin(int side, const PairOptions& o) {
   const double m32 = o.screenCovisMargin, m64 = o.screenFineMargin;
-  if (m32 <= 0 || m64 <= 0) return side < 64 ? m32 : m64;
-  return std::min(1.0, m32 * std::pow(m64 / m32, std::log2(side / 32.0)));
+  if (side < 32) return std::min(1.0, m32 * std::pow(kCoarseMarginRatio, std::log2(32.0 / side)));
+  if (side < 64) return m32 * std::pow(m64 / std::max(m32, 1e-12), std::log2(side / 32.0));
+  return m64 * std::pow(0.5, std::log2(side / 64.0));
 }
 
 std::vector<ScreenStageSpec> screenStages(const PairOptions& o) {
@@ -64,6 +77,40 @@ std::vector<ScreenStageSpec> screenStages(const PairOptions& o) {
        side *= 2)
     stages.push_back({side, stageMargin(side, o)});
   return stages;
+}
+
+std::optional<ScreenStageSpec> confirmStage(const PairOptions& o) {
+  const std::vector<ScreenStageSpec> stages = screenStages(o);
+  if (!o.screenConfirm || stages.empty() || 4 * stages.back().side > o.resolution)
+    return std::nullopt;
+  const int side = 2 * stages.back().side;
+  return ScreenStageSpec{side, stageMargin(side, o)};
+}
+
+void GenerationCost::add(const GenerationCost& o) {
+  screened += o.screened;
+  falseRejections += o.falseRejections;
+  renderSeconds += o.renderSeconds;
+  keptRenderSeconds += o.keptRenderSeconds;
+  fullRenders += o.fullRenders;
+  keptRenders += o.keptRenders;
+  wastedReferenceRenders += o.wastedReferenceRenders;
+  wastedCandidateRenders += o.wastedCandidateRenders;
+  screenSeconds += o.screenSeconds;
+  covisSeconds += o.covisSeconds;
+  totalSeconds += o.totalSeconds;
+  referencesGivenUp += o.referencesGivenUp;
+  auto addFunnel = [](std::vector<FunnelStage>& to, const std::vector<FunnelStage>& from) {
+    if (to.size() < from.size()) to.resize(from.size());
+    for (size_t k = 0; k < from.size(); ++k) {
+      to[k].entered += from[k].entered;
+      to[k].rejected += from[k].rejected;
+      to[k].seconds += from[k].seconds;
+      to[k].falseRejections += from[k].falseRejections;
+    }
+  };
+  addFunnel(candidateFunnel, o.candidateFunnel);
+  addFunnel(referenceFunnel, o.referenceFunnel);
 }
 
 void PairOptions::validate() const {
@@ -92,22 +139,45 @@ void PairOptions::validate() const {
                       "the screening resolution (" + std::to_string(screenResolution) +
                           ") must not exceed the resolution (" + std::to_string(resolution) + ")");
   if (!(in(screenCovisMargin, 0, 1) && in(screenFineMargin, 0, 1) && in(screenFrameMargin, 0, 1) &&
-        screenValidMargin >= 0))
+        screenValidMargin >= 0 && in(screenFineValidMargin, 0, 1) &&
+        in(screenGlanceValidMargin, 0, 1) && in(screenSightMargin, 0, 1)))
     throw OptionError("screen_margin", "screening margins must be in [0, 1]");
+  if (screenBatch < 1 || screenBatch > kMaxScreenBatch)
+    throw OptionError("screen_batch", "the screening batch must be in 1.." +
+                                          std::to_string(kMaxScreenBatch) + ", got " +
+                                          std::to_string(screenBatch));
+  if (screenGlanceSide < 0 || screenSightSide < 0)
+    throw OptionError("screen_glance", "the glance and sight-line sides must be >= 0 (0: off)");
+  if (giveUpAfter < 0)
+    throw OptionError("give_up_after", "the give-up count must be >= 0 (0: never), got " +
+                                           std::to_string(giveUpAfter));
 }
 
 // One view while a sample is being made.
 struct PairGenerator::View {
   Viewpoint at;
-  ImageF depth;  // [H, W, 1] full resolution
-  // Per screening stage: [S, S, 1]. A reference gets its later stages when a candidate first
-  // reaches them (most references never need them), hence mutable.
+  ImageF depth;  // [H, W, 1] full resolution, once rendered
+  // Per screening stage: [S, S, 1], rendered when the view first reaches the stage (a reference
+  // gets its later stages when a candidate needs them), hence mutable.
   mutable std::vector<ImageF> screenDepth;
-  Image8 rgb;                // [H, W, 3], empty until rendered
-  double valid = 0;          // share of depth's pixels with depth > 0
-  CovisResult covis;         // against view 0, full resolution
-  double renderSeconds = 0;  // its full-resolution renders
+  mutable ImageF auditDepth;  // a reference's full depth for the audit, apart from its state
+  // A reference's sight-line targets (world points), made when a first candidate needs them.
+  mutable std::vector<Eigen::Vector3f> sightPoints;
+  mutable bool sightPointsMade = false;
+  Image8 rgb;                 // [H, W, 3], empty until rendered
+  bool full = false;          // depth (and, when screening, colour) rendered at full resolution
+  double valid = 0;           // share of depth's pixels with depth > 0
+  double estimate = 0;        // covis estimate at the last screening stage it went through
+  double screenValid = 0;     // valid fraction there
+  CovisResult covis;          // against view 0, full resolution
+  double renderSeconds = 0;   // its full-resolution renders
   int renders = 0;
+};
+
+// The state of one generate() call: its random stream and what it has spent.
+struct PairGenerator::Search {
+  Rng rng;
+  GenerationCost cost;
 };
 
 PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
@@ -119,80 +189,243 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
   options.validate();
   options_.screenResolution = screenResolution(options);
-  for (const ScreenStageSpec& stage : screenStages(options_))
-    screens_.push_back({Camera::fromHfov(stage.side, stage.side, options.hfov), stage.margin});
-  // A reference is judged on its valid pixels: the stages up to the first of 32x32 or more.
-  for (const ScreenStage& stage : screens_) {
-    ++referenceStages_;
-    if (stage.intrinsics.width >= 32) break;
-  }
+  auto add = [&](const ScreenStageSpec& stage, bool validOnly) {
+    const double validMargin = validOnly                 ? options_.screenGlanceValidMargin
+                               : stage.side >= kFineSide ? options_.screenFineValidMargin
+                                                         : options_.screenValidMargin;
+    screens_.push_back({Camera::fromHfov(stage.side, stage.side, options.hfov), stage.margin,
+                        validMargin, validOnly});
+  };
+  const std::vector<ScreenStageSpec> stages = screenStages(options_);
+  if (!stages.empty() && options_.screenGlanceSide > 0 &&
+      options_.screenGlanceSide < stages.front().side)
+    add({options_.screenGlanceSide, 1.0}, true);
+  for (const ScreenStageSpec& stage : stages) add(stage, false);
+  regularStages_ = screens_.size();
+  // Candidates skip the glance (they look at the reference's mean point, so rarely out of the
+  // scene); their first stage is made for a whole batch at once.
+  firstCandidateStage_ = !screens_.empty() && screens_[0].validOnly ? 1 : 0;
+  if (const auto confirm = confirmStage(options_)) add(*confirm, false);
+  referenceStages_ = regularStages_;
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
                                                   GenerationCost* spent) const {
   const auto start = Clock::now();
-  Rng rng(mixSeed(seed, scene_.name, index));
-  GenerationCost cost;
+  Search search{Rng(mixSeed(seed, scene_.name, index)), {}};
+  search.cost.candidateFunnel.resize(screens_.empty() ? 0 : screens_.size() + kFirstStageSlot);
+  search.cost.referenceFunnel.resize(referenceStages_);
   std::optional<PairSample> found;
-  std::vector<View> views;
-  views.reserve(options_.views);
-  for (int ref = 0; ref < options_.maxReferences && !found; ++ref) {
-    views.clear();
-    std::optional<View> first = referenceView(rng, cost);
-    if (!first) continue;
-    const Eigen::Vector3d target = meanWorldPoint(first->at.camera, first->depth);
-    views.push_back(std::move(*first));
-    while (static_cast<int>(views.size()) < options_.views) {
-      std::optional<View> other = otherView(views[0], target, rng, cost);
-      if (!other) break;
-      views.push_back(std::move(*other));
-    }
-    if (static_cast<int>(views.size()) < options_.views) continue;
-    found.emplace();
-    found->scene = scene_.name;
-    found->index = index;
-    found->seed = seed;
-    finish(views, *found, cost);
-    for (const View& v : views) {  // the renders that end in the sample; the rest were wasted
-      cost.keptRenderSeconds += v.renderSeconds;
-      cost.keptRenders += v.renders;
-    }
-    found->candidateCovis = cost.candidateCovis;
+  PairSample sample;
+  if (makeSample(search, sample)) {
+    sample.scene = scene_.name;
+    sample.index = index;
+    sample.seed = seed;
+    found = std::move(sample);
   }
-  cost.totalSeconds = since(start);
-  if (spent) *spent = std::move(cost);
+  search.cost.totalSeconds = since(start);
+  if (spent) *spent = std::move(search.cost);
   return found;
 }
 
-std::optional<PairGenerator::View> PairGenerator::referenceView(Rng& rng,
-                                                                GenerationCost& cost) const {
-  View v;
-  v.at = sampler_.sampleReference(intrinsics_, rng);
-  if (screenedOut(nullptr, v, cost)) return std::nullopt;
-  renderFull(v, options_.screenResolution > 0, cost);
-  v.valid = validFraction(v.depth);
-  if (v.valid < options_.minValidFraction) return std::nullopt;
-  return v;
+// References until one finds its partners: a reference, then each further view in turn.
+bool PairGenerator::makeSample(Search& search, PairSample& sample) const {
+  GenerationCost& cost = search.cost;
+  std::vector<View> views;
+  views.reserve(options_.views);
+  for (int ref = 0; ref < options_.maxReferences; ++ref) {
+    views.clear();
+    std::optional<View> first = referenceView(search);
+    if (!first) continue;
+    const Eigen::Vector3d target = referenceTarget(*first);
+    views.push_back(std::move(*first));
+    while (static_cast<int>(views.size()) < options_.views) {
+      std::optional<View> other = otherView(views[0], target, search);
+      if (!other) break;
+      views.push_back(std::move(*other));
+    }
+    const bool complete = static_cast<int>(views.size()) == options_.views;
+    if (complete && referenceIsValid(views[0], search)) {
+      finish(views, sample, cost);
+      for (const View& v : views) {  // the renders that end in the sample; the rest were wasted
+        cost.keptRenderSeconds += v.renderSeconds;
+        cost.keptRenders += v.renders;
+      }
+      sample.candidateCovis = cost.candidateCovis;
+      return true;
+    }
+    cost.wastedReferenceRenders += views[0].renders;
+    for (size_t k = 1; k < views.size(); ++k) cost.wastedCandidateRenders += views[k].renders;
+  }
+  return false;
 }
 
-std::optional<PairGenerator::View> PairGenerator::otherView(const View& ref,
-                                                            const Eigen::Vector3d& target, Rng& rng,
-                                                            GenerationCost& cost) const {
-  for (int attempt = 0; attempt < options_.maxAttempts; ++attempt) {
-    View v;
-    v.at = sampler_.sampleOther(intrinsics_, ref.at, target, rng);
-    if (screenedOut(&ref, v, cost)) continue;
-    // A view that passed screening is likely kept: its colour comes in the same pass.
-    renderFull(v, options_.screenResolution > 0, cost);
-    v.valid = validFraction(v.depth);
-    if (v.valid < options_.minValidFraction) continue;
+// A reference pose and, with screening, its low-resolution checks; without, its full depth.
+std::optional<PairGenerator::View> PairGenerator::referenceView(Search& search) const {
+  View v;
+  v.at = sampler_.sampleReference(intrinsics_, search.rng);
+  if (!screens_.empty()) {
+    if (!screenReference(v, search.cost)) return std::nullopt;
+    return v;
+  }
+  renderFull(v, false, search.cost);
+  v.full = true;
+  v.valid = validFraction(v.depth);
+  if (v.valid >= options_.minValidFraction) return v;
+  search.cost.wastedReferenceRenders += v.renders;
+  return std::nullopt;
+}
+
+// The point the further views look at (CroCo's mean observed point): from the full depth without
+// screening, else from the finest regular screening stage, so that no full render is spent on a
+// reference before a partner has passed screening.
+Eigen::Vector3d PairGenerator::referenceTarget(const View& ref) const {
+  if (ref.full) return meanWorldPoint(ref.at.camera, ref.depth);
+  const size_t last = regularStages_ - 1;
+  return meanWorldPoint(stageCamera(last, ref), ref.screenDepth[last]);
+}
+
+// Candidates for one further view, drawn a batch at a time and screened, until one passes the
+// full-resolution test, the attempts run out, or the reference is given up.
+std::optional<PairGenerator::View> PairGenerator::otherView(View& ref,
+                                                            const Eigen::Vector3d& target,
+                                                            Search& search) const {
+  const int batchSize = screens_.empty() ? 1 : options_.screenBatch;
+  int misses = 0;  // candidates in a row turned down by the in-frame bound or the first stage
+  std::vector<bool> out;
+  for (int attempt = 0; attempt < options_.maxAttempts;) {
+    const int n = std::min(batchSize, options_.maxAttempts - attempt);
+    attempt += n;
+    std::vector<View> batch = drawCandidates(ref, target, n, search);
+    out.assign(n, false);
+    if (!screens_.empty()) screenFirstStage(ref, batch, out, search);
+    for (int k = 0; k < n; ++k) {
+      if (out[k]) {
+        if (options_.giveUpAfter > 0 && ++misses >= options_.giveUpAfter) {
+          ++search.cost.referencesGivenUp;
+          return std::nullopt;
+        }
+        continue;
+      }
+      misses = 0;
+      if (!screens_.empty() && !screenLaterStages(ref, batch[k], search)) continue;
+      if (!referenceIsValid(ref, search)) return std::nullopt;
+      if (passesFull(ref, batch[k], search)) return std::move(batch[k]);
+    }
+  }
+  return std::nullopt;
+}
+
+std::vector<PairGenerator::View> PairGenerator::drawCandidates(const View& ref,
+                                                               const Eigen::Vector3d& target,
+                                                               int count, Search& search) const {
+  std::vector<View> batch(count);
+  for (View& v : batch) v.at = sampler_.sampleOther(intrinsics_, ref.at, target, search.rng);
+  return batch;
+}
+
+// Runs one screening test of view v, counted (and timed) in `stage` of the funnel, and audited
+// when it turns v down; whether it did.
+template <typename Test>
+bool PairGenerator::funnelTest(FunnelStage& stage, const View* ref, const View& v,
+                               GenerationCost& cost, const Test& test) const {
+  const auto t0 = Clock::now();
+  ++stage.entered;
+  const bool out = test();
+  stage.seconds += since(t0);
+  if (!out) return false;
+  ++stage.rejected;
+  ++cost.screened;
+  stage.falseRejections += audit(ref, v, cost);
+  return true;
+}
+
+// The in-frame bound and the sight lines of every candidate of the batch, then the batched
+// stages (the glance and the first regular one) for those they leave, each stage's depth maps
+// rendered in one pass; out[k] says which were turned down.
+void PairGenerator::screenFirstStage(const View& ref, std::vector<View>& batch,
+                                     std::vector<bool>& out, Search& search) const {
+  GenerationCost& cost = search.cost;
+  std::vector<FunnelStage>& funnel = cost.candidateFunnel;
+  std::vector<size_t> left;
+  for (size_t k = 0; k < batch.size(); ++k) {
+    const View& v = batch[k];
+    out[k] =
+        funnelTest(funnel[kBoundSlot], &ref, v, cost, [&] { return outOfFrame(ref, v, cost); }) ||
+        funnelTest(funnel[kSightSlot], &ref, v, cost, [&] { return outOfSight(ref, v, cost); });
+    if (!out[k]) left.push_back(k);
+  }
+  for (size_t stage = firstCandidateStage_; stage < firstCandidateStage_ + 1; ++stage) {
+    renderStageBatch(stage, batch, left, funnel[kFirstStageSlot + stage], cost);
+    std::vector<size_t> passed;
+    for (size_t k : left) {
+      View& v = batch[k];
+      out[k] = funnelTest(funnel[kFirstStageSlot + stage], &ref, v, cost,
+                          [&] { return failsStage(stage, &ref, v, cost); });
+      if (!out[k]) passed.push_back(k);
+    }
+    left = std::move(passed);
+  }
+}
+
+// The depth maps of batch[which] at the stage, in one pass; its time counts in `funnel`.
+void PairGenerator::renderStageBatch(size_t stage, std::vector<View>& batch,
+                                     const std::vector<size_t>& which, FunnelStage& funnel,
+                                     GenerationCost& cost) const {
+  std::vector<Camera> cameras;
+  for (size_t k : which) cameras.push_back(stageCamera(stage, batch[k]));
+  std::vector<ImageF> depths(which.size());
+  const auto t0 = Clock::now();
+  caster_.renderDepthBatch(cameras.data(), depths.data(), which.size());
+  const double seconds = since(t0);
+  cost.screenSeconds += seconds;
+  funnel.seconds += seconds;
+  for (size_t i = 0; i < which.size(); ++i) {
+    View& v = batch[which[i]];
+    v.screenDepth.resize(screens_.size());
+    v.screenDepth[stage] = std::move(depths[i]);
+  }
+}
+
+// The finer stages, then the confirm stage when the last estimate may go either way; whether v
+// passed.
+bool PairGenerator::screenLaterStages(const View& ref, View& v, Search& search) const {
+  GenerationCost& cost = search.cost;
+  for (size_t stage = firstCandidateStage_ + 1; stage < screens_.size(); ++stage) {
+    if (stage == regularStages_ && !ambiguous(stage - 1, v)) break;  // the confirm stage
+    if (funnelTest(cost.candidateFunnel[kFirstStageSlot + stage], &ref, v, cost,
+                   [&] { return failsStage(stage, &ref, v, cost); }))
+      return false;
+  }
+  return true;
+}
+
+// Renders v in full (colour too, as it is likely kept) and judges it as without screening.
+bool PairGenerator::passesFull(View& ref, View& v, Search& search) const {
+  GenerationCost& cost = search.cost;
+  renderFull(v, !screens_.empty(), cost);
+  v.full = true;
+  v.valid = validFraction(v.depth);
+  if (v.valid >= options_.minValidFraction) {
     const auto t0 = Clock::now();
     v.covis = computeCovisibility(ref.at.camera, ref.depth, v.at.camera, v.depth, options_.covis);
     cost.covisSeconds += since(t0);
     cost.candidateCovis.push_back(static_cast<float>(v.covis.covis));
-    if (inBand(v.covis.covis)) return v;
+    if (inBand(v.covis.covis)) return true;
   }
-  return std::nullopt;
+  cost.wastedCandidateRenders += v.renders;
+  return false;
+}
+
+// Renders the reference in full when a first candidate has passed screening; whether it has
+// enough valid pixels there.
+bool PairGenerator::referenceIsValid(View& ref, Search& search) const {
+  if (!ref.full) {
+    renderFull(ref, !screens_.empty(), search.cost);
+    ref.full = true;
+    ref.valid = validFraction(ref.depth);
+  }
+  return ref.valid >= options_.minValidFraction;
 }
 
 bool PairGenerator::inBand(double covis) const {
@@ -200,73 +433,162 @@ bool PairGenerator::inBand(double covis) const {
                          : covis >= options_.minCovis && covis <= options_.maxCovis;
 }
 
-// Screens v coarse to fine and says whether it cannot pass; counts it, and audits the verdict
-// when asked.
-bool PairGenerator::screenedOut(const View* ref, View& v, GenerationCost& cost) const {
-  const size_t stages = ref ? screens_.size() : referenceStages_;
-  bool out = ref && outOfFrame(*ref, v, cost);
-  for (size_t stage = 0; stage < stages && !out; ++stage) out = failsStage(stage, ref, v, cost);
-  if (!out) return false;
-  ++cost.screened;
-  if (options_.auditScreening) {
-    View full = v;
-    renderFull(full, false, cost);
-    bool kept = validFraction(full.depth) >= options_.minValidFraction;
-    if (kept && ref)
-      kept = inBand(computeCovisibility(ref->at.camera, ref->depth, full.at.camera, full.depth,
-                                        options_.covis)
-                        .covis);
-    cost.falseRejections += kept;
+// A reference's low-resolution stages (valid pixels only); whether it passed.
+bool PairGenerator::screenReference(View& v, GenerationCost& cost) const {
+  for (size_t stage = 0; stage < referenceStages_; ++stage) {
+    if (funnelTest(cost.referenceFunnel[stage], nullptr, v, cost,
+                   [&] { return failsStage(stage, nullptr, v, cost); }))
+      return false;
   }
   return true;
 }
 
-// Whether too little of the reference lands inside v's frame for v to pass: no rendering, the
-// reference's pixels projected into v's camera, occlusion left out.
+// Whether the last stage's estimates of v (covis, valid fraction) lie so near a bound that the
+// confirm stage should decide.
+bool PairGenerator::ambiguous(size_t stage, const View& v) const {
+  const ScreenStage& s = screens_[stage];
+  const double validEdge = options_.minValidFraction + s.validMargin;
+  if (v.screenValid < validEdge) return true;
+  if (options_.accept) return false;
+  const double m = s.covisMargin;
+  return v.estimate < options_.minCovis + m || v.estimate > options_.maxCovis - m;
+}
+
+// With the audit on, renders a turned-down view at full resolution and counts it when the full
+// test would have kept it. Changes no state of the search and no cost but falseRejections.
+bool PairGenerator::audit(const View* ref, const View& v, GenerationCost& cost) const {
+  if (!options_.auditScreening) return false;
+  ImageF depth;
+  caster_.renderDepth(v.at.camera, depth);
+  bool kept = validFraction(depth) >= options_.minValidFraction;
+  if (kept && ref) {
+    const ImageF* refDepth = &ref->depth;
+    if (!ref->full) {
+      if (ref->auditDepth.data.empty()) caster_.renderDepth(ref->at.camera, ref->auditDepth);
+      refDepth = &ref->auditDepth;
+    }
+    kept = validFraction(*refDepth) >= options_.minValidFraction &&
+           inBand(computeCovisibility(ref->at.camera, *refDepth, v.at.camera, depth,
+                                      options_.covis)
+                      .covis);
+  }
+  cost.falseRejections += kept;
+  return kept;
+}
+
+// Whether too little of the reference lands inside v's frame for v to pass: no rendering of v,
+// the reference's finest screening depth projected into v's camera, occlusion left out.
 bool PairGenerator::outOfFrame(const View& ref, const View& v, GenerationCost& cost) const {
   if (options_.accept || screens_.empty()) return false;
+  const size_t last = regularStages_ - 1;
   CovisOptions o = options_.covis;
-  o.stride = std::max(1, options_.resolution / kFrameScreenSide);
+  o.stride = std::max(1, screens_[last].intrinsics.width / kFrameScreenSide);
   const auto t0 = Clock::now();
-  const double bound = inFrameFraction(ref.at.camera, ref.depth, v.at.camera, o);
+  const double bound =
+      inFrameFraction(stageCamera(last, ref), ref.screenDepth[last], v.at.camera, o);
   cost.screenSeconds += since(t0);
   if (bound >= options_.minCovis - options_.screenFrameMargin) return false;
   cost.candidateCovis.push_back(static_cast<float>(bound));
   return true;
 }
 
-// Renders v's depth at the stage's resolution and says whether it cannot pass: too few valid
-// pixels, or (with a reference) a covis estimate outside the band by more than the margin.
-bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, GenerationCost& cost) const {
-  const ScreenStage& screen = screens_[stage];
-  const Camera cam = screenCamera(stage, v, cost);
-  if (validFraction(v.screenDepth[stage]) < options_.minValidFraction - options_.screenValidMargin)
-    return true;
-  if (!ref || options_.accept) return false;
-  const Camera refCam = screenCamera(stage, *ref, cost);
+// Whether v sees too few of the reference's sight-line points to pass: each point must lie in v's
+// frame, in front of it, with nothing between it and v's eye (a shadow ray). Its share estimates
+// v_ij, an upper bound of covis, from a few dozen rays and no rendering of v.
+bool PairGenerator::outOfSight(const View& ref, const View& v, GenerationCost& cost) const {
+  if (options_.accept || screens_.empty() || options_.screenSightSide <= 0) return false;
   const auto t0 = Clock::now();
-  const double estimate = computeCovisibility(refCam, ref->screenDepth[stage], cam,
-                                              v.screenDepth[stage], options_.covis)
+  const std::vector<Eigen::Vector3f>& points = sightPoints(ref);
+  const Camera& c = v.at.camera;
+  const Eigen::Matrix3f worldToCamera = c.R_cam2world.transpose().cast<float>();
+  const Eigen::Matrix3f K = c.K.cast<float>();
+  const Eigen::Vector3f eye = c.t_cam2world.cast<float>();
+  std::vector<Ray> rays;
+  rays.reserve(points.size());
+  for (const Eigen::Vector3f& p : points) {
+    const Eigen::Vector3f q = K * (worldToCamera * (p - eye));
+    if (!(q.z() > 0)) continue;
+    const float u = q.x() / q.z(), w = q.y() / q.z();
+    if (!(u >= 0 && u < c.width && w >= 0 && w < c.height)) continue;
+    const float length = (p - eye).norm();
+    rays.push_back({eye, p - eye, 0.0f, 1.0f - std::max(kSightRelTol, kSightAbsTol / length)});
+  }
+  std::vector<uint8_t> blocked(rays.size());
+  caster_.occluded(rays.data(), blocked.data(), rays.size());
+  const size_t seen = rays.size() - std::count(blocked.begin(), blocked.end(), uint8_t{1});
+  const double share = points.empty() ? 0.0 : static_cast<double>(seen) / points.size();
+  cost.screenSeconds += since(t0);
+  if (share >= options_.minCovis - options_.screenSightMargin) return false;
+  cost.candidateCovis.push_back(static_cast<float>(share));
+  return true;
+}
+
+// The reference's valid pixels on a screenSightSide^2 grid of its finest screening depth, as
+// world points.
+const std::vector<Eigen::Vector3f>& PairGenerator::sightPoints(const View& ref) const {
+  if (ref.sightPointsMade) return ref.sightPoints;
+  ref.sightPointsMade = true;
+  const size_t last = regularStages_ - 1;
+  const Camera cam = stageCamera(last, ref);
+  const ImageF& depth = ref.screenDepth[last];
+  const int side = std::min(options_.screenSightSide, depth.width);
+  for (int gy = 0; gy < side; ++gy) {
+    for (int gx = 0; gx < side; ++gx) {
+      const int x = (2 * gx + 1) * depth.width / (2 * side);
+      const int y = (2 * gy + 1) * depth.height / (2 * side);
+      const float d = depth.data[static_cast<size_t>(y) * depth.width + x];
+      if (!(d > 0)) continue;
+      const Eigen::Vector3d pc = d * cam.rayCamera(x + 0.5, y + 0.5);
+      ref.sightPoints.push_back((cam.R_cam2world * pc + cam.t_cam2world).cast<float>());
+    }
+  }
+  return ref.sightPoints;
+}
+
+// The covis estimate of v against the reference at the stage's resolution.
+double PairGenerator::stageEstimate(size_t stage, const View& ref, const View& v,
+                                    GenerationCost& cost) const {
+  renderStage(stage, ref, cost);
+  const auto t0 = Clock::now();
+  const double estimate = computeCovisibility(stageCamera(stage, ref), ref.screenDepth[stage],
+                                              stageCamera(stage, v), v.screenDepth[stage],
+                                              options_.covis)
                               .covis;
   cost.screenSeconds += since(t0);
-  const bool out = estimate < options_.minCovis - screen.covisMargin ||
-                   estimate > options_.maxCovis + screen.covisMargin;
-  if (out) cost.candidateCovis.push_back(static_cast<float>(estimate));
+  return estimate;
+}
+
+// Renders v's depth at the stage's resolution (unless it has it) and says whether it cannot
+// pass: too few valid pixels, or (with a reference) a covis estimate outside the band by more
+// than the stage's margin.
+bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, GenerationCost& cost) const {
+  const ScreenStage& screen = screens_[stage];
+  renderStage(stage, v, cost);
+  v.screenValid = validFraction(v.screenDepth[stage]);
+  if (v.screenValid < options_.minValidFraction - screen.validMargin) return true;
+  if (!ref || options_.accept || screen.validOnly) return false;
+  v.estimate = stageEstimate(stage, *ref, v, cost);
+  const bool out = v.estimate < options_.minCovis - screen.covisMargin ||
+                   v.estimate > options_.maxCovis + screen.covisMargin;
+  if (out) cost.candidateCovis.push_back(static_cast<float>(v.estimate));
   return out;
 }
 
-// v's camera at the stage's resolution; renders v's depth there unless it has it already.
-Camera PairGenerator::screenCamera(size_t stage, const View& v, GenerationCost& cost) const {
+// v's camera at the stage's resolution.
+Camera PairGenerator::stageCamera(size_t stage, const View& v) const {
   Camera cam = screens_[stage].intrinsics;
   cam.R_cam2world = v.at.camera.R_cam2world;
   cam.t_cam2world = v.at.camera.t_cam2world;
-  v.screenDepth.resize(screens_.size());
-  if (v.screenDepth[stage].data.empty()) {
-    const auto t0 = Clock::now();
-    caster_.renderDepth(cam, v.screenDepth[stage]);
-    cost.screenSeconds += since(t0);
-  }
   return cam;
+}
+
+// Renders v's depth at the stage's resolution unless it has it already.
+void PairGenerator::renderStage(size_t stage, const View& v, GenerationCost& cost) const {
+  v.screenDepth.resize(screens_.size());
+  if (!v.screenDepth[stage].data.empty()) return;
+  const auto t0 = Clock::now();
+  caster_.renderDepth(stageCamera(stage, v), v.screenDepth[stage]);
+  cost.screenSeconds += since(t0);
 }
 
 void PairGenerator::renderFull(View& v, bool rgb, GenerationCost& cost) const {

@@ -47,16 +47,47 @@ struct PairOptions {
   // 0 turns it off; kAutoScreen picks resolution / 16 (at least 16), and off below 64 pixels.
   // A view that passes is screened again at twice the resolution, and so on while that is at most
   // a quarter of the output's side (256: 16, 32, 64). A 32x32 estimate may fall screenCovisMargin
-  // outside the band, a 64x64 one screenFineMargin, other sides the same ratio per doubling (16:
-  // 0.375, 128: 0.024). docs/dataset.md has the measurements behind the defaults.
+  // outside the band, a 64x64 one screenFineMargin, finer ones half as far per doubling (128:
+  // 0.02), coarser ones 2.5 times as far per halving (16: 0.45). docs/dataset.md has the
+  // measurements behind the defaults.
   int screenResolution = kAutoScreen;
-  double screenCovisMargin = 0.15;
-  double screenFineMargin = 0.06;
+  double screenCovisMargin = 0.18;
+  double screenFineMargin = 0.04;
   // Before any rendering, a candidate is turned down when the share of the reference's pixels
-  // (every resolution/64-th) inside its frame, an upper bound of covis, is below minCovis by more
-  // than this.
+  // (about 64x64 of its finest screening depth) inside its frame, an upper bound of covis, is
+  // below minCovis by more than this.
   double screenFrameMargin = 0.03;
   double screenValidMargin = 0.05;
+  // The glance: before its first stage, a reference is rendered as a screenGlanceSide^2 depth map
+  // and turned down when its valid fraction is below minValidFraction by more than
+  // screenGlanceValidMargin. It drops the references that look out of a scene (open floors, rooms
+  // without walls) at a quarter of the first stage's cost. Candidates skip it: they look at the
+  // reference's mean point, and on enclosed scenes it turned none down. 0: off.
+  int screenGlanceSide = 8;
+  double screenGlanceValidMargin = 0.15;
+  // Sight lines: after the in-frame bound, a candidate casts shadow rays to a screenSightSide^2
+  // grid of the reference's points (from its finest screening depth); the share that lies in its
+  // frame with nothing in between estimates v_ij, and covis <= v_ij. A candidate whose share is
+  // below minCovis by more than screenSightMargin is turned down before any rendering. 0: off.
+  int screenSightSide = 8;
+  double screenSightMargin = 0.25;
+  // The confirm stage: a candidate whose last-stage estimate lies within that stage's margin of
+  // a bound of the band (so it may go either way) is rendered once more at twice the side, when
+  // that is at most half the output's, and must then come within the confirm margin (128 at 256:
+  // 0.024). The rest of the candidates skip it. Off by default: at 256 it costs more than the
+  // full renders it saves (docs/dataset.md).
+  bool screenConfirm = false;
+  // The valid-pixel margin of the stages of side 64 or more (and of the confirm stage), whose
+  // valid fractions are within a percent or two of full resolution's; coarser stages take
+  // screenValidMargin.
+  double screenFineValidMargin = 0.02;
+  // Candidates are drawn this many at a time; their in-frame bounds and first-stage depth maps
+  // are made in one pass, then they go on in the order drawn.
+  int screenBatch = 8;
+  // A reference is given up when this many of its candidates in a row are turned down by the
+  // in-frame bound or the first stage (0: never); CroCo's sampler rarely finds a partner after
+  // such a run (docs/dataset.md).
+  int giveUpAfter = 0;
   // Benchmarks: also render every screened-out view at full resolution, to count the ones that
   // would have passed (PairSample::falseRejections). It changes no output.
   bool auditScreening = false;
@@ -77,6 +108,9 @@ struct ScreenStageSpec {
 // The stages `options` give, coarse to fine (empty when screening is off): sides S, 2S, 4S, ...
 // while at most a quarter of the output's, each with its side's margin (PairOptions).
 std::vector<ScreenStageSpec> screenStages(const PairOptions& options);
+// The confirm stage (PairOptions::screenConfirm): twice the last stage's side when that is at most
+// half the output's, with its side's margin; nullopt when there is none.
+std::optional<ScreenStageSpec> confirmStage(const PairOptions& options);
 
 // Views are numbered from 0 here (view 0 is CroCo's view 1, the reference).
 struct PairSample {
@@ -105,6 +139,14 @@ struct PairSample {
   int views() const { return static_cast<int>(camera.size()); }
 };
 
+// The screening funnel of a run, stage by stage: how many views entered each stage, how many it
+// turned down, and the seconds it took.
+struct FunnelStage {
+  size_t entered = 0, rejected = 0;
+  size_t falseRejections = 0;  // of those turned down, the ones full resolution would keep (audit)
+  double seconds = 0;
+};
+
 // What one generate() call spent, with or without a sample: run statistics, kept apart from the
 // sample.
 struct GenerationCost {
@@ -114,9 +156,20 @@ struct GenerationCost {
   double renderSeconds = 0;           // full resolution
   double keptRenderSeconds = 0;       // of those, the renders of the views in the sample
   size_t fullRenders = 0, keptRenders = 0;
+  // Of the wasted full renders: references (found no partner, or too few valid pixels at full
+  // resolution) and candidates (failed the full-resolution test).
+  size_t wastedReferenceRenders = 0, wastedCandidateRenders = 0;
   double screenSeconds = 0;  // screening: low-resolution renders and covis estimates
   double covisSeconds = 0;
   double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
+  // Candidates: [0] the in-frame bound, [1] the sight lines, then each low-resolution stage,
+  // coarse to fine, then the confirm stage (when the options give one); references: their
+  // low-resolution stages.
+  std::vector<FunnelStage> candidateFunnel, referenceFunnel;
+  size_t referencesGivenUp = 0;  // references dropped early for lack of promising candidates
+
+  // Adds another call's figures (not its candidateCovis).
+  void add(const GenerationCost& other);
 };
 
 class PairGenerator {
@@ -134,19 +187,41 @@ class PairGenerator {
 
  private:
   struct View;
-  std::optional<View> referenceView(Rng& rng, GenerationCost& cost) const;
-  std::optional<View> otherView(const View& ref, const Eigen::Vector3d& target, Rng& rng,
-                                GenerationCost& cost) const;
+  struct Search;
+  bool makeSample(Search& search, PairSample& sample) const;
+  std::optional<View> referenceView(Search& search) const;
+  Eigen::Vector3d referenceTarget(const View& ref) const;
+  std::optional<View> otherView(View& ref, const Eigen::Vector3d& target, Search& search) const;
+  std::vector<View> drawCandidates(const View& ref, const Eigen::Vector3d& target, int count,
+                                   Search& search) const;
+  void screenFirstStage(const View& ref, std::vector<View>& batch, std::vector<bool>& out,
+                        Search& search) const;
+  bool screenLaterStages(const View& ref, View& v, Search& search) const;
+  void renderStageBatch(size_t stage, std::vector<View>& batch, const std::vector<size_t>& which,
+                        FunnelStage& funnel, GenerationCost& cost) const;
+  bool passesFull(View& ref, View& v, Search& search) const;
+  bool referenceIsValid(View& ref, Search& search) const;
   // One screening pass: the intrinsics it renders with, and how far outside the band its covis
   // estimate may fall.
   struct ScreenStage {
     Camera intrinsics;
     double covisMargin;
+    double validMargin;
+    bool validOnly;  // the glance: valid pixels only, no covis estimate
   };
-  bool screenedOut(const View* ref, View& v, GenerationCost& cost) const;
+  bool screenReference(View& v, GenerationCost& cost) const;
   bool outOfFrame(const View& ref, const View& v, GenerationCost& cost) const;
+  bool outOfSight(const View& ref, const View& v, GenerationCost& cost) const;
+  const std::vector<Eigen::Vector3f>& sightPoints(const View& ref) const;
+  double stageEstimate(size_t stage, const View& ref, const View& v, GenerationCost& cost) const;
   bool failsStage(size_t stage, const View* ref, View& v, GenerationCost& cost) const;
-  Camera screenCamera(size_t stage, const View& v, GenerationCost& cost) const;
+  bool ambiguous(size_t stage, const View& v) const;
+  Camera stageCamera(size_t stage, const View& v) const;
+  void renderStage(size_t stage, const View& v, GenerationCost& cost) const;
+  bool audit(const View* ref, const View& v, GenerationCost& cost) const;
+  template <typename Test>
+  bool funnelTest(FunnelStage& stage, const View* ref, const View& v, GenerationCost& cost,
+                  const Test& test) const;
   void renderFull(View& v, bool rgb, GenerationCost& cost) const;
   bool inBand(double covis) const;
   void finish(std::vector<View>& views, PairSample& s, GenerationCost& cost) const;
@@ -157,8 +232,13 @@ class PairGenerator {
   const ViewpointSampler& sampler_;
   PairOptions options_;
   Camera intrinsics_;
-  std::vector<ScreenStage> screens_;  // coarse to fine; empty without screening
-  size_t referenceStages_ = 0;        // the stages a reference goes through (valid depth only)
+  // Coarse to fine, then the confirm stage when there is one; empty without screening.
+  std::vector<ScreenStage> screens_;
+  size_t regularStages_ = 0;    // screens_ without the confirm stage
+  size_t firstCandidateStage_ = 0;  // candidates skip the glance
+  size_t referenceStages_ = 0;  // the stages a reference goes through (valid depth only): all
+                                // regular ones, as its target and the in-frame bound need the
+                                // finest
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

@@ -31,6 +31,8 @@ class Query {
 #if PAIRCAST_EMBREE_MAJOR >= 4
     rtcInitIntersectArguments(&args_);
     args_.flags = coherent ? RTC_RAY_QUERY_FLAG_COHERENT : RTC_RAY_QUERY_FLAG_INCOHERENT;
+    rtcInitOccludedArguments(&occludedArgs_);
+    occludedArgs_.flags = args_.flags;
 #else
     rtcInitIntersectContext(&context_);
     context_.flags =
@@ -56,9 +58,20 @@ class Query {
 #endif
   }
 
+  // Whether anything lies on the ray between tnear and tfar (any hit, no closest one: cheaper).
+  bool occluded1(RTCScene scene, RTCRay& ray) {
+#if PAIRCAST_EMBREE_MAJOR >= 4
+    rtcOccluded1(scene, &ray, &occludedArgs_);
+#else
+    rtcOccluded1(scene, &context_, &ray);
+#endif
+    return ray.tfar < 0.0f;  // Embree sets it to -inf on a hit
+  }
+
  private:
 #if PAIRCAST_EMBREE_MAJOR >= 4
   RTCIntersectArguments args_;
+  RTCOccludedArguments occludedArgs_;
 #else
   RTCIntersectContext context_;
 #endif

@@ -37,10 +37,16 @@ class RayCaster {
 
   // Z-depth only: the fast path. `depth` is resized to the camera; 0 on a miss.
   void renderDepth(const Camera& camera, ImageF& depth) const;
+  // Z-depth of many small views in one parallel pass over all their tiles: the per-call set-up
+  // (thread team, tile split) is paid once, not per view. depths[k] is resized to cameras[k].
+  void renderDepthBatch(const Camera* cameras, ImageF* depths, size_t count) const;
   // Everything the options ask for. Buffers in `frame` are reused when the size matches.
   void render(const Camera& camera, const RenderOptions& options, Frame& frame) const;
   // Arbitrary rays, in parallel.
   void intersect(const Ray* rays, Hit* hits, size_t count) const;
+  // Whether anything lies on each ray between tnear and tfar (1: blocked): shadow rays, cheaper
+  // than intersect, since any hit will do. Runs on the calling thread.
+  void occluded(const Ray* rays, uint8_t* blocked, size_t count) const;
 
   const Mesh& mesh() const { return mesh_; }
   double buildSeconds() const { return buildSeconds_; }

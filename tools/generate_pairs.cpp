@@ -90,13 +90,22 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);  // -1 is the library's "automatic", not a user's value
   app.add_option("--screen-margin", cfg.pair.screenCovisMargin,
                  "Screening keeps candidates whose 32x32 covis estimate is within this of the band "
-                 "(other sides: see --screen-fine-margin)");
+                 "(16x16: 2.5 times it; other sides: see --screen-fine-margin)");
   app.add_option("--screen-fine-margin", cfg.pair.screenFineMargin,
-                 "The same margin for a 64x64 estimate; other sides take the same ratio per "
-                 "doubling (16x16: margin^2 / fine margin)");
+                 "The same margin for a 64x64 estimate; half of it per doubling beyond");
   app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
                  "Before rendering, turn down candidates whose share of the reference inside their "
                  "frame is below --min-covis by more than this");
+  app.add_option("--screen-sight-margin", cfg.pair.screenSightMargin,
+                 "Before rendering, turn down candidates that see (shadow rays) a share of the "
+                 "reference's points below --min-covis by more than this");
+  app.add_flag("--screen-confirm", cfg.pair.screenConfirm,
+               "Screen candidates whose last estimate is near a bound of the band once more, at "
+               "twice its side (costs more than it saves at 256, docs/dataset.md)");
+  app.add_option("--give-up-after", cfg.pair.giveUpAfter,
+                 "Give a reference up after this many of its candidates in a row are turned down "
+                 "before rendering (0: never; the default)")
+      ->check(CLI::NonNegativeNumber);
   app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
                "Also write 8-bit co-visibility masks (255: seen by the other view)");
   bool allowSkipped = false;

@@ -1,0 +1,251 @@
+// Issue 33's screening: references rendered in full only once a partner has passed screening,
+// the sight lines, the batched first stage, the funnel's accounting, the give-up, and the
+// covis distribution and bytes it leaves unchanged.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+
+#include "dataset/generate_job.h"
+#include "dataset/pair_generator.h"
+#include "dataset/test_scenes.h"
+#include "render/procedural_scene.h"
+#include "render/ray_caster.h"
+#include "render/scene_loader.h"
+#include "test_errors.h"
+#include "test_files.h"
+#include "test_paths.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The shipped apartment (four rooms behind walls and doors), with its BVH and sampler.
+struct Apartment {
+  Apartment()
+      : scene(load()), caster(scene.mesh), sampler(scene, caster, {}) {}
+  static Scene load() {
+    Scene s = loadScene(testing::sourceDir() + "/scenes/apartment/apartment.obj", {});
+    s.name = "apartment";
+    return s;
+  }
+  // The summed cost of indices 0..n-1, and the covis of their samples.
+  GenerationCost run(const PairOptions& o, int n, std::vector<double>* covis = nullptr) const {
+    const PairGenerator gen(scene, caster, sampler, o);
+    GenerationCost total;
+    for (int i = 0; i < n; ++i) {
+      GenerationCost cost;
+      const auto s = gen.generate(5, i, &cost);
+      total.add(cost);
+      if (s && covis) covis->push_back(s->covis[1].covis);
+    }
+    return total;
+  }
+  Scene scene;
+  RayCaster caster;
+  ViewpointSampler sampler;
+};
+
+const Apartment& apartment() {
+  static const Apartment a;
+  return a;
+}
+
+PairOptions smallOptions() {
+  PairOptions o;
+  o.resolution = 128;  // screened at 16 and 32, the references glanced at 8 first
+  o.keepDepth = false;
+  return o;
+}
+
+// Candidates that passed every screening stage: each was rendered in full once.
+size_t passedScreening(const GenerationCost& c) {
+  const FunnelStage& last = c.candidateFunnel.back();
+  return last.entered - last.rejected;
+}
+
+TEST(NoRenderWasted, AReferenceIsRenderedInFullOnlyOnceAPartnerPassedScreening) {
+  PairOptions o = smallOptions();
+  o.minCovis = 0.8;  // a hard band: many references find no partner
+  o.maxAttempts = 20;
+  const GenerationCost c = apartment().run(o, 30);
+  const FunnelStage& refLast = c.referenceFunnel.back();
+  const size_t referencesScreenedIn = refLast.entered - refLast.rejected;
+  const size_t referenceRenders = c.fullRenders - passedScreening(c);
+  ASSERT_GT(referencesScreenedIn, 40u) << "too few references: the test tests nothing";
+  // Every full render is a candidate that passed screening or the reference it was tested
+  // against, rendered once.
+  EXPECT_LE(referenceRenders, passedScreening(c));
+  EXPECT_LT(referenceRenders, referencesScreenedIn / 2)
+      << "references without a partner were rendered in full";
+  // The waste adds up: every full render is kept or counted as wasted, by kind.
+  EXPECT_EQ(c.fullRenders, c.keptRenders + c.wastedReferenceRenders + c.wastedCandidateRenders);
+}
+
+TEST(NoRenderWasted, TheFunnelAddsUp) {
+  const GenerationCost c = apartment().run(smallOptions(), 20);
+  const std::vector<FunnelStage>& f = c.candidateFunnel;
+  ASSERT_EQ(f.size(), 2u + 3u);  // bound, sight lines, the glance (skipped), 16, 32
+  size_t turnedDown = 0;
+  for (const FunnelStage& s : f) turnedDown += s.rejected;
+  for (const FunnelStage& s : c.referenceFunnel) turnedDown += s.rejected;
+  EXPECT_EQ(turnedDown, c.screened);
+  // The bound, the sight lines and the first stage see the whole batch; later stages stop at
+  // the candidate that passes.
+  EXPECT_EQ(f[1].entered, f[0].entered - f[0].rejected);
+  EXPECT_EQ(f[2].entered, 0u) << "candidates skip the glance";
+  EXPECT_EQ(f[3].entered, f[1].entered - f[1].rejected);
+  EXPECT_LE(f[4].entered, f[3].entered - f[3].rejected);
+  EXPECT_GT(f[1].rejected, 0u) << "the sight lines turned nothing down in a four-room flat";
+  EXPECT_GT(f[0].seconds + f[1].seconds + f[3].seconds, 0.0);
+  EXPECT_EQ(c.referenceFunnel.size(), 3u);  // the glance, 16, 32
+}
+
+TEST(NoRenderWasted, SightLinesTurnDownCandidatesBehindWallsNotOnesThatWouldBeKept) {
+  PairOptions o = smallOptions();
+  o.auditScreening = true;  // every turned-down view rendered in full and judged
+  const GenerationCost c = apartment().run(o, 30);
+  const FunnelStage& sight = c.candidateFunnel[1];
+  ASSERT_GT(sight.rejected, 30u);
+  EXPECT_LE(sight.falseRejections * 50, sight.rejected);
+  // Without them, the first stage renders what they turned down.
+  o.screenSightSide = 0;
+  const GenerationCost without = apartment().run(o, 30);
+  EXPECT_EQ(without.candidateFunnel[1].rejected, 0u);
+  EXPECT_GT(without.candidateFunnel[3].entered, c.candidateFunnel[3].entered);
+}
+
+TEST(NoRenderWasted, ScreenedPairsKeepTheUnscreenedCovisDistribution) {
+  // Two-sample Kolmogorov-Smirnov test at alpha = 0.01: the statistic stays below the critical
+  // value, so p >= 0.01.
+  PairOptions o = smallOptions();
+  std::vector<double> screened, plain;
+  apartment().run(o, 200, &screened);
+  o.screenResolution = 0;
+  apartment().run(o, 200, &plain);
+  ASSERT_GE(screened.size(), 180u);
+  ASSERT_GE(plain.size(), 180u);
+  std::sort(screened.begin(), screened.end());
+  std::sort(plain.begin(), plain.end());
+  double d = 0;
+  for (double x : screened) {
+    const double a = (std::upper_bound(screened.begin(), screened.end(), x) - screened.begin()) /
+                     static_cast<double>(screened.size());
+    const double b = (std::upper_bound(plain.begin(), plain.end(), x) - plain.begin()) /
+                     static_cast<double>(plain.size());
+    d = std::max(d, std::abs(a - b));
+  }
+  const double n = screened.size(), m = plain.size();
+  EXPECT_LT(d, 1.628 * std::sqrt((n + m) / (n * m)));
+}
+
+TEST(NoRenderWasted, GivingUpIsCountedAndDeterministic) {
+  PairOptions o = smallOptions();
+  o.minCovis = 0.8;
+  o.giveUpAfter = 2;
+  const GenerationCost a = apartment().run(o, 10);
+  const GenerationCost b = apartment().run(o, 10);
+  EXPECT_GT(a.referencesGivenUp, 0u);
+  EXPECT_EQ(a.referencesGivenUp, b.referencesGivenUp);
+  EXPECT_EQ(a.fullRenders, b.fullRenders);
+  o.giveUpAfter = 0;
+  EXPECT_EQ(apartment().run(o, 10).referencesGivenUp, 0u);
+}
+
+TEST(NoRenderWasted, BadScreeningOptionsNameTheirField) {
+  PairOptions o;
+  o.screenBatch = 0;
+  EXPECT_ERROR_CONTAINS(o.validate(), "screening batch");
+  o = PairOptions{};
+  o.giveUpAfter = -1;
+  EXPECT_ERROR_CONTAINS(o.validate(), "give-up");
+  o = PairOptions{};
+  o.screenGlanceSide = -8;
+  EXPECT_ERROR_CONTAINS(o.validate(), "glance");
+  o = PairOptions{};
+  o.screenSightMargin = 1.5;
+  EXPECT_ERROR_CONTAINS(o.validate(), "margins");
+}
+
+TEST(NoRenderWasted, TheConfirmStageIsTwiceTheLastWhenItFits) {
+  PairOptions o;  // 256: 16, 32, 64
+  EXPECT_FALSE(confirmStage(o).has_value()) << "off by default";
+  o.screenConfirm = true;
+  ASSERT_TRUE(confirmStage(o).has_value());
+  EXPECT_EQ(confirmStage(o)->side, 128);
+  EXPECT_NEAR(confirmStage(o)->margin, o.screenFineMargin / 2, 1e-12);
+  o.resolution = 96;  // 16, then 32 > 96 / 4 ... the confirm 32 fits half of 96
+  EXPECT_EQ(confirmStage(o)->side, 32);
+  o.resolution = 48;  // no screening
+  EXPECT_FALSE(confirmStage(o).has_value());
+  // With it on, the ambiguous candidates go through it, and the output keeps its distribution.
+  PairOptions c = smallOptions();
+  c.screenConfirm = true;
+  const GenerationCost with = apartment().run(c, 20);
+  ASSERT_EQ(with.candidateFunnel.size(), 6u);
+  EXPECT_GT(with.candidateFunnel[5].entered, 0u);
+  EXPECT_LT(with.candidateFunnel[5].entered, with.candidateFunnel[4].entered);
+}
+
+TEST(RayCasterBatch, BatchedDepthEqualsOneViewAtATime) {
+  const Apartment& a = apartment();
+  Rng rng(3);
+  std::vector<Camera> cams;
+  for (int k = 0; k < 9; ++k)
+    cams.push_back(a.sampler.sampleView(Camera::fromHfov(16 + k, 16, 60), rng));
+  std::vector<ImageF> batch(cams.size());
+  a.caster.renderDepthBatch(cams.data(), batch.data(), cams.size());
+  for (size_t k = 0; k < cams.size(); ++k) {
+    ImageF one;
+    a.caster.renderDepth(cams[k], one);
+    EXPECT_EQ(batch[k].width, one.width);
+    EXPECT_EQ(batch[k].data, one.data) << "view " << k;
+  }
+  a.caster.renderDepthBatch(nullptr, nullptr, 0);  // nothing to do
+}
+
+TEST(RayCasterBatch, ShadowRaysStopAtTheFirstSurface) {
+  // A wall at x = 0.95..1.05 between x = 0 and x = 2.
+  Mesh mesh;
+  mesh.materials.emplace_back();
+  addBox(mesh, {0.95f, -1, -1}, {1.05f, 1, 1}, 0);
+  const RayCaster caster(mesh);
+  const Eigen::Vector3f o(0, 0, 0), d(2, 0, 0);
+  const std::vector<Ray> rays = {{o, d, 0.0f, 1.0f},           // through the wall
+                                 {o, d, 0.0f, 0.45f},          // stops short of it
+                                 {o, {0, 0, 2}, 0.0f, 1.0f},   // beside it
+                                 {{2, 0, 0}, -d, 0.0f, 1.0f}};  // from the other side
+  std::vector<uint8_t> blocked(rays.size(), 7);
+  caster.occluded(rays.data(), blocked.data(), rays.size());
+  EXPECT_EQ(blocked, (std::vector<uint8_t>{1, 0, 0, 1}));
+}
+
+TEST(GeneratePairsScreened, OutputIsIdenticalWhateverTheJobCount) {
+  const std::string dir = testing::scratchDir("screened_jobs");
+  auto config = [&](const std::string& out, int jobs) {
+    GenerateConfig c;
+    c.scenes = {testing::sourceDir() + "/scenes/apartment"};
+    c.out = out;
+    c.pairsPerScene = 12;
+    c.pair.resolution = 128;  // screened: the batch, the sight lines, the deferred reference
+    c.shardSize = 5;
+    c.croco = true;
+    c.jobs = jobs;
+    c.progress = false;
+    return c;
+  };
+  runGenerate(config(dir + "/one", 1));
+  runGenerate(config(dir + "/three", 3));
+  const auto one = testing::fileTree(dir + "/one");  // summaries and journal aside
+  EXPECT_GT(one.size(), 12u);
+  EXPECT_EQ(one, testing::fileTree(dir + "/three"));
+  EXPECT_EQ(testing::journalRecords(dir + "/one/.paircast/journal.jsonl"),
+            testing::journalRecords(dir + "/three/.paircast/journal.jsonl"));
+}
+
+}  // namespace
+}  // namespace paircast
