@@ -204,10 +204,12 @@ std::string funnelText(const nlohmann::json& funnel, const std::vector<std::stri
 std::vector<std::string> funnelNames(bool candidates) {
   const PairOptions o;
   std::vector<std::string> names;
+  const std::vector<ScreenStageSpec> stages = screenStages(o);
   if (candidates) names = {"bound", "sight"};
   if (o.screenGlanceSide > 0) names.push_back(candidates ? "(glance)" : "glance");
-  for (const ScreenStageSpec& stage : screenStages(o))
-    names.push_back(std::to_string(stage.side) + "^2");
+  for (size_t k = 0; k < stages.size(); ++k)
+    if (candidates || k == 0 || k + 1 == stages.size())
+      names.push_back(std::to_string(stages[k].side) + "^2");
   if (const auto confirm = confirmStage(o)) names.push_back(std::to_string(confirm->side) + "^2");
   return names;
 }

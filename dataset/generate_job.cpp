@@ -25,6 +25,7 @@
 #include "dataset/croco_layout.h"
 #include "dataset/habitat_frame.h"
 #include "dataset/journal.h"
+#include "dataset/run_stats.h"
 #include "dataset/shard.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -73,18 +74,6 @@ std::string recordKey(const nlohmann::json& r) {
 // Whether a journal record is of an index known to have no sample.
 bool recordFailed(const nlohmann::json& r) {
   return r.value("failed", false);
-}
-
-// The screening funnel as summary.json keeps it: by stage, the views that entered it, those it
-// turned down, and its seconds.
-nlohmann::json funnelJson(const std::vector<FunnelStage>& funnel) {
-  nlohmann::json out = nlohmann::json::array();
-  for (const FunnelStage& f : funnel)
-    out.push_back({{"entered", f.entered},
-                   {"turned_down", f.rejected},
-                   {"false_rejections", f.falseRejections},
-                   {"seconds", f.seconds}});
-  return out;
 }
 
 // Resident memory of the process, bytes (0 when /proc is not there).
@@ -233,8 +222,6 @@ class GenerateRun {
   Result failedResult(const SceneJob& job, const Item& item, const GenerationCost& spent);
   Result keptResult(const SceneJob& job, const Item& item, const PairSample& sample,
                     const GenerationCost& spent);
-  // Adds an attempt's generation times, and encode and write seconds, to the time split.
-  void addTimes(const GenerationCost& spent, double encode, double write);
   void fail();
   // The writer, on the calling thread.
   void writeInOrder();
@@ -269,14 +256,7 @@ class GenerateRun {
   std::exception_ptr failure_;
   std::mutex loadMu_;  // scenes load one at a time, so that their memory can be measured
 
-  // Counters and timing.
-  std::atomic<size_t> accepted_{0}, failedPairs_{0}, candidates_{0}, screened_{0},
-      falseRejections_{0};
-  std::mutex timeMu_;
-  double tRender_ = 0, tScreen_ = 0, tSampling_ = 0, tCovis_ = 0, tEncode_ = 0, tWrite_ = 0;
-  double tRenderKept_ = 0;                      // of tRender_, the renders of the views kept
-  uint64_t fullRenders_ = 0, keptRenders_ = 0;  // full-resolution renders, and those kept
-  GenerationCost spent_;                        // the funnel and the wasted renders, summed
+  RunStats stats_;  // counters and the time split
   std::mutex warnMu_;
   std::vector<nlohmann::json> skipped_;
   std::atomic<int> scenesLoaded_{0}, scenesPeak_{0};
@@ -450,9 +430,6 @@ Result GenerateRun::makeItem(const Item& item) {
     return skipped;
   }
   const Attempt a = takeAttempt(job, item.index);
-  candidates_ += a.spent.candidateCovis.size();
-  screened_ += a.spent.screened;
-  falseRejections_ += a.spent.falseRejections;
   Result r =
       a.sample ? keptResult(job, item, *a.sample, a.spent) : failedResult(job, item, a.spent);
   r.done = true;
@@ -550,8 +527,7 @@ Attempt GenerateRun::takeAttempt(SceneJob& job, uint64_t index) const {
 // The journal's note of an index known to have no sample.
 Result GenerateRun::failedResult(const SceneJob& job, const Item& item,
                                  const GenerationCost& spent) {
-  addTimes(spent, 0.0, 0.0);
-  ++failedPairs_;
+  stats_.addIndex(spent, false, 0.0, 0.0);
   Result r;
   r.note = {{"failed", true},
             {"scene", job.name},
@@ -574,8 +550,7 @@ Result GenerateRun::keptResult(const SceneJob& job, const Item& item, const Pair
     makeDirs((fs::path(cfg_.out) / job.name).string());
     writeCrocoSample(crocoStem(job, item.index), enc, sample.camera);
   }
-  addTimes(spent, encode, since(t0));
-  ++accepted_;
+  stats_.addIndex(spent, true, encode, since(t0));
   Result r;
   r.note = {{"scene", job.name},
             {"index", item.index},
@@ -587,21 +562,6 @@ Result GenerateRun::keptResult(const SceneJob& job, const Item& item, const Pair
   return r;
 }
 
-void GenerateRun::addTimes(const GenerationCost& spent, double encode, double write) {
-  std::lock_guard<std::mutex> lock(timeMu_);
-  tRender_ += spent.renderSeconds;
-  tRenderKept_ += spent.keptRenderSeconds;
-  fullRenders_ += spent.fullRenders;
-  keptRenders_ += spent.keptRenders;
-  spent_.add(spent);
-  tScreen_ += spent.screenSeconds;
-  tSampling_ += std::max(
-      0.0, spent.totalSeconds - spent.renderSeconds - spent.screenSeconds - spent.covisSeconds);
-  tCovis_ += spent.covisSeconds;
-  tEncode_ += encode;
-  tWrite_ += write;
-}
-
 // Takes results in item order: journal first, then the shard, so that every sample of a
 // completed shard is in the journal.
 void GenerateRun::writeInOrder() {
@@ -609,7 +569,8 @@ void GenerateRun::writeInOrder() {
   const auto started = Clock::now();
   auto show = [&](size_t done, bool last) {
     if (last || progress.due())
-      progress.show(progressText(done, items_.size(), accepted_, candidates_, since(started)),
+      progress.show(progressText(done, items_.size(), stats_.accepted(), stats_.candidates(),
+                                 since(started)),
                     last);
   };
   for (size_t i = 0; i < items_.size(); ++i) {
@@ -625,10 +586,7 @@ void GenerateRun::writeInOrder() {
     }
     const auto t0 = Clock::now();
     writeResult(items_[i], r);
-    {
-      std::lock_guard<std::mutex> lock(timeMu_);
-      tWrite_ += since(t0);
-    }
+    stats_.addWrite(since(t0));
     show(i + 1, false);
   }
   if (shard_ && !stop_) closeShard();
@@ -780,129 +738,29 @@ void GenerateRun::writeSceneMetadata(const SceneJob& job, const std::string& up,
   writeFileAtomic((fs::path(cfg_.out) / job.name / "metadata.json").string(), meta.dump() + "\n");
 }
 
+// summary.json: this run's statistics, and what the journal says of the whole job.
 nlohmann::json GenerateRun::summaryJson(double seconds) const {
-  const double split =
-      std::max(tRender_ + tScreen_ + tSampling_ + tCovis_ + tEncode_ + tWrite_, 1e-12);
   nlohmann::json sceneStats = nlohmann::json::array();
   for (const auto& job : scenes_)
     if (!job->stats.is_null()) sceneStats.push_back(job->stats);
-  return {{"pairs", pairs_},
-          {"views", cfg_.pair.views},
-          {"candidates", tried_},
-          {"acceptance", tried_ ? static_cast<double>(pairs_) / tried_ : 0.0},
-          {"seconds", seconds},
-          {"pairs_this_run", accepted_.load()},
-          {"pairs_per_second", accepted_ / std::max(seconds, 1e-9)},
-          {"failed_pairs", failedPairs_.load()},
-          {"screening",
-           {{"resolution", screenResolution(cfg_.pair)},
-            {"screened", screened_.load()},
-            {"candidates_this_run", candidates_.load()},
-            {"false_rejections", falseRejections_.load()},
-            {"audited", cfg_.pair.auditScreening},
-            {"references_given_up", spent_.referencesGivenUp},
-            {"candidate_funnel", funnelJson(spent_.candidateFunnel)},
-            {"reference_funnel", funnelJson(spent_.referenceFunnel)}}},
-          {"covis_histogram", histogram_},
-          {"candidate_covis_histogram", candidateHistogram_},
-          {"renders",
-           {{"full", fullRenders_},
-            {"kept", keptRenders_},
-            {"wasted", fullRenders_ - keptRenders_},
-            {"wasted_references", spent_.wastedReferenceRenders},
-            {"wasted_candidates", spent_.wastedCandidateRenders},
-            {"per_pair", accepted_ ? static_cast<double>(fullRenders_) / accepted_ : 0.0}}},
-          {"time_split",
-           {{"render", tRender_ / split},
-            {"render_kept", tRenderKept_ / split},
-            {"render_wasted", (tRender_ - tRenderKept_) / split},
-            {"screen", tScreen_ / split},
-            {"sampling", tSampling_ / split},
-            {"covis", tCovis_ / split},
-            {"encode", tEncode_ / split},
-            {"write", tWrite_ / split}}},
-          {"time_seconds",
-           {{"render", tRender_},
-            {"render_kept", tRenderKept_},
-            {"render_wasted", tRender_ - tRenderKept_},
-            {"screen", tScreen_},
-            {"sampling", tSampling_},
-            {"covis", tCovis_},
-            {"encode", tEncode_},
-            {"write", tWrite_}}},
-          {"skipped_scenes", skipped_},
-          {"scene_stats", sceneStats},
-          {"scenes_in_memory_max", scenesPeak_.load()},
-          {"jobs", jobs_}};
+  nlohmann::json summary = stats_.toJson(seconds);
+  summary["screening"]["resolution"] = screenResolution(cfg_.pair);
+  summary["screening"]["audited"] = cfg_.pair.auditScreening;
+  summary.update({{"pairs", pairs_},
+                  {"views", cfg_.pair.views},
+                  {"candidates", tried_},
+                  {"acceptance", tried_ ? static_cast<double>(pairs_) / tried_ : 0.0},
+                  {"seconds", seconds},
+                  {"covis_histogram", histogram_},
+                  {"candidate_covis_histogram", candidateHistogram_},
+                  {"skipped_scenes", skipped_},
+                  {"scene_stats", sceneStats},
+                  {"scenes_in_memory_max", scenesPeak_.load()},
+                  {"jobs", jobs_}});
+  return summary;
 }
 
 }  // namespace
-
-std::vector<std::string> sortedFilesUnder(const std::string& dir,
-                                          const std::function<bool(const fs::path&)>& keep) {
-  std::vector<std::string> found;
-  std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(dir, ec);
-       it != fs::recursive_directory_iterator(); it.increment(ec))
-    if (it->is_regular_file(ec) && keep(it->path())) found.push_back(it->path().string());
-  std::sort(found.begin(), found.end());
-  return found;
-}
-
-std::vector<std::string> expandSceneList(const std::vector<std::string>& args) {
-  auto isScene = [](const fs::path& p) {
-    const std::string ext = p.extension().string();
-    if (ext == ".mtl" || ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".json" ||
-        ext == ".txt" || ext == ".md" || ext == ".bin" || ext == ".exr")
-      return false;
-    return isSupportedSceneFile(p.string());
-  };
-  std::vector<std::string> out;
-  for (const auto& arg : args) {
-    std::error_code ec;
-    if (fs::is_directory(arg, ec)) {
-      const std::vector<std::string> found = sortedFilesUnder(arg, isScene);
-      out.insert(out.end(), found.begin(), found.end());
-    } else if (fs::is_regular_file(arg, ec) && fs::path(arg).extension() == ".txt") {
-      std::ifstream in(arg);
-      std::string line;
-      const fs::path base = fs::path(arg).parent_path();
-      while (std::getline(in, line)) {
-        line.erase(0, line.find_first_not_of(" \t"));
-        line.erase(line.find_last_not_of(" \t\r") + 1);
-        if (line.empty() || line[0] == '#') continue;
-        out.push_back(fs::path(line).is_absolute() ? line : (base / line).string());
-      }
-    } else if (fs::exists(arg, ec)) {
-      out.push_back(arg);
-    } else {
-      throw Error(arg, "no such scene file, folder or list");
-    }
-  }
-  return out;
-}
-
-std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files) {
-  // Datasets that name every scene file alike (Replica's <scene>/mesh.ply, MP3D's
-  // <scene>/matterport_mesh/<hash>.obj) are told apart by their folder: a stem that several
-  // files share becomes "<folder>_<stem>".
-  std::map<std::string, int> stems;
-  for (const auto& f : files) stems[fs::path(f).stem().string()]++;
-  std::vector<std::string> out;
-  std::set<std::string> taken;
-  for (const auto& f : files) {
-    const fs::path p(f);
-    std::string stem = p.stem().string();
-    const std::string folder = p.parent_path().filename().string();
-    if (stems[stem] > 1 && !folder.empty()) stem = folder + "_" + stem;
-    stem = sanitizeName(stem);
-    std::string name = stem;
-    for (int k = 2; taken.count(name); ++k) name = stem + "_" + std::to_string(k);
-    taken.insert(name);
-    out.push_back(name);
-  }
-  return out;
-}
 
 nlohmann::json runGenerate(const GenerateConfig& config) {
   GenerateRun run(config);

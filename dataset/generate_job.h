@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "dataset/pair_generator.h"
+#include "dataset/scene_list.h"
 #include "render/scene_loader.h"
 
 namespace paircast {
@@ -37,19 +38,6 @@ struct GenerateConfig {
   LoadOptions load;
   PairOptions pair;  // views, covis band, screening, covis masks, ...
 };
-
-// The regular files under `dir` (recursively) that `keep` accepts, sorted by path.
-std::vector<std::string> sortedFilesUnder(
-    const std::string& dir, const std::function<bool(const std::filesystem::path&)>& keep);
-
-// Expands the --scenes arguments into scene files, sorted within each folder, in argument order.
-// Throws paircast::Error naming an argument that does not exist.
-std::vector<std::string> expandSceneList(const std::vector<std::string>& args);
-
-// The name of each scene file in outputs and keys: its sanitised stem, or "<folder>_<stem>" when
-// several files share the stem (Replica's mesh.ply), with _2, _3, ... added to later files whose
-// name is taken.
-std::vector<std::string> uniqueSceneNames(const std::vector<std::string>& files);
 
 // Runs the job and returns the summary (also written to <out>/summary.json). Scenes that fail
 // to load or have no walkable floor or valid views are skipped with a warning and listed in

@@ -206,7 +206,12 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
   // scene); their first stage is made for a whole batch at once.
   firstCandidateStage_ = !screens_.empty() && screens_[0].validOnly ? 1 : 0;
   if (const auto confirm = confirmStage(options_)) add(*confirm, false);
-  referenceStages_ = regularStages_;
+  // A reference is judged on its valid pixels at the glance, the first regular stage and the
+  // finest one (which its target and the in-frame bound need anyway): the stages between turned
+  // down almost none (docs/dataset.md).
+  for (size_t k = 0; k < regularStages_; ++k)
+    if (screens_[k].validOnly || k == firstCandidateStage_ || k + 1 == regularStages_)
+      referenceStages_.push_back(k);
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
@@ -214,7 +219,7 @@ std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
   const auto start = Clock::now();
   Search search{Rng(mixSeed(seed, scene_.name, index)), {}};
   search.cost.candidateFunnel.resize(screens_.empty() ? 0 : screens_.size() + kFirstStageSlot);
-  search.cost.referenceFunnel.resize(referenceStages_);
+  search.cost.referenceFunnel.resize(referenceStages_.size());
   std::optional<PairSample> found;
   PairSample sample;
   if (makeSample(search, sample)) {
@@ -435,8 +440,9 @@ bool PairGenerator::inBand(double covis) const {
 
 // A reference's low-resolution stages (valid pixels only); whether it passed.
 bool PairGenerator::screenReference(View& v, GenerationCost& cost) const {
-  for (size_t stage = 0; stage < referenceStages_; ++stage) {
-    if (funnelTest(cost.referenceFunnel[stage], nullptr, v, cost,
+  for (size_t k = 0; k < referenceStages_.size(); ++k) {
+    const size_t stage = referenceStages_[k];
+    if (funnelTest(cost.referenceFunnel[k], nullptr, v, cost,
                    [&] { return failsStage(stage, nullptr, v, cost); }))
       return false;
   }

@@ -163,8 +163,8 @@ struct GenerationCost {
   double covisSeconds = 0;
   double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
   // Candidates: [0] the in-frame bound, [1] the sight lines, then each low-resolution stage,
-  // coarse to fine, then the confirm stage (when the options give one); references: their
-  // low-resolution stages.
+  // coarse to fine, then the confirm stage (when the options give one); references: the glance,
+  // the first stage and the finest one.
   std::vector<FunnelStage> candidateFunnel, referenceFunnel;
   size_t referencesGivenUp = 0;  // references dropped early for lack of promising candidates
 
@@ -236,9 +236,7 @@ class PairGenerator {
   std::vector<ScreenStage> screens_;
   size_t regularStages_ = 0;    // screens_ without the confirm stage
   size_t firstCandidateStage_ = 0;  // candidates skip the glance
-  size_t referenceStages_ = 0;  // the stages a reference goes through (valid depth only): all
-                                // regular ones, as its target and the in-frame bound need the
-                                // finest
+  std::vector<size_t> referenceStages_;  // the stages a reference goes through (valid depth only)
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

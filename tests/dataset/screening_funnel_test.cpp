@@ -102,7 +102,7 @@ TEST(NoRenderWasted, TheFunnelAddsUp) {
   EXPECT_LE(f[4].entered, f[3].entered - f[3].rejected);
   EXPECT_GT(f[1].rejected, 0u) << "the sight lines turned nothing down in a four-room flat";
   EXPECT_GT(f[0].seconds + f[1].seconds + f[3].seconds, 0.0);
-  EXPECT_EQ(c.referenceFunnel.size(), 3u);  // the glance, 16, 32
+  EXPECT_EQ(c.referenceFunnel.size(), 3u);  // the glance, 16, 32 (the first and the finest)
 }
 
 TEST(NoRenderWasted, SightLinesTurnDownCandidatesBehindWallsNotOnesThatWouldBeKept) {
