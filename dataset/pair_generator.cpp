@@ -270,13 +270,14 @@ std::optional<PairGenerator::View> PairGenerator::referenceView(Search& search) 
   View v;
   v.at = sampler_.sampleReference(intrinsics_, search.rng);
   if (!screens_.empty()) {
-    if (!screenReference(v, search.cost)) return std::nullopt;
+    // A reference needs a valid pixel for its target, even with --min-valid 0.
+    if (!screenReference(v, search.cost) || v.screenValid == 0) return std::nullopt;
     return v;
   }
   renderFull(v, false, search.cost);
   v.full = true;
   v.valid = validFraction(v.depth);
-  if (v.valid >= options_.minValidFraction) return v;
+  if (v.valid >= options_.minValidFraction && v.valid > 0) return v;
   search.cost.wastedReferenceRenders += v.renders;
   return std::nullopt;
 }
