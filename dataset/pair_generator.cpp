@@ -202,16 +202,27 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
     add({options_.screenGlanceSide, 1.0}, true);
   for (const ScreenStageSpec& stage : stages) add(stage, false);
   regularStages_ = screens_.size();
-  // Candidates skip the glance (they look at the reference's mean point, so rarely out of the
-  // scene); their first stage is made for a whole batch at once.
-  firstCandidateStage_ = !screens_.empty() && screens_[0].validOnly ? 1 : 0;
   if (const auto confirm = confirmStage(options_)) add(*confirm, false);
-  // A reference is judged on its valid pixels at the glance, the first regular stage and the
-  // finest one (which its target and the in-frame bound need anyway): the stages between turned
-  // down almost none (docs/dataset.md).
+  planStages();
+}
+
+// Which stages references and candidates go through. A reference is judged on its valid pixels
+// at the glance, the first regular stage and the finest one (which its target and the in-frame
+// bound need anyway): the stages between turned down almost none. A candidate glances (with its
+// v_ji estimate), then skips the first regular stage, which turned down almost none after it,
+// and goes through the rest; without the glance, through every stage. Its first stage is made
+// for a whole batch at once. docs/dataset.md has the measurements.
+void PairGenerator::planStages() {
+  const bool glance = !screens_.empty() && screens_[0].validOnly;
+  const size_t firstRegular = glance ? 1 : 0;
   for (size_t k = 0; k < regularStages_; ++k)
-    if (screens_[k].validOnly || k == firstCandidateStage_ || k + 1 == regularStages_)
-      referenceStages_.push_back(k);
+    if (k <= firstRegular || k + 1 == regularStages_) referenceStages_.push_back(k);
+  const bool candidateGlance = glance && options_.screenCandidateGlance;
+  for (size_t k = 0; k < screens_.size(); ++k) {
+    if (k == 0 && glance && !candidateGlance) continue;
+    if (k == firstRegular && candidateGlance && regularStages_ > 2) continue;
+    candidateStages_.push_back(k);
+  }
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
@@ -346,9 +357,9 @@ bool PairGenerator::funnelTest(FunnelStage& stage, const View* ref, const View& 
   return true;
 }
 
-// The in-frame bound and the sight lines of every candidate of the batch, then the batched
-// stages (the glance and the first regular one) for those they leave, each stage's depth maps
-// rendered in one pass; out[k] says which were turned down.
+// The in-frame bound and the sight lines of every candidate of the batch, then the candidates'
+// first stage (the glance) for those they leave, their depth maps rendered in one pass; out[k]
+// says which were turned down.
 void PairGenerator::screenFirstStage(const View& ref, std::vector<View>& batch,
                                      std::vector<bool>& out, Search& search) const {
   GenerationCost& cost = search.cost;
@@ -361,17 +372,31 @@ void PairGenerator::screenFirstStage(const View& ref, std::vector<View>& batch,
         funnelTest(funnel[kSightSlot], &ref, v, cost, [&] { return outOfSight(ref, v, cost); });
     if (!out[k]) left.push_back(k);
   }
-  for (size_t stage = firstCandidateStage_; stage < firstCandidateStage_ + 1; ++stage) {
-    renderStageBatch(stage, batch, left, funnel[kFirstStageSlot + stage], cost);
-    std::vector<size_t> passed;
-    for (size_t k : left) {
-      View& v = batch[k];
-      out[k] = funnelTest(funnel[kFirstStageSlot + stage], &ref, v, cost,
-                          [&] { return failsStage(stage, &ref, v, cost); });
-      if (!out[k]) passed.push_back(k);
-    }
-    left = std::move(passed);
+  const size_t stage = candidateStages_.front();
+  renderStageBatch(stage, batch, left, funnel[kFirstStageSlot + stage], cost);
+  for (size_t k : left) {
+    View& v = batch[k];
+    out[k] = funnelTest(funnel[kFirstStageSlot + stage], &ref, v, cost, [&] {
+      return screens_[stage].validOnly ? failsGlance(ref, v, cost)
+                                       : failsStage(stage, &ref, v, cost);
+    });
   }
+}
+
+// A candidate's glance: too few valid pixels in its 8x8 map, or too few of them seen by the
+// reference (tested against its finest screening depth): that share estimates v_ji, and covis
+// <= v_ji, so it takes the sight lines' margin.
+bool PairGenerator::failsGlance(const View& ref, View& v, GenerationCost& cost) const {
+  if (failsStage(0, nullptr, v, cost)) return true;
+  if (options_.accept) return false;
+  const size_t last = regularStages_ - 1;
+  const auto t0 = Clock::now();
+  const double seen = visibleFraction(stageCamera(0, v), v.screenDepth[0], stageCamera(last, ref),
+                                      ref.screenDepth[last], options_.covis);
+  cost.screenSeconds += since(t0);
+  if (seen >= options_.minCovis - options_.screenSightMargin) return false;
+  cost.candidateCovis.push_back(static_cast<float>(seen));
+  return true;
 }
 
 // The depth maps of batch[which] at the stage, in one pass; its time counts in `funnel`.
@@ -397,8 +422,9 @@ void PairGenerator::renderStageBatch(size_t stage, std::vector<View>& batch,
 // passed.
 bool PairGenerator::screenLaterStages(const View& ref, View& v, Search& search) const {
   GenerationCost& cost = search.cost;
-  for (size_t stage = firstCandidateStage_ + 1; stage < screens_.size(); ++stage) {
-    if (stage == regularStages_ && !ambiguous(stage - 1, v)) break;  // the confirm stage
+  for (size_t k = 1; k < candidateStages_.size(); ++k) {
+    const size_t stage = candidateStages_[k];
+    if (stage == regularStages_ && !ambiguous(candidateStages_[k - 1], v)) break;  // confirm
     if (funnelTest(cost.candidateFunnel[kFirstStageSlot + stage], &ref, v, cost,
                    [&] { return failsStage(stage, &ref, v, cost); }))
       return false;

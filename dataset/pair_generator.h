@@ -58,13 +58,17 @@ struct PairOptions {
   // below minCovis by more than this.
   double screenFrameMargin = 0.03;
   double screenValidMargin = 0.05;
-  // The glance: before its first stage, a reference is rendered as a screenGlanceSide^2 depth map
-  // and turned down when its valid fraction is below minValidFraction by more than
+  // The glance: before its first stage, a view is rendered as a screenGlanceSide^2 depth map and
+  // turned down when its valid fraction is below minValidFraction by more than
   // screenGlanceValidMargin. It drops the references that look out of a scene (open floors, rooms
-  // without walls) at a quarter of the first stage's cost. Candidates skip it: they look at the
-  // reference's mean point, and on enclosed scenes it turned none down. 0: off.
+  // without walls) at a quarter of the first stage's cost. 0: off.
   int screenGlanceSide = 8;
   double screenGlanceValidMargin = 0.15;
+  // Candidates glance too, a batch in one pass, and are also turned down when the share of their
+  // glance's points that the reference sees (against its finest screening depth), an estimate of
+  // v_ji, is below minCovis by more than screenSightMargin. They then skip the first regular
+  // stage (16x16 at 256), which turns down almost none after it.
+  bool screenCandidateGlance = true;
   // Sight lines: after the in-frame bound, a candidate casts shadow rays to a screenSightSide^2
   // grid of the reference's points (from its finest screening depth); the share that lies in its
   // frame with nothing in between estimates v_ij, and covis <= v_ij. A candidate whose share is
@@ -197,6 +201,7 @@ class PairGenerator {
   void screenFirstStage(const View& ref, std::vector<View>& batch, std::vector<bool>& out,
                         Search& search) const;
   bool screenLaterStages(const View& ref, View& v, Search& search) const;
+  bool failsGlance(const View& ref, View& v, GenerationCost& cost) const;
   void renderStageBatch(size_t stage, std::vector<View>& batch, const std::vector<size_t>& which,
                         FunnelStage& funnel, GenerationCost& cost) const;
   bool passesFull(View& ref, View& v, Search& search) const;
@@ -235,8 +240,9 @@ class PairGenerator {
   // Coarse to fine, then the confirm stage when there is one; empty without screening.
   std::vector<ScreenStage> screens_;
   size_t regularStages_ = 0;    // screens_ without the confirm stage
-  size_t firstCandidateStage_ = 0;  // candidates skip the glance
+  std::vector<size_t> candidateStages_;  // the stages a candidate goes through, in order
   std::vector<size_t> referenceStages_;  // the stages a reference goes through (valid depth only)
+  void planStages();
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

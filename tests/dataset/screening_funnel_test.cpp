@@ -89,19 +89,20 @@ TEST(NoRenderWasted, AReferenceIsRenderedInFullOnlyOnceAPartnerPassedScreening) 
 TEST(NoRenderWasted, TheFunnelAddsUp) {
   const GenerationCost c = apartment().run(smallOptions(), 20);
   const std::vector<FunnelStage>& f = c.candidateFunnel;
-  ASSERT_EQ(f.size(), 2u + 3u);  // bound, sight lines, the glance (skipped), 16, 32
+  ASSERT_EQ(f.size(), 2u + 3u);  // bound, sight lines, the glance, 16 (skipped), 32
   size_t turnedDown = 0;
   for (const FunnelStage& s : f) turnedDown += s.rejected;
   for (const FunnelStage& s : c.referenceFunnel) turnedDown += s.rejected;
   EXPECT_EQ(turnedDown, c.screened);
-  // The bound, the sight lines and the first stage see the whole batch; later stages stop at
-  // the candidate that passes.
+  // The bound, the sight lines and the glance see the whole batch; later stages stop at the
+  // candidate that passes.
   EXPECT_EQ(f[1].entered, f[0].entered - f[0].rejected);
-  EXPECT_EQ(f[2].entered, 0u) << "candidates skip the glance";
-  EXPECT_EQ(f[3].entered, f[1].entered - f[1].rejected);
-  EXPECT_LE(f[4].entered, f[3].entered - f[3].rejected);
+  EXPECT_EQ(f[2].entered, f[1].entered - f[1].rejected);
+  EXPECT_EQ(f[3].entered, 0u) << "after the glance, candidates skip the first stage";
+  EXPECT_LE(f[4].entered, f[2].entered - f[2].rejected);
   EXPECT_GT(f[1].rejected, 0u) << "the sight lines turned nothing down in a four-room flat";
-  EXPECT_GT(f[0].seconds + f[1].seconds + f[3].seconds, 0.0);
+  EXPECT_GT(f[2].rejected, 0u) << "the glance turned nothing down in a four-room flat";
+  EXPECT_GT(f[0].seconds + f[1].seconds + f[2].seconds, 0.0);
   EXPECT_EQ(c.referenceFunnel.size(), 3u);  // the glance, 16, 32 (the first and the finest)
 }
 
@@ -112,11 +113,21 @@ TEST(NoRenderWasted, SightLinesTurnDownCandidatesBehindWallsNotOnesThatWouldBeKe
   const FunnelStage& sight = c.candidateFunnel[1];
   ASSERT_GT(sight.rejected, 30u);
   EXPECT_LE(sight.falseRejections * 50, sight.rejected);
-  // Without them, the first stage renders what they turned down.
+  // Without them, the glance renders what they turned down.
   o.screenSightSide = 0;
   const GenerationCost without = apartment().run(o, 30);
   EXPECT_EQ(without.candidateFunnel[1].rejected, 0u);
-  EXPECT_GT(without.candidateFunnel[3].entered, c.candidateFunnel[3].entered);
+  EXPECT_GT(without.candidateFunnel[2].entered, c.candidateFunnel[2].entered);
+  // The glance's v_ji estimate turns down candidates that the full test would not keep.
+  const FunnelStage& glance = c.candidateFunnel[2];
+  ASSERT_GT(glance.rejected, 30u);
+  EXPECT_LE(glance.falseRejections * 50, glance.rejected);
+  // Without the candidates' glance, they go through the first stage instead.
+  o.screenSightSide = PairOptions{}.screenSightSide;
+  o.screenCandidateGlance = false;
+  const GenerationCost noGlance = apartment().run(o, 30);
+  EXPECT_EQ(noGlance.candidateFunnel[2].entered, 0u);
+  EXPECT_EQ(noGlance.candidateFunnel[3].entered, c.candidateFunnel[2].entered);
 }
 
 TEST(NoRenderWasted, ScreenedPairsKeepTheUnscreenedCovisDistribution) {
