@@ -262,10 +262,9 @@ void printStageTable(const nlohmann::json& results) {
       "--- | --- |\n");
   for (const auto& r : results)
     std::printf("| %s | %zu | %.1f | %.1f | **%.2f** | %.1f | %.2fx | %.4f | %.2f |\n",
-                r["scene"].get<std::string>().c_str(),
-                r["scene_stats"]["triangles"].get<size_t>(), r["pairs_per_second"].get<double>(),
-                r["limit_pairs_per_second"].get<double>(), r["efficiency"].get<double>(),
-                r["unscreened_pairs_per_second"].get<double>(),
+                r["scene"].get<std::string>().c_str(), r["scene_stats"]["triangles"].get<size_t>(),
+                r["pairs_per_second"].get<double>(), r["limit_pairs_per_second"].get<double>(),
+                r["efficiency"].get<double>(), r["unscreened_pairs_per_second"].get<double>(),
                 r["screening_speedup"].get<double>(), r["false_rejection_rate"].get<double>(),
                 r["renders"]["per_pair"].get<double>());
   std::printf(
@@ -404,11 +403,10 @@ int main(int argc, char** argv) {
       // The audited run's funnel: what each stage turned down, wrongly, and its worker time per
       // pair.
       const double auditPairsMade = audit["pairs_this_run"].get<double>();
-      std::printf("    audited funnel, candidates: %s\n    audited funnel, references: %s\n",
-                  funnelText(screening["candidate_funnel"], funnelNames(true), auditPairsMade)
-                      .c_str(),
-                  funnelText(screening["reference_funnel"], funnelNames(false), auditPairsMade)
-                      .c_str());
+      std::printf(
+          "    audited funnel, candidates: %s\n    audited funnel, references: %s\n",
+          funnelText(screening["candidate_funnel"], funnelNames(true), auditPairsMade).c_str(),
+          funnelText(screening["reference_funnel"], funnelNames(false), auditPairsMade).c_str());
       const auto& fast = sum["screening"];
       std::printf("    funnel, candidates: %s\n    funnel, references: %s\n",
                   funnelText(fast["candidate_funnel"], funnelNames(true),

@@ -569,9 +569,9 @@ void GenerateRun::writeInOrder() {
   const auto started = Clock::now();
   auto show = [&](size_t done, bool last) {
     if (last || progress.due())
-      progress.show(progressText(done, items_.size(), stats_.accepted(), stats_.candidates(),
-                                 since(started)),
-                    last);
+      progress.show(
+          progressText(done, items_.size(), stats_.accepted(), stats_.candidates(), since(started)),
+          last);
   };
   for (size_t i = 0; i < items_.size(); ++i) {
     Result r;

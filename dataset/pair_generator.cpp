@@ -164,13 +164,13 @@ struct PairGenerator::View {
   // A reference's sight-line targets (world points), made when a first candidate needs them.
   mutable std::vector<Eigen::Vector3f> sightPoints;
   mutable bool sightPointsMade = false;
-  Image8 rgb;                 // [H, W, 3], empty until rendered
-  bool full = false;          // depth (and, when screening, colour) rendered at full resolution
-  double valid = 0;           // share of depth's pixels with depth > 0
-  double estimate = 0;        // covis estimate at the last screening stage it went through
-  double screenValid = 0;     // valid fraction there
-  CovisResult covis;          // against view 0, full resolution
-  double renderSeconds = 0;   // its full-resolution renders
+  Image8 rgb;                // [H, W, 3], empty until rendered
+  bool full = false;         // depth (and, when screening, colour) rendered at full resolution
+  double valid = 0;          // share of depth's pixels with depth > 0
+  double estimate = 0;       // covis estimate at the last screening stage it went through
+  double screenValid = 0;    // valid fraction there
+  CovisResult covis;         // against view 0, full resolution
+  double renderSeconds = 0;  // its full-resolution renders
   int renders = 0;
 };
 
@@ -501,8 +501,7 @@ bool PairGenerator::audit(const View* ref, const View& v, GenerationCost& cost) 
       refDepth = &ref->auditDepth;
     }
     kept = validFraction(*refDepth) >= options_.minValidFraction &&
-           inBand(computeCovisibility(ref->at.camera, *refDepth, v.at.camera, depth,
-                                      options_.covis)
+           inBand(computeCovisibility(ref->at.camera, *refDepth, v.at.camera, depth, options_.covis)
                       .covis);
   }
   cost.falseRejections += kept;
@@ -583,10 +582,10 @@ double PairGenerator::stageEstimate(size_t stage, const View& ref, const View& v
                                     GenerationCost& cost) const {
   renderStage(stage, ref, cost);
   const auto t0 = Clock::now();
-  const double estimate = computeCovisibility(stageCamera(stage, ref), ref.screenDepth[stage],
-                                              stageCamera(stage, v), v.screenDepth[stage],
-                                              options_.covis)
-                              .covis;
+  const double estimate =
+      computeCovisibility(stageCamera(stage, ref), ref.screenDepth[stage], stageCamera(stage, v),
+                          v.screenDepth[stage], options_.covis)
+          .covis;
   cost.screenSeconds += since(t0);
   return estimate;
 }

@@ -239,7 +239,7 @@ class PairGenerator {
   Camera intrinsics_;
   // Coarse to fine, then the confirm stage when there is one; empty without screening.
   std::vector<ScreenStage> screens_;
-  size_t regularStages_ = 0;    // screens_ without the confirm stage
+  size_t regularStages_ = 0;             // screens_ without the confirm stage
   std::vector<size_t> candidateStages_;  // the stages a candidate goes through, in order
   std::vector<size_t> referenceStages_;  // the stages a reference goes through (valid depth only)
   void planStages();

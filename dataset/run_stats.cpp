@@ -58,9 +58,8 @@ nlohmann::json RunStats::toJson(double seconds) const {
                                 {"covis", s.covisSeconds},
                                 {"encode", encode_},
                                 {"write", write_}};
-  const double total = std::max(s.renderSeconds + s.screenSeconds + sampling_ + s.covisSeconds +
-                                    encode_ + write_,
-                                1e-12);
+  const double total = std::max(
+      s.renderSeconds + s.screenSeconds + sampling_ + s.covisSeconds + encode_ + write_, 1e-12);
   nlohmann::json split = nlohmann::json::object();
   for (const auto& [name, value] : times.items()) split[name] = value.get<double>() / total;
   return {{"pairs_this_run", accepted_},

@@ -7,9 +7,9 @@
 #include <cstdint>
 #include <memory>
 
-#include "util/camera.h"
 #include "render/frame.h"
 #include "render/mesh.h"
+#include "util/camera.h"
 
 namespace paircast {
 

@@ -26,8 +26,7 @@ namespace fs = std::filesystem;
 
 // The shipped apartment (four rooms behind walls and doors), with its BVH and sampler.
 struct Apartment {
-  Apartment()
-      : scene(load()), caster(scene.mesh), sampler(scene, caster, {}) {}
+  Apartment() : scene(load()), caster(scene.mesh), sampler(scene, caster, {}) {}
   static Scene load() {
     Scene s = loadScene(testing::sourceDir() + "/scenes/apartment/apartment.obj", {});
     s.name = "apartment";
@@ -226,9 +225,9 @@ TEST(RayCasterBatch, ShadowRaysStopAtTheFirstSurface) {
   addBox(mesh, {0.95f, -1, -1}, {1.05f, 1, 1}, 0);
   const RayCaster caster(mesh);
   const Eigen::Vector3f o(0, 0, 0), d(2, 0, 0);
-  const std::vector<Ray> rays = {{o, d, 0.0f, 1.0f},           // through the wall
-                                 {o, d, 0.0f, 0.45f},          // stops short of it
-                                 {o, {0, 0, 2}, 0.0f, 1.0f},   // beside it
+  const std::vector<Ray> rays = {{o, d, 0.0f, 1.0f},            // through the wall
+                                 {o, d, 0.0f, 0.45f},           // stops short of it
+                                 {o, {0, 0, 2}, 0.0f, 1.0f},    // beside it
                                  {{2, 0, 0}, -d, 0.0f, 1.0f}};  // from the other side
   std::vector<uint8_t> blocked(rays.size(), 7);
   caster.occluded(rays.data(), blocked.data(), rays.size());
