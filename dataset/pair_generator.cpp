@@ -18,8 +18,8 @@ constexpr auto since = secondsSince;
 // outOfFrame projects about a kFrameScreenSide^2 grid of the reference's pixels.
 constexpr int kFrameScreenSide = 64;
 constexpr int kMaxScreenBatch = 64;
-// How much wider a stage's covis margin is than the next finer one's, below 32x32 (16x16: 0.375
-// with the default 0.15 at 32x32, docs/dataset.md).
+// How much wider a stage's covis margin is than the next finer one's, below 32x32 (16x16: 0.45
+// with the default 0.18 at 32x32, docs/dataset.md).
 constexpr double kCoarseMarginRatio = 2.5;
 // Screening stages of this side or more take the fine valid margin.
 constexpr int kFineSide = 64;
@@ -308,7 +308,7 @@ std::optional<PairGenerator::View> PairGenerator::otherView(View& ref,
                                                             const Eigen::Vector3d& target,
                                                             Search& search) const {
   const int batchSize = screens_.empty() ? 1 : options_.screenBatch;
-  int misses = 0;  // candidates in a row turned down by the in-frame bound or the first stage
+  int misses = 0;  // candidates in a row turned down in screenFirstStage (no render beyond 8x8)
   std::vector<bool> out;
   for (int attempt = 0; attempt < options_.maxAttempts;) {
     const int n = std::min(batchSize, options_.maxAttempts - attempt);

@@ -89,8 +89,8 @@ struct PairOptions {
   // are made in one pass, then they go on in the order drawn.
   int screenBatch = 8;
   // A reference is given up when this many of its candidates in a row are turned down by the
-  // in-frame bound or the first stage (0: never); CroCo's sampler rarely finds a partner after
-  // such a run (docs/dataset.md).
+  // in-frame bound, the sight lines or the glance (0: never, the default: on simple_room it lost
+  // pairs and saved no time, docs/dataset.md).
   int giveUpAfter = 0;
   // Benchmarks: also render every screened-out view at full resolution, to count the ones that
   // would have passed (PairSample::falseRejections). It changes no output.

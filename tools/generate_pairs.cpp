@@ -104,7 +104,7 @@ int main(int argc, char** argv) {
                "twice its side (costs more than it saves at 256, docs/dataset.md)");
   app.add_option("--give-up-after", cfg.pair.giveUpAfter,
                  "Give a reference up after this many of its candidates in a row are turned down "
-                 "before rendering (0: never; the default)")
+                 "before any render beyond 8x8 (0: never; the default)")
       ->check(CLI::NonNegativeNumber);
   app.add_flag("--save-covis-mask", cfg.pair.covisMasks,
                "Also write 8-bit co-visibility masks (255: seen by the other view)");

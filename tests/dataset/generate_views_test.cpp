@@ -146,7 +146,7 @@ TEST(Screening, StagesDoubleUpToAQuarterOfTheOutputWithMarginsBySide) {
   EXPECT_EQ(screenStages(o).front().side, 32);
   EXPECT_EQ(screenStages(o).back().side, 128);
   EXPECT_NEAR(screenStages(o).back().margin, o.screenFineMargin / 2, 1e-12);  // half per doubling
-  o.screenResolution = 48;  // at 512: 48 and 96
+  o.screenResolution = 48;                                                    // at 512: 48 and 96
   EXPECT_EQ(screenStages(o).size(), 2u);
   o.resolution = 128;
   o.screenResolution = 24;
