@@ -3,7 +3,9 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
+#include <utility>
 
 #include "util/error.h"
 
@@ -303,6 +305,28 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
     cellPoints_[open[k].cell].push_back(static_cast<int>(points_.size()));
     points_.push_back(open[k].point);
   }
+  measureEmptyRings();
+}
+
+// Chebyshev distances to the nearest cell with points: the two-pass chamfer transform with
+// unit steps to all eight neighbours, which is exact for that metric.
+void FloorMap::measureEmptyRings() {
+  constexpr int kFar = std::numeric_limits<int>::max() / 2;
+  emptyRings_.assign(cellPoints_.size(), kFar);
+  for (size_t c = 0; c < cellPoints_.size(); ++c)
+    if (!cellPoints_[c].empty()) emptyRings_[c] = 0;
+  auto at = [&](int i, int j) -> int& { return emptyRings_[static_cast<size_t>(i) * nB_ + j]; };
+  auto relax = [&](int i, int j, int di, int dj) {
+    const int ni = i + di, nj = j + dj;
+    if (ni >= 0 && ni < nA_ && nj >= 0 && nj < nB_) at(i, j) = std::min(at(i, j), at(ni, nj) + 1);
+  };
+  for (int i = 0; i < nA_; ++i)
+    for (int j = 0; j < nB_; ++j)
+      for (const auto& [di, dj] : {std::pair{-1, -1}, {-1, 0}, {-1, 1}, {0, -1}})
+        relax(i, j, di, dj);
+  for (int i = nA_ - 1; i >= 0; --i)
+    for (int j = nB_ - 1; j >= 0; --j)
+      for (const auto& [di, dj] : {std::pair{1, 1}, {1, 0}, {1, -1}, {0, 1}}) relax(i, j, di, dj);
 }
 
 double FloorMap::area() const {
@@ -341,7 +365,14 @@ std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double r
         best = d, bestIndex = list[pos], bestOrder = order;
     }
   };
-  for (int r = 0; r <= reach; ++r) {
+  // Rings nearer than the nearest cell with points are empty. Outside the grid, that cell lies
+  // at least as far as the grid's edge, and no nearer than the nearest from the edge's cell
+  // (clamped) less the way to it.
+  const int ki = std::clamp(ci, 0, nA_ - 1), kj = std::clamp(cj, 0, nB_ - 1);
+  const int toEdge = std::max(std::abs(ci - ki), std::abs(cj - kj));
+  const int first = std::max(toEdge, emptyRings_[static_cast<size_t>(ki) * nB_ + kj] - toEdge);
+  if (first > reach) return std::nullopt;
+  for (int r = first; r <= reach; ++r) {
     // Every cell of ring r is at least (r - 1) cells from p (p lies in cell (ci, cj)).
     if (bestIndex >= 0 && (r - 1) * cell_ > std::sqrt(best) + 1e-4) break;
     if (r == 0) {

@@ -61,6 +61,10 @@ class FloorMap {
   bool hasCeiling_ = false;
   std::vector<Eigen::Vector3f> points_;       // walkable points, cell centres on the floor
   std::vector<std::vector<int>> cellPoints_;  // [nA * nB] indices into points_
+  // [nA * nB] the ring (Chebyshev distance in cells) of the nearest cell with points, so that
+  // snap starts its search there
+  std::vector<int> emptyRings_;
+  void measureEmptyRings();
 };
 
 }  // namespace paircast

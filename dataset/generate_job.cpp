@@ -41,6 +41,18 @@ namespace {
 using Clock = SteadyClock;
 constexpr auto since = secondsSince;
 
+// OpenMP's thread count of the calling thread, set for a scope and put back after it.
+class OmpThreads {
+ public:
+  explicit OmpThreads(int n) : before_(omp_get_max_threads()) { omp_set_num_threads(n); }
+  ~OmpThreads() { omp_set_num_threads(before_); }
+  OmpThreads(const OmpThreads&) = delete;
+  OmpThreads& operator=(const OmpThreads&) = delete;
+
+ private:
+  int before_;
+};
+
 constexpr int kHistogramBins = 20;
 // A scene is skipped as having no valid views when this many of its first indices (or all it has,
 // if fewer) have no sample: one index's failure says little, since a scene whose floor is only
@@ -468,7 +480,12 @@ void GenerateRun::loadScene(SceneJob& job) {
   }
   t0 = Clock::now();
   job.caster = std::make_unique<RayCaster>(job.scene->mesh);
-  job.sampler = std::make_unique<ViewpointSampler>(*job.scene, *job.caster, cfg_.pair.sampler);
+  {
+    // The floor map's rays on every core: the workers wait for the first scene, and a later
+    // scene's overlap with their renders is brief.
+    const OmpThreads all(jobs_);
+    job.sampler = std::make_unique<ViewpointSampler>(*job.scene, *job.caster, cfg_.pair.sampler);
+  }
   job.stats = {{"scene", job.name},
                {"triangles", job.scene->mesh.numTriangles()},
                {"load_seconds", loadSeconds},

@@ -71,6 +71,17 @@ double stageMargin(int side, const PairOptions& o) {
   return m64 * std::pow(0.5, std::log2(side / 64.0));
 }
 
+// The covis options of a stage's estimate against the lower bound: the tolerances times half the
+// ratio of the output's side to the stage's, at least 1 (PairOptions::screenScaleTolerance).
+static CovisOptions stageCovisOptions(int side, const PairOptions& o) {
+  CovisOptions c = o.covis;
+  if (!o.screenScaleTolerance) return c;
+  const float scale = std::max(1.0f, 0.5f * static_cast<float>(o.resolution) / side);
+  c.absTol *= scale;
+  c.relTol *= scale;
+  return c;
+}
+
 std::vector<ScreenStageSpec> screenStages(const PairOptions& o) {
   std::vector<ScreenStageSpec> stages;
   for (int side = screenResolution(o); side > 0 && (stages.empty() || 4 * side <= o.resolution);
@@ -85,6 +96,59 @@ std::optional<ScreenStageSpec> confirmStage(const PairOptions& o) {
     return std::nullopt;
   const int side = 2 * stages.back().side;
   return ScreenStageSpec{side, stageMargin(side, o)};
+}
+
+// A reference is judged on its valid pixels at the glance, the first regular stage and the
+// next (32x32 at 256), which its points come from; the finest stage (64x64) only checks its valid
+// pixels before a full render, when they are near the bound, as most references never need it
+// (their candidates skip it). A candidate glances (with its v_ji estimate), then skips the first
+// regular stage, which turned down almost none after it, and goes through the rest; without the
+// glance, through every stage. Its first stage is made for a whole batch at once.
+// docs/dataset.md has the measurements.
+ScreenPlan screenPlan(const PairOptions& o) {
+  ScreenPlan plan;
+  const std::vector<ScreenStageSpec> regular = screenStages(o);
+  if (regular.empty()) return plan;
+  const bool glance = o.screenGlanceSide > 0 && o.screenGlanceSide < regular.front().side;
+  if (glance) plan.stages.push_back({o.screenGlanceSide, 1.0, true});
+  for (const ScreenStageSpec& stage : regular)
+    plan.stages.push_back({stage.side, stage.margin, false});
+  plan.regular = plan.stages.size();
+  if (const auto confirm = confirmStage(o))
+    plan.stages.push_back({confirm->side, confirm->margin, false});
+  const size_t firstRegular = glance ? 1 : 0;
+  const size_t points = std::min(firstRegular + 1, plan.regular - 1);
+  for (size_t k = 0; k <= points; ++k)
+    if (k <= firstRegular || k == points) plan.reference.push_back(k);
+  if (points + 1 < plan.regular) plan.referenceFine = plan.regular - 1;
+  const bool candidateGlance = glance && o.screenCandidateGlance;
+  for (size_t k = 0; k < plan.stages.size(); ++k) {
+    if (k == 0 && glance && !candidateGlance) continue;
+    if (k == firstRegular && candidateGlance && plan.regular > 2) continue;
+    plan.candidate.push_back(k);
+  }
+  return plan;
+}
+
+namespace {
+
+std::string stageName(const ScreenPlan::Stage& stage, const char* glance) {
+  return stage.validOnly ? glance : std::to_string(stage.side) + "^2";
+}
+
+}  // namespace
+
+std::vector<std::string> ScreenPlan::candidateNames() const {
+  std::vector<std::string> names = {"bound", "sight"};
+  for (const Stage& stage : stages) names.push_back(stageName(stage, "(glance)"));
+  return names;
+}
+
+std::vector<std::string> ScreenPlan::referenceNames() const {
+  std::vector<std::string> names;
+  for (size_t k : reference) names.push_back(stageName(stages[k], "glance"));
+  if (referenceFine) names.push_back(stageName(stages[*referenceFine], "glance") + " valid");
+  return names;
 }
 
 void GenerationCost::add(const GenerationCost& o) {
@@ -140,7 +204,8 @@ void PairOptions::validate() const {
                           ") must not exceed the resolution (" + std::to_string(resolution) + ")");
   if (!(in(screenCovisMargin, 0, 1) && in(screenFineMargin, 0, 1) && in(screenFrameMargin, 0, 1) &&
         screenValidMargin >= 0 && in(screenFineValidMargin, 0, 1) &&
-        in(screenGlanceValidMargin, 0, 1) && in(screenSightMargin, 0, 1)))
+        in(screenGlanceValidMargin, 0, 1) && in(screenSightMargin, 0, 1) &&
+        in(screenGlanceCovisMargin, 0, 1)))
     throw OptionError("screen_margin", "screening margins must be in [0, 1]");
   if (screenBatch < 1 || screenBatch > kMaxScreenBatch)
     throw OptionError("screen_batch", "the screening batch must be in 1.." +
@@ -166,6 +231,7 @@ struct PairGenerator::View {
   mutable bool sightPointsMade = false;
   Image8 rgb;                // [H, W, 3], empty until rendered
   bool full = false;         // depth (and, when screening, colour) rendered at full resolution
+  bool fineChecked = false;  // a reference: the plan's fine check done (and passed)
   double valid = 0;          // share of depth's pixels with depth > 0
   double estimate = 0;       // covis estimate at the last screening stage it went through
   double screenValid = 0;    // valid fraction there
@@ -189,40 +255,16 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
       intrinsics_(Camera::fromHfov(options.resolution, options.resolution, options.hfov)) {
   options.validate();
   options_.screenResolution = screenResolution(options);
-  auto add = [&](const ScreenStageSpec& stage, bool validOnly) {
-    const double validMargin = validOnly                 ? options_.screenGlanceValidMargin
+  plan_ = screenPlan(options_);
+  for (const ScreenPlan::Stage& stage : plan_.stages) {
+    const double validMargin = stage.validOnly           ? options_.screenGlanceValidMargin
                                : stage.side >= kFineSide ? options_.screenFineValidMargin
                                                          : options_.screenValidMargin;
     screens_.push_back({Camera::fromHfov(stage.side, stage.side, options.hfov), stage.margin,
-                        validMargin, validOnly});
-  };
-  const std::vector<ScreenStageSpec> stages = screenStages(options_);
-  if (!stages.empty() && options_.screenGlanceSide > 0 &&
-      options_.screenGlanceSide < stages.front().side)
-    add({options_.screenGlanceSide, 1.0}, true);
-  for (const ScreenStageSpec& stage : stages) add(stage, false);
-  regularStages_ = screens_.size();
-  if (const auto confirm = confirmStage(options_)) add(*confirm, false);
-  planStages();
-}
-
-// Which stages references and candidates go through. A reference is judged on its valid pixels
-// at the glance, the first regular stage and the finest one (which its target and the in-frame
-// bound need anyway): the stages between turned down almost none. A candidate glances (with its
-// v_ji estimate), then skips the first regular stage, which turned down almost none after it,
-// and goes through the rest; without the glance, through every stage. Its first stage is made
-// for a whole batch at once. docs/dataset.md has the measurements.
-void PairGenerator::planStages() {
-  const bool glance = !screens_.empty() && screens_[0].validOnly;
-  const size_t firstRegular = glance ? 1 : 0;
-  for (size_t k = 0; k < regularStages_; ++k)
-    if (k <= firstRegular || k + 1 == regularStages_) referenceStages_.push_back(k);
-  const bool candidateGlance = glance && options_.screenCandidateGlance;
-  for (size_t k = 0; k < screens_.size(); ++k) {
-    if (k == 0 && glance && !candidateGlance) continue;
-    if (k == firstRegular && candidateGlance && regularStages_ > 2) continue;
-    candidateStages_.push_back(k);
+                        validMargin, stage.validOnly, stageCovisOptions(stage.side, options_)});
   }
+  regularStages_ = plan_.regular;
+  if (!plan_.reference.empty()) pointsStage_ = plan_.reference.back();
 }
 
 std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
@@ -230,7 +272,7 @@ std::optional<PairSample> PairGenerator::generate(uint64_t seed, uint64_t index,
   const auto start = Clock::now();
   Search search{Rng(mixSeed(seed, scene_.name, index)), {}};
   search.cost.candidateFunnel.resize(screens_.empty() ? 0 : screens_.size() + kFirstStageSlot);
-  search.cost.referenceFunnel.resize(referenceStages_.size());
+  search.cost.referenceFunnel.resize(plan_.reference.size() + (plan_.referenceFine ? 1 : 0));
   std::optional<PairSample> found;
   PairSample sample;
   if (makeSample(search, sample)) {
@@ -294,12 +336,11 @@ std::optional<PairGenerator::View> PairGenerator::referenceView(Search& search) 
 }
 
 // The point the further views look at (CroCo's mean observed point): from the full depth without
-// screening, else from the finest regular screening stage, so that no full render is spent on a
-// reference before a partner has passed screening.
+// screening, else from the stage the reference's points come from, so that no full render is
+// spent on a reference before a partner has passed screening.
 Eigen::Vector3d PairGenerator::referenceTarget(const View& ref) const {
   if (ref.full) return meanWorldPoint(ref.at.camera, ref.depth);
-  const size_t last = regularStages_ - 1;
-  return meanWorldPoint(stageCamera(last, ref), ref.screenDepth[last]);
+  return meanWorldPoint(stageCamera(pointsStage_, ref), ref.screenDepth[pointsStage_]);
 }
 
 // Candidates for one further view, drawn a batch at a time and screened, until one passes the
@@ -372,7 +413,7 @@ void PairGenerator::screenFirstStage(const View& ref, std::vector<View>& batch,
         funnelTest(funnel[kSightSlot], &ref, v, cost, [&] { return outOfSight(ref, v, cost); });
     if (!out[k]) left.push_back(k);
   }
-  const size_t stage = candidateStages_.front();
+  const size_t stage = plan_.candidate.front();
   renderStageBatch(stage, batch, left, funnel[kFirstStageSlot + stage], cost);
   for (size_t k : left) {
     View& v = batch[k];
@@ -384,17 +425,17 @@ void PairGenerator::screenFirstStage(const View& ref, std::vector<View>& batch,
 }
 
 // A candidate's glance: too few valid pixels in its 8x8 map, or too few of them seen by the
-// reference (tested against its finest screening depth): that share estimates v_ji, and covis
-// <= v_ji, so it takes the sight lines' margin.
+// reference (tested against the depth its points come from, with that stage's tolerances): that
+// share estimates v_ji, and covis <= v_ji.
 bool PairGenerator::failsGlance(const View& ref, View& v, GenerationCost& cost) const {
   if (failsStage(0, nullptr, v, cost)) return true;
   if (options_.accept) return false;
-  const size_t last = regularStages_ - 1;
+  const size_t points = pointsStage_;
   const auto t0 = Clock::now();
-  const double seen = visibleFraction(stageCamera(0, v), v.screenDepth[0], stageCamera(last, ref),
-                                      ref.screenDepth[last], options_.covis);
+  const double seen = visibleFraction(stageCamera(0, v), v.screenDepth[0], stageCamera(points, ref),
+                                      ref.screenDepth[points], screens_[points].covis);
   cost.screenSeconds += since(t0);
-  if (seen >= options_.minCovis - options_.screenSightMargin) return false;
+  if (seen >= options_.minCovis - options_.screenGlanceCovisMargin) return false;
   cost.candidateCovis.push_back(static_cast<float>(seen));
   return true;
 }
@@ -418,13 +459,14 @@ void PairGenerator::renderStageBatch(size_t stage, std::vector<View>& batch,
   }
 }
 
-// The finer stages, then the confirm stage when the last estimate may go either way; whether v
-// passed.
+// The finer stages, then the confirm stage, each while the estimate before it may go either way
+// (PairOptions::screenSkipClear; the confirm stage always); whether v passed.
 bool PairGenerator::screenLaterStages(const View& ref, View& v, Search& search) const {
   GenerationCost& cost = search.cost;
-  for (size_t k = 1; k < candidateStages_.size(); ++k) {
-    const size_t stage = candidateStages_[k];
-    if (stage == regularStages_ && !ambiguous(candidateStages_[k - 1], v)) break;  // confirm
+  for (size_t k = 1; k < plan_.candidate.size(); ++k) {
+    const size_t stage = plan_.candidate[k], before = plan_.candidate[k - 1];
+    const bool clear = !screens_[before].validOnly && !ambiguous(before, v);
+    if (clear && (stage == regularStages_ || options_.screenSkipClear)) break;
     if (funnelTest(cost.candidateFunnel[kFirstStageSlot + stage], &ref, v, cost,
                    [&] { return failsStage(stage, &ref, v, cost); }))
       return false;
@@ -453,11 +495,24 @@ bool PairGenerator::passesFull(View& ref, View& v, Search& search) const {
 // enough valid pixels there.
 bool PairGenerator::referenceIsValid(View& ref, Search& search) const {
   if (!ref.full) {
+    if (!referenceIsFine(ref, search.cost)) return false;
     renderFull(ref, !screens_.empty(), search.cost);
     ref.full = true;
     ref.valid = validFraction(ref.depth);
   }
   return ref.valid >= options_.minValidFraction;
+}
+
+// The plan's fine check of a reference whose last stage left its valid pixels near the bound
+// (the finest stage, rendered unless a candidate needed it already); whether it passed.
+bool PairGenerator::referenceIsFine(View& ref, GenerationCost& cost) const {
+  if (!plan_.referenceFine || ref.fineChecked) return true;
+  ref.fineChecked = true;
+  const double validEdge = options_.minValidFraction + screens_[pointsStage_].validMargin;
+  if (ref.screenValid >= validEdge) return true;
+  const size_t stage = *plan_.referenceFine;
+  return !funnelTest(cost.referenceFunnel[plan_.reference.size()], nullptr, ref, cost,
+                     [&] { return failsStage(stage, nullptr, ref, cost); });
 }
 
 bool PairGenerator::inBand(double covis) const {
@@ -467,8 +522,8 @@ bool PairGenerator::inBand(double covis) const {
 
 // A reference's low-resolution stages (valid pixels only); whether it passed.
 bool PairGenerator::screenReference(View& v, GenerationCost& cost) const {
-  for (size_t k = 0; k < referenceStages_.size(); ++k) {
-    const size_t stage = referenceStages_[k];
+  for (size_t k = 0; k < plan_.reference.size(); ++k) {
+    const size_t stage = plan_.reference[k];
     if (funnelTest(cost.referenceFunnel[k], nullptr, v, cost,
                    [&] { return failsStage(stage, nullptr, v, cost); }))
       return false;
@@ -476,8 +531,8 @@ bool PairGenerator::screenReference(View& v, GenerationCost& cost) const {
   return true;
 }
 
-// Whether the last stage's estimates of v (covis, valid fraction) lie so near a bound that the
-// confirm stage should decide.
+// Whether a stage's estimates of v (covis, valid fraction) lie within its margins of a bound, so
+// that a finer stage should decide.
 bool PairGenerator::ambiguous(size_t stage, const View& v) const {
   const ScreenStage& s = screens_[stage];
   const double validEdge = options_.minValidFraction + s.validMargin;
@@ -509,15 +564,16 @@ bool PairGenerator::audit(const View* ref, const View& v, GenerationCost& cost) 
 }
 
 // Whether too little of the reference lands inside v's frame for v to pass: no rendering of v,
-// the reference's finest screening depth projected into v's camera, occlusion left out.
+// the reference's points (the depth of its last stage) projected into v's camera, occlusion
+// left out.
 bool PairGenerator::outOfFrame(const View& ref, const View& v, GenerationCost& cost) const {
   if (options_.accept || screens_.empty()) return false;
-  const size_t last = regularStages_ - 1;
+  const size_t points = pointsStage_;
   CovisOptions o = options_.covis;
-  o.stride = std::max(1, screens_[last].intrinsics.width / kFrameScreenSide);
+  o.stride = std::max(1, screens_[points].intrinsics.width / kFrameScreenSide);
   const auto t0 = Clock::now();
   const double bound =
-      inFrameFraction(stageCamera(last, ref), ref.screenDepth[last], v.at.camera, o);
+      inFrameFraction(stageCamera(points, ref), ref.screenDepth[points], v.at.camera, o);
   cost.screenSeconds += since(t0);
   if (bound >= options_.minCovis - options_.screenFrameMargin) return false;
   cost.candidateCovis.push_back(static_cast<float>(bound));
@@ -555,14 +611,13 @@ bool PairGenerator::outOfSight(const View& ref, const View& v, GenerationCost& c
   return true;
 }
 
-// The reference's valid pixels on a screenSightSide^2 grid of its finest screening depth, as
-// world points.
+// The reference's valid pixels on a screenSightSide^2 grid of its points' depth, as world
+// points.
 const std::vector<Eigen::Vector3f>& PairGenerator::sightPoints(const View& ref) const {
   if (ref.sightPointsMade) return ref.sightPoints;
   ref.sightPointsMade = true;
-  const size_t last = regularStages_ - 1;
-  const Camera cam = stageCamera(last, ref);
-  const ImageF& depth = ref.screenDepth[last];
+  const Camera cam = stageCamera(pointsStage_, ref);
+  const ImageF& depth = ref.screenDepth[pointsStage_];
   const int side = std::min(options_.screenSightSide, depth.width);
   for (int gy = 0; gy < side; ++gy) {
     for (int gx = 0; gx < side; ++gx) {
@@ -577,14 +632,15 @@ const std::vector<Eigen::Vector3f>& PairGenerator::sightPoints(const View& ref) 
   return ref.sightPoints;
 }
 
-// The covis estimate of v against the reference at the stage's resolution.
-double PairGenerator::stageEstimate(size_t stage, const View& ref, const View& v,
+// The covis estimate of v against the reference at the stage's resolution, with the stage's
+// tolerances (lower) or covis' own (upper).
+double PairGenerator::stageEstimate(size_t stage, const View& ref, const View& v, bool upper,
                                     GenerationCost& cost) const {
   renderStage(stage, ref, cost);
   const auto t0 = Clock::now();
   const double estimate =
       computeCovisibility(stageCamera(stage, ref), ref.screenDepth[stage], stageCamera(stage, v),
-                          v.screenDepth[stage], options_.covis)
+                          v.screenDepth[stage], upper ? options_.covis : screens_[stage].covis)
           .covis;
   cost.screenSeconds += since(t0);
   return estimate;
@@ -599,9 +655,15 @@ bool PairGenerator::failsStage(size_t stage, const View* ref, View& v, Generatio
   v.screenValid = validFraction(v.screenDepth[stage]);
   if (v.screenValid < options_.minValidFraction - screen.validMargin) return true;
   if (!ref || options_.accept || screen.validOnly) return false;
-  v.estimate = stageEstimate(stage, *ref, v, cost);
-  const bool out = v.estimate < options_.minCovis - screen.covisMargin ||
-                   v.estimate > options_.maxCovis + screen.covisMargin;
+  v.estimate = stageEstimate(stage, *ref, v, false, cost);
+  bool out = v.estimate < options_.minCovis - screen.covisMargin;
+  // The upper bound, when it can be passed: an estimate with the plain tolerances, which falls
+  // below covis rather than above it.
+  if (!out && options_.maxCovis + screen.covisMargin < 1.0) {
+    const double plain = stageEstimate(stage, *ref, v, true, cost);
+    out = plain > options_.maxCovis + screen.covisMargin;
+    if (out) v.estimate = plain;
+  }
   if (out) cost.candidateCovis.push_back(static_cast<float>(v.estimate));
   return out;
 }

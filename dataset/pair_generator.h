@@ -48,14 +48,26 @@ struct PairOptions {
   // A view that passes is screened again at twice the resolution, and so on while that is at most
   // a quarter of the output's side (256: 16, 32, 64). A 32x32 estimate may fall screenCovisMargin
   // outside the band, a 64x64 one screenFineMargin, finer ones half as far per doubling (128:
-  // 0.02), coarser ones 2.5 times as far per halving (16: 0.45). docs/dataset.md has the
+  // 0.005), coarser ones 2.5 times as far per halving (16: 0.075). docs/dataset.md has the
   // measurements behind the defaults.
   int screenResolution = kAutoScreen;
-  double screenCovisMargin = 0.18;
-  double screenFineMargin = 0.04;
-  // Before any rendering, a candidate is turned down when the share of the reference's pixels
-  // (about 64x64 of its finest screening depth) inside its frame, an upper bound of covis, is
-  // below minCovis by more than this.
+  double screenCovisMargin = 0.03;
+  double screenFineMargin = 0.01;
+  // A stage's estimate against the band's lower bound takes covis' depth tolerances times half
+  // the ratio of the output's side to the stage's (at 256: 4 at 32x32, 2 at 64x64, 1 from 128x128
+  // on), as the nearest pixel of a coarse depth map lies farther from the point looked up. Without
+  // it, estimates fall below full resolution's covis (by 0.05 for one candidate in 100 at 64x64)
+  // and the margins must cover that; with it, they are tight. The upper bound (below 1) takes
+  // the plain tolerances. false: plain tolerances throughout (with the old margins, 0.18 and 0.04).
+  bool screenScaleTolerance = true;
+  // A candidate whose estimate lies inside the band by its stage's margin or more, with valid
+  // pixels as clear, skips the finer stages (at 256: a 32x32 estimate of 0.53 or more goes to
+  // full resolution). The 64x64 stage would turn down 1-3 % of those, which costs less than
+  // rendering them all at 64x64 (docs/dataset.md). false: every candidate takes every stage.
+  bool screenSkipClear = true;
+  // Before any rendering, a candidate is turned down when the share of the reference's points
+  // (the pixels of its last stage's depth, 32x32 at 256; screenPlan) inside its frame, an upper
+  // bound of covis, is below minCovis by more than this.
   double screenFrameMargin = 0.03;
   double screenValidMargin = 0.05;
   // The glance: before its first stage, a view is rendered as a screenGlanceSide^2 depth map and
@@ -65,12 +77,13 @@ struct PairOptions {
   int screenGlanceSide = 8;
   double screenGlanceValidMargin = 0.15;
   // Candidates glance too, a batch in one pass, and are also turned down when the share of their
-  // glance's points that the reference sees (against its finest screening depth), an estimate of
-  // v_ji, is below minCovis by more than screenSightMargin. They then skip the first regular
-  // stage (16x16 at 256), which turns down almost none after it.
+  // glance's points that the reference sees (against its points' depth), an estimate of
+  // v_ji, is below minCovis by more than screenGlanceCovisMargin. They then skip the first
+  // regular stage (16x16 at 256), which turns down almost none after it.
   bool screenCandidateGlance = true;
+  double screenGlanceCovisMargin = 0.15;
   // Sight lines: after the in-frame bound, a candidate casts shadow rays to a screenSightSide^2
-  // grid of the reference's points (from its finest screening depth); the share that lies in its
+  // grid of the reference's points (from its last stage's depth); the share that lies in its
   // frame with nothing in between estimates v_ij, and covis <= v_ij. A candidate whose share is
   // below minCovis by more than screenSightMargin is turned down before any rendering. 0: off.
   int screenSightSide = 8;
@@ -82,9 +95,9 @@ struct PairOptions {
   // full renders it saves (docs/dataset.md).
   bool screenConfirm = false;
   // The valid-pixel margin of the stages of side 64 or more (and of the confirm stage), whose
-  // valid fractions are within a percent or two of full resolution's; coarser stages take
-  // screenValidMargin.
-  double screenFineValidMargin = 0.02;
+  // valid fractions lie within 0.004 of full resolution's (references that failed at full
+  // resolution, simple_room); coarser stages take screenValidMargin.
+  double screenFineValidMargin = 0.005;
   // Candidates are drawn this many at a time; their in-frame bounds and first-stage depth maps
   // are made in one pass, then they go on in the order drawn.
   int screenBatch = 8;
@@ -115,6 +128,31 @@ std::vector<ScreenStageSpec> screenStages(const PairOptions& options);
 // The confirm stage (PairOptions::screenConfirm): twice the last stage's side when that is at most
 // half the output's, with its side's margin; nullopt when there is none.
 std::optional<ScreenStageSpec> confirmStage(const PairOptions& options);
+
+// The order of screening the options give: every stage (the glance first when there is one, the
+// confirm stage last), the ones candidates and references go through, and the funnel's names.
+struct ScreenPlan {
+  struct Stage {
+    int side;
+    double margin;
+    bool validOnly;  // the glance: valid pixels (and a candidate's v_ji estimate) only
+  };
+  std::vector<Stage> stages;      // empty without screening
+  size_t regular = 0;             // stages without the confirm stage
+  std::vector<size_t> candidate;  // the stages a candidate goes through, in order
+  // The stages a reference goes through, in order (valid pixels only). The last gives its points:
+  // its target, the in-frame bound, the sight lines and the glance's v_ji estimate.
+  std::vector<size_t> reference;
+  // Checked (valid pixels) before a reference is rendered in full, when its last stage's valid
+  // fraction lies within that stage's margin of the bound; none when that is the finest stage.
+  std::optional<size_t> referenceFine;
+
+  // The funnels' slot names: candidates "bound", "sight", then a name per stage (side^2, the
+  // glance "(glance)"); references a name per stage of `reference`, then the fine check's.
+  std::vector<std::string> candidateNames() const;
+  std::vector<std::string> referenceNames() const;
+};
+ScreenPlan screenPlan(const PairOptions& options);
 
 // Views are numbered from 0 here (view 0 is CroCo's view 1, the reference).
 struct PairSample {
@@ -166,9 +204,8 @@ struct GenerationCost {
   double screenSeconds = 0;  // screening: low-resolution renders and covis estimates
   double covisSeconds = 0;
   double totalSeconds = 0;  // all of generate(): the rest is pose sampling and bookkeeping
-  // Candidates: [0] the in-frame bound, [1] the sight lines, then each low-resolution stage,
-  // coarse to fine, then the confirm stage (when the options give one); references: the glance,
-  // the first stage and the finest one.
+  // Candidates: [0] the in-frame bound, [1] the sight lines, then each stage of the plan;
+  // references: each of the plan's reference stages, then the fine check (screenPlan).
   std::vector<FunnelStage> candidateFunnel, referenceFunnel;
   size_t referencesGivenUp = 0;  // references dropped early for lack of promising candidates
 
@@ -206,19 +243,22 @@ class PairGenerator {
                         FunnelStage& funnel, GenerationCost& cost) const;
   bool passesFull(View& ref, View& v, Search& search) const;
   bool referenceIsValid(View& ref, Search& search) const;
+  bool referenceIsFine(View& ref, GenerationCost& cost) const;
   // One screening pass: the intrinsics it renders with, and how far outside the band its covis
   // estimate may fall.
   struct ScreenStage {
     Camera intrinsics;
     double covisMargin;
     double validMargin;
-    bool validOnly;  // the glance: valid pixels only, no covis estimate
+    bool validOnly;      // the glance: valid pixels only, no covis estimate
+    CovisOptions covis;  // for the estimate against the lower bound (screenScaleTolerance)
   };
   bool screenReference(View& v, GenerationCost& cost) const;
   bool outOfFrame(const View& ref, const View& v, GenerationCost& cost) const;
   bool outOfSight(const View& ref, const View& v, GenerationCost& cost) const;
   const std::vector<Eigen::Vector3f>& sightPoints(const View& ref) const;
-  double stageEstimate(size_t stage, const View& ref, const View& v, GenerationCost& cost) const;
+  double stageEstimate(size_t stage, const View& ref, const View& v, bool upper,
+                       GenerationCost& cost) const;
   bool failsStage(size_t stage, const View* ref, View& v, GenerationCost& cost) const;
   bool ambiguous(size_t stage, const View& v) const;
   Camera stageCamera(size_t stage, const View& v) const;
@@ -237,12 +277,12 @@ class PairGenerator {
   const ViewpointSampler& sampler_;
   PairOptions options_;
   Camera intrinsics_;
-  // Coarse to fine, then the confirm stage when there is one; empty without screening.
+  ScreenPlan plan_;
+  // plan_'s stages, coarse to fine, then the confirm stage when there is one; empty without
+  // screening.
   std::vector<ScreenStage> screens_;
-  size_t regularStages_ = 0;             // screens_ without the confirm stage
-  std::vector<size_t> candidateStages_;  // the stages a candidate goes through, in order
-  std::vector<size_t> referenceStages_;  // the stages a reference goes through (valid depth only)
-  void planStages();
+  size_t regularStages_ = 0;  // screens_ without the confirm stage
+  size_t pointsStage_ = 0;    // the reference stage its points come from (plan_.reference.back())
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").

@@ -58,6 +58,16 @@ class Query {
 #endif
   }
 
+  // Whether anything lies on each ray of a packet of eight between tnear and tfar; valid[i] is
+  // -1 for the rays to trace, 0 else. Embree sets a blocked ray's tfar to -inf.
+  void occluded8(const int* valid, RTCScene scene, RTCRay8& ray) {
+#if PAIRCAST_EMBREE_MAJOR >= 4
+    rtcOccluded8(valid, scene, &ray, &occludedArgs_);
+#else
+    rtcOccluded8(valid, scene, &context_, &ray);
+#endif
+  }
+
   // Whether anything lies on the ray between tnear and tfar (any hit, no closest one: cheaper).
   bool occluded1(RTCScene scene, RTCRay& ray) {
 #if PAIRCAST_EMBREE_MAJOR >= 4

@@ -495,25 +495,33 @@ Eigen::Vector3f RayCaster::Impl::unitNormal(const RTCRayHit8& rh, int i) const {
   return norm > 0 ? Eigen::Vector3f(ng / norm) : Eigen::Vector3f::UnitZ();
 }
 
+// Packets of eight (shadow rays from one eye are coherent enough to traverse together).
 void RayCaster::occluded(const Ray* rays, uint8_t* blocked, size_t count) const {
   RTCScene scene = impl_->scene;
   embree::Query query;
-  for (size_t k = 0; k < count; ++k) {
-    const Ray& r = rays[k];
-    RTCRay ray;
-    ray.org_x = r.origin.x();
-    ray.org_y = r.origin.y();
-    ray.org_z = r.origin.z();
-    ray.dir_x = r.direction.x();
-    ray.dir_y = r.direction.y();
-    ray.dir_z = r.direction.z();
-    ray.tnear = r.tnear;
-    ray.tfar = r.tfar;
-    ray.time = 0.0f;
-    ray.mask = 0xFFFFFFFFu;
-    ray.id = 0;
-    ray.flags = 0;
-    blocked[k] = query.occluded1(scene, ray) ? 1 : 0;
+  for (size_t k0 = 0; k0 < count; k0 += kPacket) {
+    alignas(32) RTCRay8 packet;
+    alignas(32) int valid[kPacket];
+    for (size_t i = 0; i < kPacket; ++i) {
+      const size_t k = k0 + i;
+      valid[i] = k < count ? -1 : 0;
+      const Ray& r = rays[std::min(k, count - 1)];
+      packet.org_x[i] = r.origin.x();
+      packet.org_y[i] = r.origin.y();
+      packet.org_z[i] = r.origin.z();
+      packet.dir_x[i] = r.direction.x();
+      packet.dir_y[i] = r.direction.y();
+      packet.dir_z[i] = r.direction.z();
+      packet.tnear[i] = r.tnear;
+      packet.tfar[i] = r.tfar;
+      packet.time[i] = 0.0f;
+      packet.mask[i] = 0xFFFFFFFFu;
+      packet.id[i] = static_cast<unsigned>(i);
+      packet.flags[i] = 0;
+    }
+    query.occluded8(valid, scene, packet);
+    for (size_t i = 0; i < kPacket && k0 + i < count; ++i)
+      blocked[k0 + i] = packet.tfar[i] < 0.0f ? 1 : 0;
   }
 }
 

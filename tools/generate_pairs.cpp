@@ -93,12 +93,20 @@ int main(int argc, char** argv) {
                  "(16x16: 2.5 times it; other sides: see --screen-fine-margin)");
   app.add_option("--screen-fine-margin", cfg.pair.screenFineMargin,
                  "The same margin for a 64x64 estimate; half of it per doubling beyond");
+  app.add_flag_callback(
+      "--screen-plain-tolerance", [&cfg] { cfg.pair.screenScaleTolerance = false; },
+      "Screening estimates take covis' own depth tolerances at every side (default: "
+      "scaled with the side, docs/dataset.md); the earlier generator took them with "
+      "--screen-margin 0.18 --screen-fine-margin 0.04 --screen-glance-margin 0.25");
   app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
                  "Before rendering, turn down candidates whose share of the reference inside their "
                  "frame is below --min-covis by more than this");
   app.add_option("--screen-sight-margin", cfg.pair.screenSightMargin,
                  "Before rendering, turn down candidates that see (shadow rays) a share of the "
                  "reference's points below --min-covis by more than this");
+  app.add_option("--screen-glance-margin", cfg.pair.screenGlanceCovisMargin,
+                 "Turn down candidates whose 8x8 glance's share seen by the reference is below "
+                 "--min-covis by more than this");
   app.add_flag("--screen-confirm", cfg.pair.screenConfirm,
                "Screen candidates whose last estimate is near a bound of the band once more, at "
                "twice its side (costs more than it saves at 256, docs/dataset.md)");

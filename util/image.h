@@ -1,6 +1,7 @@
 // Plain images with interleaved channels, row-major: data[(y * width + x) * channels + c].
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 

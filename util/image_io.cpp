@@ -7,6 +7,7 @@
 
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/jpeg_encoder.h"
 
 namespace paircast {
 namespace {
@@ -95,8 +96,12 @@ Image<T> readMemImage(const void* data, size_t size, const std::string& name, in
 
 }  // namespace
 
+// JPEG straight through libjpeg-turbo (the same bytes as OpenImageIO's writer, faster); other
+// formats through OpenImageIO.
 std::vector<unsigned char> encodeImage(const Image8& image, std::string_view format,
                                        int jpegQuality) {
+  if ((format == "jpg" || format == "jpeg") && (image.channels == 1 || image.channels == 3))
+    return encodeJpeg(image, jpegQuality);
   return encode(image, std::string(format), TypeDesc::UINT8, jpegQuality);
 }
 

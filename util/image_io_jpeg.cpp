@@ -1,6 +1,7 @@
 // util/image_io.h for the trainer-only build (PAIRCAST_WITH_RENDER=OFF), without OpenImageIO:
-// JPEG through libjpeg-turbo (decode and encode), PNG written with stored (uncompressed)
-// deflate blocks, which needs no zlib. EXR and PNG decoding need the full build and say so.
+// JPEG through libjpeg-turbo (decoded here, encoded by util/jpeg_encoder.cpp as in the full
+// build), PNG written with stored (uncompressed) deflate blocks, which needs no zlib. EXR and PNG
+// decoding need the full build and say so.
 #include <algorithm>
 #include <csetjmp>
 #include <cstdint>
@@ -13,6 +14,7 @@
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
+#include "util/jpeg_encoder.h"
 #include "util/jpeg_errors.h"
 
 namespace paircast {
@@ -65,34 +67,6 @@ std::string decodeJpeg(const unsigned char* data, size_t size, int channels, int
   *height = static_cast<int>(cinfo.output_height);
   *pixels = out;
   jpeg_destroy_decompress(&cinfo);
-  return {};
-}
-
-std::string encodeJpeg(const Image8& image, int quality, unsigned char** bytes,
-                       unsigned long* size) {
-  jpeg_compress_struct cinfo;
-  jpeg::ErrorManager err;
-  cinfo.err = jpeg::install(err, jpeg::onMessageLenient);
-  if (setjmp(err.jump)) {
-    jpeg_destroy_compress(&cinfo);
-    return err.message;
-  }
-  jpeg_create_compress(&cinfo);
-  jpeg_mem_dest(&cinfo, bytes, size);
-  cinfo.image_width = static_cast<JDIMENSION>(image.width);
-  cinfo.image_height = static_cast<JDIMENSION>(image.height);
-  cinfo.input_components = image.channels;
-  cinfo.in_color_space = image.channels == 1 ? JCS_GRAYSCALE : JCS_RGB;
-  jpeg_set_defaults(&cinfo);
-  jpeg_set_quality(&cinfo, quality, TRUE);
-  jpeg_start_compress(&cinfo, TRUE);
-  const size_t stride = static_cast<size_t>(image.width) * image.channels;
-  while (cinfo.next_scanline < cinfo.image_height) {
-    JSAMPROW row = const_cast<unsigned char*>(image.data.data()) + stride * cinfo.next_scanline;
-    jpeg_write_scanlines(&cinfo, &row, 1);
-  }
-  jpeg_finish_compress(&cinfo);
-  jpeg_destroy_compress(&cinfo);
   return {};
 }
 
@@ -168,15 +142,7 @@ std::vector<unsigned char> encodeImage(const Image8& image, std::string_view for
   if (format == "png") return encodePng(image);
   if (format != "jpg" && format != "jpeg")
     throw Error("image." + std::string(format), std::string("encoding ") + kFullBuild);
-  if (image.channels != 1 && image.channels != 3) throw Error("JPEG: 1 or 3 channels only");
-  unsigned char* bytes = nullptr;
-  unsigned long size = 0;
-  const std::string failure = encodeJpeg(image, jpegQuality, &bytes, &size);
-  std::vector<unsigned char> out;
-  if (failure.empty()) out.assign(bytes, bytes + size);
-  std::free(bytes);
-  if (!failure.empty()) throw Error("image.jpg", "cannot encode: " + failure);
-  return out;
+  return encodeJpeg(image, jpegQuality);
 }
 
 std::vector<unsigned char> encodeExr(const ImageF&, bool) {

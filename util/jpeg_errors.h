@@ -1,7 +1,7 @@
-// libjpeg's error handling for our decoders and encoder (util/jpeg_decoder.cpp, and
-// util/image_io_jpeg.cpp in the trainer-only build). libjpeg reports errors through error_exit,
-// which must not return: it longjmps back to the setjmp of the function that called libjpeg, where
-// no C++ object with a destructor may be alive.
+// libjpeg's error handling for our decoders and encoder (util/jpeg_decoder.cpp,
+// util/jpeg_encoder.cpp, and util/image_io_jpeg.cpp in the trainer-only build). libjpeg reports
+// errors through error_exit, which must not return: it longjmps back to the setjmp of the function
+// that called libjpeg, where no C++ object with a destructor may be alive.
 #pragma once
 
 #include <csetjmp>

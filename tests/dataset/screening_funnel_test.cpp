@@ -1,6 +1,7 @@
 // Issue 33's screening: references rendered in full only once a partner has passed screening,
-// the sight lines, the batched first stage, the funnel's accounting, the give-up, and the
-// covis distribution and bytes it leaves unchanged.
+// the sight lines, the batched first stage, the scaled tolerances, the skip of clear candidates,
+// the references' fine check, the funnel's accounting, the give-up, and the covis distribution
+// and bytes it leaves unchanged.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -201,6 +202,125 @@ TEST(NoRenderWasted, TheConfirmStageIsTwiceTheLastWhenItFits) {
   EXPECT_LT(with.candidateFunnel[5].entered, with.candidateFunnel[4].entered);
 }
 
+TEST(ScreenPlan, ReferencesTakeTheirPointsFrom32AndCheckTheFinestOnlyNearTheBound) {
+  PairOptions o;  // 256: the glance (8), 16, 32, 64
+  ScreenPlan plan = screenPlan(o);
+  ASSERT_EQ(plan.stages.size(), 4u);
+  EXPECT_EQ(plan.stages[0].side, 8);
+  EXPECT_TRUE(plan.stages[0].validOnly);
+  EXPECT_EQ(plan.stages[3].side, 64);
+  EXPECT_EQ(plan.candidate, (std::vector<size_t>{0, 2, 3}));
+  EXPECT_EQ(plan.reference, (std::vector<size_t>{0, 1, 2}));
+  ASSERT_TRUE(plan.referenceFine.has_value());
+  EXPECT_EQ(*plan.referenceFine, 3u);
+  EXPECT_EQ(plan.candidateNames(),
+            (std::vector<std::string>{"bound", "sight", "(glance)", "16^2", "32^2", "64^2"}));
+  EXPECT_EQ(plan.referenceNames(),
+            (std::vector<std::string>{"glance", "16^2", "32^2", "64^2 valid"}));
+  o.resolution = 128;  // 8, 16, 32: the references' points come from the finest, no fine check
+  plan = screenPlan(o);
+  EXPECT_EQ(plan.reference, (std::vector<size_t>{0, 1, 2}));
+  EXPECT_FALSE(plan.referenceFine.has_value());
+  o.resolution = 512;  // 8, 32, 64, 128
+  plan = screenPlan(o);
+  EXPECT_EQ(plan.stages[plan.reference.back()].side, 64);
+  EXPECT_EQ(plan.stages[*plan.referenceFine].side, 128);
+  o.screenResolution = 0;
+  EXPECT_TRUE(screenPlan(o).stages.empty());
+  EXPECT_TRUE(screenPlan(o).reference.empty());
+}
+
+PairOptions fullSizeOptions() {
+  PairOptions o;  // 256, as bench_generate and generate_pairs' default
+  o.keepDepth = false;
+  o.auditScreening = true;
+  return o;
+}
+
+// The previous estimates: covis' own tolerances at every side, with the margins they needed.
+PairOptions plainTolerance(PairOptions o) {
+  o.screenScaleTolerance = false;
+  o.screenCovisMargin = 0.18;
+  o.screenFineMargin = 0.04;
+  o.screenGlanceCovisMargin = 0.25;
+  return o;
+}
+
+TEST(NoRenderWasted, ScaledTolerancesWasteFewerRendersAndTurnDownNoMoreThatWouldBeKept) {
+  const PairOptions o = fullSizeOptions();
+  const GenerationCost scaled = apartment().run(o, 40);
+  const GenerationCost plain = apartment().run(plainTolerance(o), 40);
+  ASSERT_GT(plain.wastedCandidateRenders, 5u) << "too few failures: the test tests nothing";
+  EXPECT_LT(2 * scaled.wastedCandidateRenders, plain.wastedCandidateRenders);
+  EXPECT_LE(scaled.falseRejections, plain.falseRejections + 1);
+  // The 32x32 stage turns down a larger share of what reaches it.
+  const FunnelStage &s32 = scaled.candidateFunnel[4], &p32 = plain.candidateFunnel[4];
+  ASSERT_GT(s32.entered, 0u);
+  EXPECT_GT(static_cast<double>(s32.rejected) / s32.entered,
+            1.3 * static_cast<double>(p32.rejected) / p32.entered);
+}
+
+TEST(NoRenderWasted, ClearCandidatesSkipTheFinerStages) {
+  PairOptions o = fullSizeOptions();
+  o.auditScreening = false;
+  const GenerationCost skip = apartment().run(o, 30);
+  o.screenSkipClear = false;
+  const GenerationCost all = apartment().run(o, 30);
+  const auto passed = [](const FunnelStage& f) { return f.entered - f.rejected; };
+  // Without the skip, every candidate that passes 32x32 goes through 64x64.
+  EXPECT_EQ(all.candidateFunnel[5].entered, passed(all.candidateFunnel[4]));
+  ASSERT_GT(passed(skip.candidateFunnel[4]), 20u);
+  EXPECT_LT(2 * skip.candidateFunnel[5].entered, passed(skip.candidateFunnel[4]));
+  EXPECT_GT(skip.candidateFunnel[5].entered, 0u) << "no candidate was near the bound";
+}
+
+TEST(NoRenderWasted, AnUpperBoundIsJudgedWithThePlainEstimate) {
+  // Scaled tolerances raise estimates; against an upper bound they would turn down candidates
+  // that full resolution keeps.
+  PairOptions o = fullSizeOptions();
+  o.maxCovis = 0.7;
+  const GenerationCost c = apartment().run(o, 30);
+  size_t rejected = 0, wrong = 0;
+  for (size_t k = 4; k < c.candidateFunnel.size(); ++k) {
+    rejected += c.candidateFunnel[k].rejected;
+    wrong += c.candidateFunnel[k].falseRejections;
+  }
+  ASSERT_GT(rejected, 30u);
+  EXPECT_LE(wrong * 50, rejected);
+}
+
+TEST(NoRenderWasted, AReferenceNearTheValidBoundIsCheckedAtTheFinestStageFirst) {
+  // The test room with one long wall left out: views through the gap see nothing there, so many
+  // references lie near the valid-pixel bound.
+  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+  boxes.erase(boxes.begin() + 5);
+  const std::string path = testing::scratchDir("open_room") + "/open_room.obj";
+  testing::writeBoxesObj(path, boxes);
+  Scene scene = loadScene(path, {});
+  scene.name = "open_room";
+  const RayCaster caster(scene.mesh);
+  const ViewpointSampler sampler(scene, caster, {});
+  PairOptions o = fullSizeOptions();
+  o.maxAttempts = 20;
+  const PairGenerator gen(scene, caster, sampler, o);
+  GenerationCost c;
+  for (int i = 0; i < 150; ++i) {
+    GenerationCost one;
+    gen.generate(3, i, &one);
+    c.add(one);
+  }
+  ASSERT_EQ(c.referenceFunnel.size(), 4u);
+  const FunnelStage& fine = c.referenceFunnel[3];
+  ASSERT_GT(fine.entered, 5u) << "no reference near the bound: the test tests nothing";
+  EXPECT_GT(fine.rejected, 0u);
+  EXPECT_LE(fine.falseRejections * 10, fine.rejected);
+  EXPECT_LT(fine.entered, c.referenceFunnel[2].entered - c.referenceFunnel[2].rejected)
+      << "references clear of the bound were checked too";
+  // References rendered in full had passed it or were clear of the bound: few of those renders
+  // were wasted.
+  EXPECT_LE(c.wastedReferenceRenders * 10, c.keptRenders + 10);
+}
+
 TEST(RayCasterBatch, BatchedDepthEqualsOneViewAtATime) {
   const Apartment& a = apartment();
   Rng rng(3);
@@ -232,6 +352,32 @@ TEST(RayCasterBatch, ShadowRaysStopAtTheFirstSurface) {
   std::vector<uint8_t> blocked(rays.size(), 7);
   caster.occluded(rays.data(), blocked.data(), rays.size());
   EXPECT_EQ(blocked, (std::vector<uint8_t>{1, 0, 0, 1}));
+}
+
+TEST(RayCasterBatch, ShadowRayPacketsAgreeWithClosestHits) {
+  // Packets of eight, the last one partial: blocked exactly when the closest hit lies before the
+  // ray's end.
+  const Apartment& a = apartment();
+  Rng rng(11);
+  std::vector<Ray> rays;
+  for (int k = 0; k < 19; ++k) {
+    const Camera c = a.sampler.sampleView(Camera::fromHfov(8, 8, 60), rng);
+    const Eigen::Vector3f dir(static_cast<float>(rng.uniform(-1, 1)),
+                              static_cast<float>(rng.uniform(-1, 1)),
+                              static_cast<float>(rng.uniform(-1, 1)));
+    rays.push_back({c.t_cam2world.cast<float>(), 4.0f * dir, 0.0f, 1.0f});
+  }
+  std::vector<uint8_t> blocked(rays.size(), 7);
+  a.caster.occluded(rays.data(), blocked.data(), rays.size());
+  std::vector<Hit> hits(rays.size());
+  a.caster.intersect(rays.data(), hits.data(), rays.size());
+  size_t some = 0;
+  for (size_t k = 0; k < rays.size(); ++k) {
+    EXPECT_EQ(blocked[k], hits[k].triangle >= 0 ? 1 : 0) << "ray " << k;
+    some += blocked[k];
+  }
+  EXPECT_GT(some, 0u);
+  EXPECT_LT(some, rays.size());
 }
 
 TEST(GeneratePairsScreened, OutputIsIdenticalWhateverTheJobCount) {

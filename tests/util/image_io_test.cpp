@@ -15,6 +15,10 @@
 #include "test_paths.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/jpeg_encoder.h"
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
 
 namespace paircast {
 namespace {
@@ -49,6 +53,35 @@ TEST(ImageIo, JpegRoundTripIsClose) {
   double err = 0;
   for (size_t i = 0; i < img.size(); ++i) err += std::abs(int(back.data[i]) - int(img.data[i]));
   EXPECT_LT(err / img.size(), 2.0);
+}
+
+// JPEG as OpenImageIO's writer encodes it, for the comparison below.
+std::vector<unsigned char> oiioJpeg(const Image8& img, int quality) {
+  std::vector<unsigned char> bytes;
+  OIIO::Filesystem::IOVecOutput proxy(bytes);
+  auto out = OIIO::ImageOutput::create("image.jpg");
+  OIIO::ImageSpec spec(img.width, img.height, img.channels, OIIO::TypeDesc::UINT8);
+  spec.attribute("Compression", "jpeg:" + std::to_string(quality));
+  EXPECT_TRUE(out->set_ioproxy(&proxy) && out->open("image.jpg", spec));
+  EXPECT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, img.data.data()));
+  EXPECT_TRUE(out->close());
+  return bytes;
+}
+
+TEST(ImageIo, JpegBytesAreThoseOpenImageIOWrote) {
+  // libjpeg-turbo straight, for speed: shards and CroCo folders keep the bytes they had.
+  Image8 noisy = gradient(256, 256);
+  for (size_t i = 0; i < noisy.data.size(); i += 7) noisy.data[i] ^= static_cast<uint8_t>(i * 31);
+  for (int quality : {90, 95, 50}) {
+    EXPECT_EQ(encodeImage(noisy, "jpg", quality), oiioJpeg(noisy, quality)) << quality;
+  }
+  Image8 grey(40, 24, 1);
+  for (size_t i = 0; i < grey.data.size(); ++i) grey.data[i] = static_cast<uint8_t>(i * 13);
+  EXPECT_EQ(encodeImage(grey, "jpg", 90), oiioJpeg(grey, 90));
+  // What libjpeg cannot take is an error naming the image, not a crash.
+  EXPECT_ERROR_CONTAINS(encodeJpeg(noisy, 0), "quality");
+  EXPECT_ERROR_CONTAINS(encodeJpeg(Image8(4, 4, 2), 90), "channels");
+  EXPECT_ERROR_CONTAINS(encodeJpeg(Image8(), 90), "empty");
 }
 
 TEST(ImageIo, HeadersClaimingHugeImagesAreRefusedBeforeDecoding) {
