@@ -372,9 +372,11 @@ int main(int argc, char** argv) {
       for (int run = 0; run < runs; ++run) {
         fs::remove_all(out);
         nlohmann::json one = generate(scenes[s], out, pairs, threads, screen, false);
+        const bool skipped = !one["skipped_scenes"].empty();
         const RenderLimit next = probe.measure(threads);
         framed.push_back({std::move(one), best(edge, next)});
         edge = next;
+        if (skipped) break;  // a scene without valid views is skipped every time
       }
       std::sort(framed.begin(), framed.end(), [](const FramedRun& a, const FramedRun& b) {
         return a.efficiency() < b.efficiency();
@@ -405,9 +407,6 @@ int main(int argc, char** argv) {
                             std::max(1.0, sum["renders"]["kept"].get<double>());
       const double limitMs = 1e3 * limit.rgbDepthSeconds * threads;
       std::printf(
-          "    a kept render took %.2f ms of a core in the run, %.2f in the limit (%.2fx)\n",
-          keptMs, limitMs, keptMs / limitMs);
-      std::printf(
           "%-22s %9zu tris  load %.2f s  build %.2f s  %.0f MB\n"
           "    %7.1f pairs/s  limit %6.1f pairs/s  efficiency %.2f  unscreened %6.1f pairs/s "
           "(x%.2f)  acceptance %4.1f%%\n"
@@ -433,6 +432,9 @@ int main(int argc, char** argv) {
           sum["renders"]["kept"].get<double>(), sum["renders"]["per_pair"].get<double>(),
           sum["renders"]["wasted_references"].get<double>(),
           sum["renders"]["wasted_candidates"].get<double>());
+      std::printf(
+          "    a kept render took %.2f ms of a core in the run, %.2f in the limit (%.2fx)\n",
+          keptMs, limitMs, keptMs / limitMs);
       // The audited run's funnel: what each stage turned down, wrongly, and its worker time per
       // pair.
       const double auditPairsMade = audit["pairs_this_run"].get<double>();

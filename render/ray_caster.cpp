@@ -525,37 +525,48 @@ void RayCaster::occluded(const Ray* rays, uint8_t* blocked, size_t count) const 
   }
 }
 
+// Packets of eight consecutive rays: callers pass neighbours in turn (a footprint's rays, a row
+// of columns), which traverse together.
 void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {
   RTCScene scene = impl_->scene;
-#pragma omp parallel for schedule(static, 256)
-  for (long k = 0; k < static_cast<long>(count); ++k) {
+  const long packets = static_cast<long>((count + kPacket - 1) / kPacket);
+#pragma omp parallel for schedule(static, 32)
+  for (long p = 0; p < packets; ++p) {
     embree::Query query;
-    RTCRayHit rh;
-    const Ray& r = rays[k];
-    rh.ray.org_x = r.origin.x();
-    rh.ray.org_y = r.origin.y();
-    rh.ray.org_z = r.origin.z();
-    rh.ray.dir_x = r.direction.x();
-    rh.ray.dir_y = r.direction.y();
-    rh.ray.dir_z = r.direction.z();
-    rh.ray.tnear = r.tnear;
-    rh.ray.tfar = r.tfar;
-    rh.ray.time = 0.0f;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.id = 0;
-    rh.ray.flags = 0;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    query.intersect1(scene, rh);
-    Hit& h = hits[k];
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) {
-      h = Hit{};
-      continue;
+    alignas(32) RTCRayHit8 rh;
+    alignas(32) int valid[kPacket];
+    const size_t k0 = static_cast<size_t>(p) * kPacket;
+    for (size_t i = 0; i < kPacket; ++i) {
+      const size_t k = k0 + i;
+      valid[i] = k < count ? -1 : 0;
+      const Ray& r = rays[std::min(k, count - 1)];
+      rh.ray.org_x[i] = r.origin.x();
+      rh.ray.org_y[i] = r.origin.y();
+      rh.ray.org_z[i] = r.origin.z();
+      rh.ray.dir_x[i] = r.direction.x();
+      rh.ray.dir_y[i] = r.direction.y();
+      rh.ray.dir_z[i] = r.direction.z();
+      rh.ray.tnear[i] = r.tnear;
+      rh.ray.tfar[i] = r.tfar;
+      rh.ray.time[i] = 0.0f;
+      rh.ray.mask[i] = 0xFFFFFFFFu;
+      rh.ray.id[i] = static_cast<unsigned>(i);
+      rh.ray.flags[i] = 0;
+      rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
+      rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
     }
-    h.t = rh.ray.tfar;
-    h.triangle = static_cast<int32_t>(rh.hit.primID);
-    h.normal = Eigen::Vector3f(rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z).normalized();
+    query.intersect8(valid, scene, rh);
+    for (size_t i = 0; i < kPacket && k0 + i < count; ++i) {
+      Hit& h = hits[k0 + i];
+      if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) {
+        h = Hit{};
+        continue;
+      }
+      h.t = rh.ray.tfar[i];
+      h.triangle = static_cast<int32_t>(rh.hit.primID[i]);
+      h.normal = Eigen::Vector3f(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]).normalized();
+    }
   }
 }
 
