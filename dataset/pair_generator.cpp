@@ -231,7 +231,7 @@ struct PairGenerator::View {
   mutable bool sightPointsMade = false;
   Image8 rgb;                // [H, W, 3], empty until rendered
   bool full = false;         // depth (and, when screening, colour) rendered at full resolution
-  bool fineChecked = false;  // a reference: the plan's fine check done (and passed)
+  std::optional<bool> fine;  // a reference: whether it passed the plan's fine check, once made
   double valid = 0;          // share of depth's pixels with depth > 0
   double estimate = 0;       // covis estimate at the last screening stage it went through
   double screenValid = 0;    // valid fraction there
@@ -506,13 +506,15 @@ bool PairGenerator::referenceIsValid(View& ref, Search& search) const {
 // The plan's fine check of a reference whose last stage left its valid pixels near the bound
 // (the finest stage, rendered unless a candidate needed it already); whether it passed.
 bool PairGenerator::referenceIsFine(View& ref, GenerationCost& cost) const {
-  if (!plan_.referenceFine || ref.fineChecked) return true;
-  ref.fineChecked = true;
-  const double validEdge = options_.minValidFraction + screens_[pointsStage_].validMargin;
-  if (ref.screenValid >= validEdge) return true;
-  const size_t stage = *plan_.referenceFine;
-  return !funnelTest(cost.referenceFunnel[plan_.reference.size()], nullptr, ref, cost,
-                     [&] { return failsStage(stage, nullptr, ref, cost); });
+  if (!plan_.referenceFine) return true;
+  if (!ref.fine) {
+    const double validEdge = options_.minValidFraction + screens_[pointsStage_].validMargin;
+    const size_t stage = *plan_.referenceFine;
+    ref.fine = ref.screenValid >= validEdge ||
+               !funnelTest(cost.referenceFunnel[plan_.reference.size()], nullptr, ref, cost,
+                           [&] { return failsStage(stage, nullptr, ref, cost); });
+  }
+  return *ref.fine;
 }
 
 bool PairGenerator::inBand(double covis) const {
