@@ -263,7 +263,6 @@ PairGenerator::PairGenerator(const Scene& scene, const RayCaster& caster,
     screens_.push_back({Camera::fromHfov(stage.side, stage.side, options.hfov), stage.margin,
                         validMargin, stage.validOnly, stageCovisOptions(stage.side, options_)});
   }
-  regularStages_ = plan_.regular;
   if (!plan_.reference.empty()) pointsStage_ = plan_.reference.back();
 }
 
@@ -466,7 +465,7 @@ bool PairGenerator::screenLaterStages(const View& ref, View& v, Search& search) 
   for (size_t k = 1; k < plan_.candidate.size(); ++k) {
     const size_t stage = plan_.candidate[k], before = plan_.candidate[k - 1];
     const bool clear = !screens_[before].validOnly && !ambiguous(before, v);
-    if (clear && (stage == regularStages_ || options_.screenSkipClear)) break;
+    if (clear && (stage == plan_.regular || options_.screenSkipClear)) break;
     if (funnelTest(cost.candidateFunnel[kFirstStageSlot + stage], &ref, v, cost,
                    [&] { return failsStage(stage, &ref, v, cost); }))
       return false;

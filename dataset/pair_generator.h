@@ -58,12 +58,13 @@ struct PairOptions {
   // on), as the nearest pixel of a coarse depth map lies farther from the point looked up. Without
   // it, estimates fall below full resolution's covis (by 0.05 for one candidate in 100 at 64x64)
   // and the margins must cover that; with it, they are tight. The upper bound (below 1) takes
-  // the plain tolerances. false: plain tolerances throughout (with the old margins, 0.18 and 0.04).
+  // the plain tolerances. false: plain tolerances throughout, which need margins of about 0.18
+  // and 0.04.
   bool screenScaleTolerance = true;
   // A candidate whose estimate lies inside the band by its stage's margin or more, with valid
   // pixels as clear, skips the finer stages (at 256: a 32x32 estimate of 0.53 or more goes to
-  // full resolution). The 64x64 stage would turn down 1-3 % of those, which costs less than
-  // rendering them all at 64x64 (docs/dataset.md). false: every candidate takes every stage.
+  // full resolution). 1-4 % of those fail at full resolution, which costs less than rendering
+  // them all at 64x64 (docs/dataset.md). false: every candidate takes every stage.
   bool screenSkipClear = true;
   // Before any rendering, a candidate is turned down when the share of the reference's points
   // (the pixels of its last stage's depth, 32x32 at 256; screenPlan) inside its frame, an upper
@@ -281,8 +282,7 @@ class PairGenerator {
   // plan_'s stages, coarse to fine, then the confirm stage when there is one; empty without
   // screening.
   std::vector<ScreenStage> screens_;
-  size_t regularStages_ = 0;  // screens_ without the confirm stage
-  size_t pointsStage_ = 0;    // the reference stage its points come from (plan_.reference.back())
+  size_t pointsStage_ = 0;  // the reference stage its points come from (plan_.reference.back())
 };
 
 // Mean world point of the valid pixels of a depth map (CroCo's "observed point").
