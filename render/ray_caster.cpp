@@ -495,6 +495,31 @@ Eigen::Vector3f RayCaster::Impl::unitNormal(const RTCRayHit8& rh, int i) const {
   return norm > 0 ? Eigen::Vector3f(ng / norm) : Eigen::Vector3f::UnitZ();
 }
 
+namespace {
+
+// rays[k0, k0 + 8) as a packet; lanes past `count` are invalid (and repeat the last ray).
+void loadPacket(const Ray* rays, size_t k0, size_t count, RTCRay8& packet, int* valid) {
+  for (size_t i = 0; i < kPacket; ++i) {
+    const size_t k = k0 + i;
+    valid[i] = k < count ? -1 : 0;
+    const Ray& r = rays[std::min(k, count - 1)];
+    packet.org_x[i] = r.origin.x();
+    packet.org_y[i] = r.origin.y();
+    packet.org_z[i] = r.origin.z();
+    packet.dir_x[i] = r.direction.x();
+    packet.dir_y[i] = r.direction.y();
+    packet.dir_z[i] = r.direction.z();
+    packet.tnear[i] = r.tnear;
+    packet.tfar[i] = r.tfar;
+    packet.time[i] = 0.0f;
+    packet.mask[i] = 0xFFFFFFFFu;
+    packet.id[i] = static_cast<unsigned>(i);
+    packet.flags[i] = 0;
+  }
+}
+
+}  // namespace
+
 // Packets of eight (shadow rays from one eye are coherent enough to traverse together).
 void RayCaster::occluded(const Ray* rays, uint8_t* blocked, size_t count) const {
   RTCScene scene = impl_->scene;
@@ -502,23 +527,7 @@ void RayCaster::occluded(const Ray* rays, uint8_t* blocked, size_t count) const 
   for (size_t k0 = 0; k0 < count; k0 += kPacket) {
     alignas(32) RTCRay8 packet;
     alignas(32) int valid[kPacket];
-    for (size_t i = 0; i < kPacket; ++i) {
-      const size_t k = k0 + i;
-      valid[i] = k < count ? -1 : 0;
-      const Ray& r = rays[std::min(k, count - 1)];
-      packet.org_x[i] = r.origin.x();
-      packet.org_y[i] = r.origin.y();
-      packet.org_z[i] = r.origin.z();
-      packet.dir_x[i] = r.direction.x();
-      packet.dir_y[i] = r.direction.y();
-      packet.dir_z[i] = r.direction.z();
-      packet.tnear[i] = r.tnear;
-      packet.tfar[i] = r.tfar;
-      packet.time[i] = 0.0f;
-      packet.mask[i] = 0xFFFFFFFFu;
-      packet.id[i] = static_cast<unsigned>(i);
-      packet.flags[i] = 0;
-    }
+    loadPacket(rays, k0, count, packet, valid);
     query.occluded8(valid, scene, packet);
     for (size_t i = 0; i < kPacket && k0 + i < count; ++i)
       blocked[k0 + i] = packet.tfar[i] < 0.0f ? 1 : 0;
@@ -536,22 +545,8 @@ void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {
     alignas(32) RTCRayHit8 rh;
     alignas(32) int valid[kPacket];
     const size_t k0 = static_cast<size_t>(p) * kPacket;
+    loadPacket(rays, k0, count, rh.ray, valid);
     for (size_t i = 0; i < kPacket; ++i) {
-      const size_t k = k0 + i;
-      valid[i] = k < count ? -1 : 0;
-      const Ray& r = rays[std::min(k, count - 1)];
-      rh.ray.org_x[i] = r.origin.x();
-      rh.ray.org_y[i] = r.origin.y();
-      rh.ray.org_z[i] = r.origin.z();
-      rh.ray.dir_x[i] = r.direction.x();
-      rh.ray.dir_y[i] = r.direction.y();
-      rh.ray.dir_z[i] = r.direction.z();
-      rh.ray.tnear[i] = r.tnear;
-      rh.ray.tfar[i] = r.tfar;
-      rh.ray.time[i] = 0.0f;
-      rh.ray.mask[i] = 0xFFFFFFFFu;
-      rh.ray.id[i] = static_cast<unsigned>(i);
-      rh.ray.flags[i] = 0;
       rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
       rh.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
       rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
