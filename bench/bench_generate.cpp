@@ -236,6 +236,21 @@ std::vector<SceneArg> generatedScenes(const std::string& dir, int rooms, size_t 
   return out;
 }
 
+// The pair options a run with `screen`'s settings generates with.
+PairOptions pairOptions(const Screen& screen) {
+  PairOptions o;
+  o.screenResolution = screen.resolution;
+  o.screenCovisMargin = screen.margin;
+  o.screenFineMargin = screen.fineMargin;
+  o.screenFrameMargin = screen.frameMargin;
+  o.screenSightMargin = screen.sightMargin;
+  o.screenGlanceCovisMargin = screen.glanceMargin;
+  o.screenConfirm = screen.confirm;
+  o.screenScaleTolerance = screen.scaleTolerance;
+  o.giveUpAfter = screen.giveUpAfter;
+  return o;
+}
+
 nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, unsigned threads,
                         Screen screen, bool audit) {
   GenerateConfig c;
@@ -245,16 +260,8 @@ nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, 
   c.pairsPerScene = pairs;
   c.jobs = static_cast<int>(threads);
   c.progress = false;
-  c.pair.screenResolution = screen.resolution;
+  c.pair = pairOptions(screen);
   c.pair.auditScreening = audit;
-  c.pair.screenCovisMargin = screen.margin;
-  c.pair.screenFineMargin = screen.fineMargin;
-  c.pair.screenFrameMargin = screen.frameMargin;
-  c.pair.screenSightMargin = screen.sightMargin;
-  c.pair.screenGlanceCovisMargin = screen.glanceMargin;
-  c.pair.screenConfirm = screen.confirm;
-  c.pair.screenScaleTolerance = screen.scaleTolerance;
-  c.pair.giveUpAfter = screen.giveUpAfter;
   return runGenerate(c);
 }
 
@@ -358,6 +365,7 @@ int main(int argc, char** argv) {
         "threads: %u, %d pairs per scene (unscreened %d, audited %d), 256x256, hfov 60, covis "
         ">= 0.5\n",
         threads, pairs, plainPairs, auditPairs);
+    const ScreenPlan plan = screenPlan(pairOptions(screen));  // the funnels' slot names
     nlohmann::json results = nlohmann::json::array();
     std::vector<std::string> depthStems;
     for (size_t s = 0; s < scenes.size(); ++s) {
@@ -402,7 +410,7 @@ int main(int argc, char** argv) {
       const auto& stats = sum["scene_stats"][0];
       const auto& split = sum["time_split"];
       // The run's kept renders against the limit's: above 1 when the machine ran slower during
-      // the run than at its best spell around it, or the renders there paid for what else ran.
+      // the run than in the faster of its frames, or the renders there paid for what else ran.
       const double keptMs = 1e3 * sum["time_seconds"]["render_kept"].get<double>() /
                             std::max(1.0, sum["renders"]["kept"].get<double>());
       const double limitMs = 1e3 * limit.rgbDepthSeconds * threads;
@@ -438,19 +446,16 @@ int main(int argc, char** argv) {
       // The audited run's funnel: what each stage turned down, wrongly, and its worker time per
       // pair.
       const double auditPairsMade = audit["pairs_this_run"].get<double>();
-      std::printf("    audited funnel, candidates: %s\n    audited funnel, references: %s\n",
-                  funnelText(screening["candidate_funnel"],
-                             screenPlan(PairOptions{}).candidateNames(), auditPairsMade)
-                      .c_str(),
-                  funnelText(screening["reference_funnel"],
-                             screenPlan(PairOptions{}).referenceNames(), auditPairsMade)
-                      .c_str());
+      std::printf(
+          "    audited funnel, candidates: %s\n    audited funnel, references: %s\n",
+          funnelText(screening["candidate_funnel"], plan.candidateNames(), auditPairsMade).c_str(),
+          funnelText(screening["reference_funnel"], plan.referenceNames(), auditPairsMade).c_str());
       const auto& fast = sum["screening"];
       std::printf("    funnel, candidates: %s\n    funnel, references: %s\n",
-                  funnelText(fast["candidate_funnel"], screenPlan(PairOptions{}).candidateNames(),
+                  funnelText(fast["candidate_funnel"], plan.candidateNames(),
                              sum["pairs_this_run"].get<double>())
                       .c_str(),
-                  funnelText(fast["reference_funnel"], screenPlan(PairOptions{}).referenceNames(),
+                  funnelText(fast["reference_funnel"], plan.referenceNames(),
                              sum["pairs_this_run"].get<double>())
                       .c_str());
       std::fflush(stdout);
