@@ -324,6 +324,12 @@ std::optional<PairGenerator::View> PairGenerator::referenceView(Search& search) 
   if (!screens_.empty()) {
     // A reference needs a valid pixel for its target, even with --min-valid 0.
     if (!screenReference(v, search.cost) || v.screenValid == 0) return std::nullopt;
+    // Below the bound there, a reference takes its fine check now, before any candidate is drawn:
+    // such references mostly fail it (on simple_room all but 2 of 380), and their candidates
+    // were a sixth of all. Above the bound, most pass, so it waits until a partner passes
+    // screening.
+    if (v.screenValid < options_.minValidFraction && !referenceIsFine(v, search.cost))
+      return std::nullopt;
     return v;
   }
   renderFull(v, false, search.cost);

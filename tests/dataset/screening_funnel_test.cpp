@@ -321,6 +321,37 @@ TEST(NoRenderWasted, AReferenceNearTheValidBoundIsCheckedAtTheFinestStageFirst) 
   EXPECT_LE(c.wastedReferenceRenders * 10, c.keptRenders + 10);
 }
 
+TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
+  // The open room again, one reference an index. A reference that fails its fine check with no
+  // candidate drawn was checked at once (below the bound at its last stage); before, every
+  // reference waited for a candidate to pass screening, and its candidates were wasted.
+  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+  boxes.erase(boxes.begin() + 5);
+  const std::string path = testing::scratchDir("open_room_eager") + "/open_room.obj";
+  testing::writeBoxesObj(path, boxes);
+  Scene scene = loadScene(path, {});
+  scene.name = "open_room";
+  const RayCaster caster(scene.mesh);
+  const ViewpointSampler sampler(scene, caster, {});
+  PairOptions o = fullSizeOptions();
+  o.maxAttempts = 20;
+  o.maxReferences = 1;
+  const PairGenerator gen(scene, caster, sampler, o);
+  int failed = 0, failedAtOnce = 0;
+  for (int i = 0; i < 300; ++i) {
+    GenerationCost c;
+    const bool found = gen.generate(5, i, &c).has_value();
+    const FunnelStage& fine = c.referenceFunnel.back();
+    ASSERT_LE(fine.entered, 1u) << "index " << i;
+    if (!fine.rejected) continue;
+    EXPECT_FALSE(found) << "index " << i << ": its only reference failed";
+    ++failed;
+    failedAtOnce += c.candidateFunnel.front().entered == 0;
+  }
+  ASSERT_GT(failed, 5) << "no reference near the bound: the test tests nothing";
+  EXPECT_GT(failedAtOnce * 2, failed) << "most failed their fine check after candidates";
+}
+
 TEST(RayCasterBatch, BatchedDepthEqualsOneViewAtATime) {
   const Apartment& a = apartment();
   Rng rng(3);
