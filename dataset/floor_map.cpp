@@ -33,18 +33,80 @@ struct Axes {
     const float angle = static_cast<float>(2.0 * M_PI * d / n);
     return std::cos(angle) * a + std::sin(angle) * b;
   }
+  // All n of them.
+  std::vector<Eigen::Vector3f> horizontals(int n) const {
+    std::vector<Eigen::Vector3f> out(n);
+    for (int d = 0; d < n; ++d) out[d] = horizontal(d, n);
+    return out;
+  }
 };
 
+constexpr int kFootprintRays = 8;
+
+// Whether a candidate's footprint is flat: its kFootprintRays hits (heights measured down from
+// `lift` above it, at `offsets`) and the candidate itself, fitted by a plane h = c0 + c1 a + c2 b
+// (least squares, normal equations in double), with enough hits, a gentle enough slope and no
+// point further off the plane than the roughness limit.
+bool fitsFlat(const Hit* hits, const Eigen::Vector2f* offsets, float lift, float tanSlope,
+              const FloorOptions& o) {
+  Eigen::Vector3d rows[kFootprintRays + 1];  // (1, a, b) per point; the candidate first
+  double heights[kFootprintRays + 1];
+  int n = 0;
+  rows[n] = Eigen::Vector3d(1, 0, 0), heights[n++] = 0.0;
+  for (int d = 0; d < kFootprintRays; ++d) {
+    if (hits[d].triangle < 0) continue;
+    rows[n] = Eigen::Vector3d(1, offsets[d].x(), offsets[d].y());
+    heights[n++] = lift - hits[d].t;
+  }
+  if (n - 1 < o.minFootprintHits) return false;
+  Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d Ath = Eigen::Vector3d::Zero();
+  for (int i = 0; i < n; ++i) AtA += rows[i] * rows[i].transpose(), Ath += heights[i] * rows[i];
+  const Eigen::Vector3d c = AtA.ldlt().solve(Ath);
+  if (c.tail<2>().norm() > tanSlope) return false;
+  double roughness = 0.0;
+  for (int i = 0; i < n; ++i)
+    roughness = std::max(roughness, std::abs(rows[i].dot(c) - heights[i]));
+  return roughness <= o.maxRoughness;
+}
+
+// The candidates whose flag is set, in order.
+std::vector<Candidate> kept(const std::vector<Candidate>& candidates,
+                            const std::vector<char>& keep) {
+  std::vector<Candidate> out;
+  for (size_t k = 0; k < candidates.size(); ++k)
+    if (keep[k]) out.push_back(candidates[k]);
+  return out;
+}
+
+// Casts `perItem` rays for each of `count` items and judges each item by its hits: make(k, rays)
+// writes item k's rays, judge(k, hits) says whether it passes. Items go a block at a time, so
+// that the ray and hit buffers stay small and are reused (fresh memory is slow to write).
+template <typename Make, typename Judge>
+std::vector<char> castAndJudge(const RayCaster& caster, long count, int perItem, const Make& make,
+                               const Judge& judge) {
+  constexpr long kBlock = 2048;
+  std::vector<Ray> rays(std::min(count, kBlock) * perItem);
+  std::vector<Hit> hits(rays.size());
+  std::vector<char> pass(count);
+  for (long first = 0; first < count; first += kBlock) {
+    const long n = std::min(kBlock, count - first);
+#pragma omp parallel for schedule(static)
+    for (long k = 0; k < n; ++k) make(first + k, &rays[k * perItem]);
+    caster.intersect(rays.data(), hits.data(), n * perItem);
+#pragma omp parallel for schedule(static)
+    for (long k = 0; k < n; ++k) pass[first + k] = judge(first + k, &hits[k * perItem]);
+  }
+  return pass;
+}
+
 // The candidates flat at the scale of a footprint: downward rays at kFootprintRays points on a
-// circle around each (from a little above it, so that noise and small steps are seen) are
-// fitted, with the candidate, by a plane h = c0 + c1 a + c2 b (least squares). A candidate is
-// flat when enough rays hit, the plane is no steeper than the slope limit, and no hit lies
-// further off it than the roughness limit. A wall's edge, a step's nosing, the rim of a table
+// circle around each (from a little above it, so that noise and small steps are seen), fitted
+// with the candidate by a plane (fitsFlat). A wall's edge, a step's nosing, the rim of a table
 // and clutter fail; millimetres of noise on centimetre triangles do not.
 std::vector<Candidate> flatCandidates(const std::vector<Candidate>& candidates,
                                       const RayCaster& caster, const FloorOptions& o,
                                       const Axes& axes) {
-  constexpr int kFootprintRays = 8;
   const float radius = static_cast<float>(o.footprintRadius);
   const float tanSlope = static_cast<float>(std::tan(o.maxSlopeDegrees * M_PI / 180.0));
   const float lift = std::max(0.3f, 2.0f * radius * tanSlope + static_cast<float>(o.maxRoughness));
@@ -52,63 +114,34 @@ std::vector<Candidate> flatCandidates(const std::vector<Candidate>& candidates,
   for (int d = 0; d < kFootprintRays; ++d)
     offsets[d] = radius * Eigen::Vector2f(std::cos(2.0 * M_PI * d / kFootprintRays),
                                           std::sin(2.0 * M_PI * d / kFootprintRays));
-  std::vector<Ray> rays(candidates.size() * kFootprintRays);
-  std::vector<Hit> hits(rays.size());
-  for (size_t k = 0; k < candidates.size(); ++k) {
+  const auto footprint = [&](long k, Ray* rays) {
     for (int d = 0; d < kFootprintRays; ++d) {
       const Eigen::Vector3f from =
           candidates[k].point + offsets[d].x() * axes.a + offsets[d].y() * axes.b + lift * axes.up;
-      rays[k * kFootprintRays + d] = Ray{from, -axes.up, 0.0f, 2.0f * lift};
+      rays[d] = Ray{from, -axes.up, 0.0f, 2.0f * lift};
     }
-  }
-  caster.intersect(rays.data(), hits.data(), rays.size());
-  std::vector<Candidate> flat;
-  for (size_t k = 0; k < candidates.size(); ++k) {
-    // Points (a, b, h) relative to the candidate, which is the first; normal equations of the
-    // fit accumulated in double.
-    Eigen::Vector3d rows[kFootprintRays + 1];  // (1, a, b) per point
-    double heights[kFootprintRays + 1];
-    int n = 0;
-    rows[n] = Eigen::Vector3d(1, 0, 0), heights[n++] = 0.0;
-    for (int d = 0; d < kFootprintRays; ++d) {
-      const Hit& hit = hits[k * kFootprintRays + d];
-      if (hit.triangle < 0) continue;
-      rows[n] = Eigen::Vector3d(1, offsets[d].x(), offsets[d].y());
-      heights[n++] = lift - hit.t;
-    }
-    if (n - 1 < o.minFootprintHits) continue;
-    Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
-    Eigen::Vector3d Ath = Eigen::Vector3d::Zero();
-    for (int i = 0; i < n; ++i) AtA += rows[i] * rows[i].transpose(), Ath += heights[i] * rows[i];
-    const Eigen::Vector3d c = AtA.ldlt().solve(Ath);
-    if (c.tail<2>().norm() > tanSlope) continue;
-    double roughness = 0.0;
-    for (int i = 0; i < n; ++i)
-      roughness = std::max(roughness, std::abs(rows[i].dot(c) - heights[i]));
-    if (roughness > o.maxRoughness) continue;
-    flat.push_back(candidates[k]);
-  }
-  return flat;
+  };
+  const auto flat = [&](long, const Hit* hits) {
+    return fitsFlat(hits, offsets.data(), lift, tanSlope, o);
+  };
+  return kept(candidates, castAndJudge(caster, static_cast<long>(candidates.size()), kFootprintRays,
+                                       footprint, flat));
 }
 
 // For each point, whether walls surround it: horizontal rays at 1 m, in 8 directions, hit
 // something in at least 6 (a scan's walls have holes, and rooms have doors).
-std::vector<bool> enclosedPoints(const std::vector<Candidate>& points, const RayCaster& caster,
+std::vector<char> enclosedPoints(const std::vector<Candidate>& points, const RayCaster& caster,
                                  const Axes& axes) {
   constexpr int kDirs = 8, kMinHits = 6;
-  std::vector<Ray> rays(points.size() * kDirs);
-  std::vector<Hit> hits(rays.size());
-  for (size_t k = 0; k < points.size(); ++k)
-    for (int d = 0; d < kDirs; ++d)
-      rays[k * kDirs + d] = Ray{points[k].point + axes.up, axes.horizontal(d, kDirs), 0.0f, 1e30f};
-  caster.intersect(rays.data(), hits.data(), rays.size());
-  std::vector<bool> enclosed(points.size());
-  for (size_t k = 0; k < points.size(); ++k) {
-    int n = 0;
-    for (int d = 0; d < kDirs; ++d) n += hits[k * kDirs + d].triangle >= 0;
-    enclosed[k] = n >= kMinHits;
-  }
-  return enclosed;
+  const std::vector<Eigen::Vector3f> dirs = axes.horizontals(kDirs);
+  const auto around = [&](long k, Ray* rays) {
+    for (int d = 0; d < kDirs; ++d) rays[d] = Ray{points[k].point + axes.up, dirs[d], 0.0f, 1e30f};
+  };
+  const auto enclosed = [&](long, const Hit* hits) {
+    return std::count_if(hits, hits + kDirs, [](const Hit& h) { return h.triangle >= 0; }) >=
+           kMinHits;
+  };
+  return castAndJudge(caster, static_cast<long>(points.size()), kDirs, around, enclosed);
 }
 
 // The grid of columns over the scene's horizontal extent.
@@ -188,33 +221,24 @@ std::vector<Candidate> openCandidates(std::vector<Candidate> candidates, const R
                                       const FloorOptions& o, const Axes& axes) {
   const int kDirs = 8;
   const float heights[2] = {0.5f, 1.5f};
-  const size_t perCand = 1 + 2 * kDirs;
-  std::vector<Ray> rays(candidates.size() * perCand);
-  std::vector<Hit> hits(rays.size());
-  for (size_t k = 0; k < candidates.size(); ++k) {
-    const Eigen::Vector3f p = candidates[k].point + 0.02f * axes.up;
-    rays[k * perCand] = Ray{p, axes.up, 0.0f, 1e30f};
-    for (int h = 0; h < 2; ++h) {
-      for (int d = 0; d < kDirs; ++d) {
-        rays[k * perCand + 1 + h * kDirs + d] =
-            Ray{candidates[k].point + heights[h] * axes.up, axes.horizontal(d, kDirs), 0.0f,
-                static_cast<float>(o.wallClearance)};
-      }
-    }
-  }
-  caster.intersect(rays.data(), hits.data(), rays.size());
-  std::vector<Candidate> open;
-  for (size_t k = 0; k < candidates.size(); ++k) {
-    const Hit& above = hits[k * perCand];
-    const float headroom = above.triangle >= 0 ? above.t : std::numeric_limits<float>::infinity();
-    if (headroom < o.headroom) continue;
-    bool clear = true;
-    for (size_t r = 1; r < perCand && clear; ++r) clear = hits[k * perCand + r].triangle < 0;
-    if (!clear) continue;
-    candidates[k].headroom = headroom;
-    open.push_back(candidates[k]);
-  }
-  return open;
+  const int perCand = 1 + 2 * kDirs;
+  const std::vector<Eigen::Vector3f> dirs = axes.horizontals(kDirs);
+  const auto around = [&](long k, Ray* rays) {
+    rays[0] = Ray{candidates[k].point + 0.02f * axes.up, axes.up, 0.0f, 1e30f};
+    for (int h = 0; h < 2; ++h)
+      for (int d = 0; d < kDirs; ++d)
+        rays[1 + h * kDirs + d] = Ray{candidates[k].point + heights[h] * axes.up, dirs[d], 0.0f,
+                                      static_cast<float>(o.wallClearance)};
+  };
+  const auto open = [&](long k, const Hit* hits) {
+    candidates[k].headroom =
+        hits[0].triangle >= 0 ? hits[0].t : std::numeric_limits<float>::infinity();
+    return candidates[k].headroom >= o.headroom &&
+           std::none_of(hits + 1, hits + perCand, [](const Hit& h) { return h.triangle >= 0; });
+  };
+  const std::vector<char> pass =
+      castAndJudge(caster, static_cast<long>(candidates.size()), perCand, around, open);
+  return kept(candidates, pass);
 }
 
 // A scene with a ceiling over a room's worth of open floor (minRegionArea) is an interior: then
@@ -233,7 +257,7 @@ std::vector<Candidate> insidePoints(const std::vector<Candidate>& open, const Ra
   std::vector<Candidate> uncovered;
   for (const Candidate& c : open)
     if (!std::isfinite(c.headroom)) uncovered.push_back(c);
-  const std::vector<bool> enclosed = enclosedPoints(uncovered, caster, axes);
+  const std::vector<char> enclosed = enclosedPoints(uncovered, caster, axes);
   std::vector<Candidate> inside;
   for (size_t k = 0, u = 0; k < open.size(); ++k) {
     if (std::isfinite(open[k].headroom) || enclosed[u++]) inside.push_back(open[k]);
