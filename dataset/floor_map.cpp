@@ -375,18 +375,27 @@ std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double r
   const int ci = static_cast<int>(std::floor(a / cell_)),
             cj = static_cast<int>(std::floor(b / cell_));
   const int reach = static_cast<int>(std::ceil(radius / cell_));
+  // A cell's points lie over its centre, so none lies nearer than the centre across the floor.
+  // Distances are compared with kSlack to spare, for the rounding of points in float.
+  constexpr double kSlack = 1e-4;
   float best = std::numeric_limits<float>::infinity();
+  double beyond =
+      best;  // (|best| + kSlack)^2: cells whose centres lie farther hold no nearer point
   int bestIndex = -1;
   size_t bestOrder = 0;  // cell * (max list length) order, as the full scan meets points
   const auto visit = [&](int i, int j) {
     if (i < 0 || i >= nA_ || j < 0 || j >= nB_) return;
+    const double da = (i + 0.5) * cell_ - a, db = (j + 0.5) * cell_ - b;
+    if (da * da + db * db > beyond) return;
     const size_t cell = static_cast<size_t>(i) * nB_ + j;
     const std::vector<int>& list = cellPoints_[cell];
     for (size_t pos = 0; pos < list.size(); ++pos) {
       const float d = (points_[list[pos]] - p).squaredNorm();
       const size_t order = cell * points_.size() + pos;
-      if (d < best || (d == best && order < bestOrder))
+      if (d < best || (d == best && order < bestOrder)) {
         best = d, bestIndex = list[pos], bestOrder = order;
+        beyond = (std::sqrt(best) + kSlack) * (std::sqrt(best) + kSlack);
+      }
     }
   };
   // Rings nearer than the nearest cell with points are empty. Outside the grid, that cell lies
@@ -396,9 +405,12 @@ std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double r
   const int toEdge = std::max(std::abs(ci - ki), std::abs(cj - kj));
   const int first = std::max(toEdge, emptyRings_[static_cast<size_t>(ki) * nB_ + kj] - toEdge);
   if (first > reach) return std::nullopt;
+  // Along the axis of its ring, a cell's centre in ring r lies at least r cells less p's offset
+  // from its own cell's centre.
+  const double offset =
+      std::max(std::abs(a - (ci + 0.5) * cell_), std::abs(b - (cj + 0.5) * cell_));
   for (int r = first; r <= reach; ++r) {
-    // Every cell of ring r is at least (r - 1) cells from p (p lies in cell (ci, cj)).
-    if (bestIndex >= 0 && (r - 1) * cell_ > std::sqrt(best) + 1e-4) break;
+    if (bestIndex >= 0 && r * cell_ - offset > std::sqrt(best) + kSlack) break;
     if (r == 0) {
       visit(ci, cj);
       continue;
