@@ -414,7 +414,8 @@ void PairGenerator::screenFirstStage(const View& ref, std::vector<View>& batch,
   for (size_t k = 0; k < batch.size(); ++k) {
     const View& v = batch[k];
     out[k] =
-        funnelTest(funnel[kBoundSlot], &ref, v, cost, [&] { return outOfFrame(ref, v, cost); }) ||
+        (frameBound() &&
+         funnelTest(funnel[kBoundSlot], &ref, v, cost, [&] { return outOfFrame(ref, v, cost); })) ||
         funnelTest(funnel[kSightSlot], &ref, v, cost, [&] { return outOfSight(ref, v, cost); });
     if (!out[k]) left.push_back(k);
   }
@@ -574,7 +575,7 @@ bool PairGenerator::audit(const View* ref, const View& v, GenerationCost& cost) 
 // the reference's points (the depth of its last stage) projected into v's camera, occlusion
 // left out.
 bool PairGenerator::outOfFrame(const View& ref, const View& v, GenerationCost& cost) const {
-  if (options_.accept || screens_.empty()) return false;
+  if (!frameBound()) return false;
   const size_t points = pointsStage_;
   CovisOptions o = options_.covis;
   o.stride = std::max(1, screens_[points].intrinsics.width / kFrameScreenSide);
@@ -585,6 +586,12 @@ bool PairGenerator::outOfFrame(const View& ref, const View& v, GenerationCost& c
   if (bound >= options_.minCovis - options_.screenFrameMargin) return false;
   cost.candidateCovis.push_back(static_cast<float>(bound));
   return true;
+}
+
+// Whether the in-frame bound is on: with screening, a band and a margin that leaves a bound above
+// 0 (PairOptions::screenFrameMargin).
+bool PairGenerator::frameBound() const {
+  return !options_.accept && !screens_.empty() && options_.minCovis > options_.screenFrameMargin;
 }
 
 // Whether v sees too few of the reference's sight-line points to pass: each point must lie in v's

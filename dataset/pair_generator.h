@@ -68,8 +68,10 @@ struct PairOptions {
   bool screenSkipClear = true;
   // Before any rendering, a candidate is turned down when the share of the reference's points
   // (the pixels of its last stage's depth, 32x32 at 256; screenPlan) inside its frame, an upper
-  // bound of covis, is below minCovis by more than this.
-  double screenFrameMargin = 0.03;
+  // bound of covis, is below minCovis by more than this. At minCovis or more it is off, the
+  // default: the sight lines turn down what it would, and it turned down too few (2-9 %) to pay
+  // for itself (docs/dataset.md).
+  double screenFrameMargin = 1.0;
   double screenValidMargin = 0.05;
   // The glance: before its first stage, a view is rendered as a screenGlanceSide^2 depth map and
   // turned down when its valid fraction is below minValidFraction by more than
@@ -255,6 +257,7 @@ class PairGenerator {
     CovisOptions covis;  // for the estimate against the lower bound (screenScaleTolerance)
   };
   bool screenReference(View& v, GenerationCost& cost) const;
+  bool frameBound() const;
   bool outOfFrame(const View& ref, const View& v, GenerationCost& cost) const;
   bool outOfSight(const View& ref, const View& v, GenerationCost& cost) const;
   const std::vector<Eigen::Vector3f>& sightPoints(const View& ref) const;

@@ -100,7 +100,7 @@ int main(int argc, char** argv) {
       "--screen-margin 0.18 --screen-fine-margin 0.04 --screen-glance-margin 0.25");
   app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
                  "Before rendering, turn down candidates whose share of the reference inside their "
-                 "frame is below --min-covis by more than this");
+                 "frame is below --min-covis by more than this (default: off; 0.03 turns it on)");
   app.add_option("--screen-sight-margin", cfg.pair.screenSightMargin,
                  "Before rendering, turn down candidates that see (shadow rays) a share of the "
                  "reference's points below --min-covis by more than this");

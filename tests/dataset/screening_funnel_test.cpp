@@ -94,9 +94,10 @@ TEST(NoRenderWasted, TheFunnelAddsUp) {
   for (const FunnelStage& s : f) turnedDown += s.rejected;
   for (const FunnelStage& s : c.referenceFunnel) turnedDown += s.rejected;
   EXPECT_EQ(turnedDown, c.screened);
-  // The bound, the sight lines and the glance see the whole batch; later stages stop at the
-  // candidate that passes.
-  EXPECT_EQ(f[1].entered, f[0].entered - f[0].rejected);
+  // The sight lines and the glance see the whole batch; later stages stop at the candidate that
+  // passes. The in-frame bound is off by default.
+  EXPECT_EQ(f[0].entered, 0u);
+  EXPECT_GT(f[1].entered, 0u);
   EXPECT_EQ(f[2].entered, f[1].entered - f[1].rejected);
   EXPECT_EQ(f[3].entered, 0u) << "after the glance, candidates skip the first stage";
   EXPECT_LE(f[4].entered, f[2].entered - f[2].rejected);
@@ -350,6 +351,34 @@ TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
   }
   ASSERT_GT(failed, 5) << "no reference near the bound: the test tests nothing";
   EXPECT_GT(failedAtOnce * 2, failed) << "most failed their fine check after candidates";
+}
+
+TEST(NoRenderWasted, TheInFrameBoundIsOffUnlessAMarginTurnsItOn) {
+  // Off by default: the sight lines see what it sees. With a margin it turns candidates down
+  // before the sight lines, and the samples are those made without it, unless the audit finds
+  // it turned down a candidate that would have been kept.
+  const Apartment& a = apartment();
+  PairOptions off = fullSizeOptions(), on = off;
+  on.screenFrameMargin = 0.03;
+  const PairGenerator withoutBound(a.scene, a.caster, a.sampler, off);
+  const PairGenerator withBound(a.scene, a.caster, a.sampler, on);
+  size_t turnedDown = 0;
+  for (int i = 0; i < 12; ++i) {
+    GenerationCost c0, c1;
+    const auto s0 = withoutBound.generate(4, i, &c0);
+    const auto s1 = withBound.generate(4, i, &c1);
+    EXPECT_EQ(c0.candidateFunnel[0].entered, 0u) << "index " << i;
+    EXPECT_GT(c1.candidateFunnel[0].entered, 0u) << "index " << i;
+    EXPECT_EQ(c1.candidateFunnel[0].entered, c0.candidateFunnel[1].entered) << "index " << i;
+    turnedDown += c1.candidateFunnel[0].rejected;
+    ASSERT_EQ(s0.has_value(), s1.has_value()) << "index " << i;
+    if (!s0 || c1.candidateFunnel[0].falseRejections > 0) continue;
+    for (int k = 0; k < s0->views(); ++k) {
+      EXPECT_EQ(s0->camera[k].t_cam2world, s1->camera[k].t_cam2world) << "index " << i;
+      EXPECT_EQ(s0->rgb[k].data, s1->rgb[k].data) << "index " << i;
+    }
+  }
+  EXPECT_GT(turnedDown, 10u) << "the bound turned nothing down: the test tests nothing";
 }
 
 TEST(RayCasterBatch, BatchedDepthEqualsOneViewAtATime) {
