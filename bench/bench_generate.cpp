@@ -1,8 +1,9 @@
 // bench_generate: for each scene, side by side in one run on the same threads:
 //   - the render limit: 1 / (two RGB+depth renders at the output resolution), with --jobs workers
 //     rendering views of that scene on one core each, as generate_pairs' workers do;
-//   - generate_pairs' accepted pairs/s with screening (the default; --runs runs, each judged
-//     against the limit measured just before and after it, and the median counts) and without,
+//   - generate_pairs' accepted pairs/s with screening (the default; --runs runs of indices enough
+//     for --pairs pairs, as a pilot run finds the scene's yield, each judged against the limit
+//     measured just before and after it, and the median counts) and without,
 //     the efficiency
 //     (pairs/s / limit), the stage table (screening, the full renders kept and those wasted on
 //     views that end in no sample, JPEG, covis, poses, writing) with the count of full renders
@@ -265,6 +266,20 @@ nlohmann::json generate(const SceneArg& arg, const std::string& out, int pairs, 
   return runGenerate(c);
 }
 
+// Indices enough for about `pairs` pairs, from the share of a pilot run's indices (a fifth as
+// many, screened, not timed) that found one: most scenes find one at every index, simple_room at
+// 37 %, and there 1000 indices would make 370 pairs, over which the scene's load and checks, paid
+// once a run, weigh three times what they do in a run of 1000 pairs. At most 10 times `pairs`.
+int indicesFor(const SceneArg& arg, const std::string& out, int pairs, unsigned threads,
+               const Screen& screen) {
+  const int pilot = std::max(100, pairs / 5);
+  const nlohmann::json one = generate(arg, out, pilot, threads, screen, false);
+  fs::remove_all(out);
+  const double yield = one["pairs_this_run"].get<double>() / pilot;
+  if (!(yield > 0)) return pairs;  // skipped: the runs say why
+  return static_cast<int>(std::min(10.0 * pairs, std::ceil(pairs / std::min(1.0, yield))));
+}
+
 // The run's figures as the Markdown tables of docs/benchmarks.md: rates, then the stage table.
 void printStageTable(const nlohmann::json& results) {
   std::printf(
@@ -375,11 +390,12 @@ int main(int argc, char** argv) {
       // of the two: the machine's speed drifts by tens of percent over seconds, and a run and
       // its frame see the same spell. The run of median efficiency counts.
       const RenderProbe probe(scenes[s], 256);
+      const int indices = indicesFor(scenes[s], out + "-pilot", pairs, threads, screen);
       std::vector<FramedRun> framed;
       RenderLimit edge = probe.measure(threads);
       for (int run = 0; run < runs; ++run) {
         fs::remove_all(out);
-        nlohmann::json one = generate(scenes[s], out, pairs, threads, screen, false);
+        nlohmann::json one = generate(scenes[s], out, indices, threads, screen, false);
         const bool skipped = !one["skipped_scenes"].empty();
         const RenderLimit next = probe.measure(threads);
         framed.push_back({std::move(one), best(edge, next)});
@@ -415,7 +431,7 @@ int main(int argc, char** argv) {
                             std::max(1.0, sum["renders"]["kept"].get<double>());
       const double limitMs = 1e3 * limit.rgbDepthSeconds * threads;
       std::printf(
-          "%-22s %9zu tris  load %.2f s  build %.2f s  %.0f MB\n"
+          "%-22s %9zu tris  load %.2f s  build %.2f s  %.0f MB  %d indices\n"
           "    %7.1f pairs/s  limit %6.1f pairs/s  efficiency %.2f  unscreened %6.1f pairs/s "
           "(x%.2f)  acceptance %4.1f%%\n"
           "    screening turned down %.0f views, references and candidates (%.0f candidates "
@@ -426,7 +442,7 @@ int main(int argc, char** argv) {
           "    full renders: %.0f, %.0f kept, %.2f per pair; wasted: %.0f references, %.0f "
           "candidates\n",
           name.c_str(), stats["triangles"].get<size_t>(), stats["load_seconds"].get<double>(),
-          stats["build_seconds"].get<double>(), stats["bytes"].get<double>() / 1e6, rate,
+          stats["build_seconds"].get<double>(), stats["bytes"].get<double>() / 1e6, indices, rate,
           limit.pairsPerSecond(), rate / limit.pairsPerSecond(), plainRate, rate / plainRate,
           100 * sum["acceptance"].get<double>(), screening["screened"].get<double>(),
           screening["candidates_this_run"].get<double>(), sum["failed_pairs"].get<double>(),
@@ -460,6 +476,8 @@ int main(int argc, char** argv) {
                       .c_str());
       std::fflush(stdout);
       results.push_back({{"scene", name},
+                         {"indices", indices},
+                         {"pairs", sum["pairs_this_run"]},
                          {"pairs_per_second", rate},
                          {"limit_pairs_per_second", limit.pairsPerSecond()},
                          {"efficiency", rate / limit.pairsPerSecond()},
