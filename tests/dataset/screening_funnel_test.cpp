@@ -290,20 +290,34 @@ TEST(NoRenderWasted, AnUpperBoundIsJudgedWithThePlainEstimate) {
   EXPECT_LE(wrong * 50, rejected);
 }
 
+// The test room with one long wall left out: views through the gap see nothing there, so many
+// references lie near the valid-pixel bound.
+struct OpenRoom {
+  OpenRoom() : scene(load()), caster(scene.mesh), sampler(scene, caster, {}) {}
+  static Scene load() {
+    std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
+    boxes.erase(boxes.begin() + 5);
+    const std::string path = testing::scratchDir("open_room") + "/open_room.obj";
+    testing::writeBoxesObj(path, boxes);
+    Scene s = loadScene(path, {});
+    s.name = "open_room";
+    return s;
+  }
+  Scene scene;
+  RayCaster caster;
+  ViewpointSampler sampler;
+};
+
+const OpenRoom& openRoom() {
+  static const OpenRoom room;
+  return room;
+}
+
 TEST(NoRenderWasted, AReferenceNearTheValidBoundIsCheckedAtTheFinestStageFirst) {
-  // The test room with one long wall left out: views through the gap see nothing there, so many
-  // references lie near the valid-pixel bound.
-  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
-  boxes.erase(boxes.begin() + 5);
-  const std::string path = testing::scratchDir("open_room") + "/open_room.obj";
-  testing::writeBoxesObj(path, boxes);
-  Scene scene = loadScene(path, {});
-  scene.name = "open_room";
-  const RayCaster caster(scene.mesh);
-  const ViewpointSampler sampler(scene, caster, {});
+  const OpenRoom& room = openRoom();
   PairOptions o = fullSizeOptions();
   o.maxAttempts = 20;
-  const PairGenerator gen(scene, caster, sampler, o);
+  const PairGenerator gen(room.scene, room.caster, room.sampler, o);
   GenerationCost c;
   for (int i = 0; i < 150; ++i) {
     GenerationCost one;
@@ -326,18 +340,11 @@ TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
   // The open room again, one reference an index. A reference that fails its fine check with no
   // candidate drawn was checked at once (below the bound at its last stage); before, every
   // reference waited for a candidate to pass screening, and its candidates were wasted.
-  std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
-  boxes.erase(boxes.begin() + 5);
-  const std::string path = testing::scratchDir("open_room_eager") + "/open_room.obj";
-  testing::writeBoxesObj(path, boxes);
-  Scene scene = loadScene(path, {});
-  scene.name = "open_room";
-  const RayCaster caster(scene.mesh);
-  const ViewpointSampler sampler(scene, caster, {});
+  const OpenRoom& room = openRoom();
   PairOptions o = fullSizeOptions();
   o.maxAttempts = 20;
   o.maxReferences = 1;
-  const PairGenerator gen(scene, caster, sampler, o);
+  const PairGenerator gen(room.scene, room.caster, room.sampler, o);
   int failed = 0, failedAtOnce = 0;
   for (int i = 0; i < 300; ++i) {
     GenerationCost c;
