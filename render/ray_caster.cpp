@@ -8,6 +8,8 @@
 #include <cmath>
 #include <mutex>
 
+#include <omp.h>
+
 #include "render/embree.h"
 #include "render/packet_shading.h"
 #include "render/texture_pyramid.h"
@@ -255,6 +257,13 @@ int tilesDown(int height) {
   return (height + kTileH - 1) / kTileH;
 }
 
+// Whether `items` of work go in this thread alone: one item, or OpenMP allowed one thread (as in
+// generate_pairs' workers). A parallel region costs about 0.4 us even with one thread, a quarter
+// of an 8x8 render's time, and screening makes dozens of those a pair.
+bool inThisThread(long items) {
+  return items <= 1 || omp_get_max_threads() == 1;
+}
+
 }  // namespace
 
 void RayCaster::renderDepth(const Camera& camera, ImageF& depth) const {
@@ -267,12 +276,18 @@ void RayCaster::renderDepth(const Camera& camera, ImageF& depth) const {
   const bool largeMesh = impl_->largeMesh;
   // A row of tiles at a time: threads on neighbouring tiles of one row would write the same cache
   // lines of the output (false sharing).
-#pragma omp parallel for schedule(dynamic, tilesX)
-  for (int tile = 0; tile < tilesX * tilesY; ++tile) {
+  const auto render = [&](int tile) {
     embree::Query query = primaryQuery(W, H, largeMesh);
     depthTile(scene, P, (tile % tilesX) * kTileW, (tile / tilesX) * kTileH, W, H, query,
               depth.data.data());
+  };
+  const int tiles = tilesX * tilesY;
+  if (inThisThread(tiles)) {
+    for (int tile = 0; tile < tiles; ++tile) render(tile);
+    return;
   }
+#pragma omp parallel for schedule(dynamic, tilesX)
+  for (int tile = 0; tile < tiles; ++tile) render(tile);
 }
 
 void RayCaster::renderDepthBatch(const Camera* cameras, ImageF* depths, size_t count) const {
@@ -287,14 +302,19 @@ void RayCaster::renderDepthBatch(const Camera* cameras, ImageF* depths, size_t c
   }
   RTCScene scene = impl_->scene;
   const bool largeMesh = impl_->largeMesh;
-#pragma omp parallel for schedule(dynamic, 1)
-  for (size_t k = 0; k < count; ++k) {
+  const auto render = [&](size_t k) {
     const int W = cameras[k].width, H = cameras[k].height, tilesX = tilesAcross(W);
     embree::Query query = primaryQuery(W, H, largeMesh);
     for (int tile = 0; tile < tilesX * tilesDown(H); ++tile)
       depthTile(scene, rays[k], (tile % tilesX) * kTileW, (tile / tilesX) * kTileH, W, H, query,
                 depths[k].data.data());
+  };
+  if (inThisThread(static_cast<long>(count))) {
+    for (size_t k = 0; k < count; ++k) render(k);
+    return;
   }
+#pragma omp parallel for schedule(dynamic, 1)
+  for (size_t k = 0; k < count; ++k) render(k);
 }
 
 void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame& frame) const {
@@ -312,9 +332,16 @@ void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame
   const PacketLight light =
       packetLight(options.shading, static_cast<float>(1.0 / (camera.K(0, 0) * ss)));
   const int tilesX = (W + kTileW - 1) / kTileW, tilesY = (H + kTileH - 1) / kTileH;
-#pragma omp parallel for schedule(dynamic, tilesX)  // rows of tiles, as renderDepth
-  for (int tile = 0; tile < tilesX * tilesY; ++tile)
+  const auto render = [&](int tile) {
     impl_->renderTile(P, options, light, (tile % tilesX) * kTileW, (tile / tilesX) * kTileH, frame);
+  };
+  const int tiles = tilesX * tilesY;
+  if (inThisThread(tiles)) {
+    for (int tile = 0; tile < tiles; ++tile) render(tile);
+    return;
+  }
+#pragma omp parallel for schedule(dynamic, tilesX)  // rows of tiles, as renderDepth
+  for (int tile = 0; tile < tiles; ++tile) render(tile);
 }
 
 // One 8x8 tile: the centre rays give the geometry maps (and the colour without supersampling);
@@ -539,8 +566,7 @@ void RayCaster::occluded(const Ray* rays, uint8_t* blocked, size_t count) const 
 void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {
   RTCScene scene = impl_->scene;
   const long packets = static_cast<long>((count + kPacket - 1) / kPacket);
-#pragma omp parallel for schedule(static, 32)
-  for (long p = 0; p < packets; ++p) {
+  const auto cast = [&](long p) {
     embree::Query query;
     alignas(32) RTCRayHit8 rh;
     alignas(32) int valid[kPacket];
@@ -562,7 +588,13 @@ void RayCaster::intersect(const Ray* rays, Hit* hits, size_t count) const {
       h.triangle = static_cast<int32_t>(rh.hit.primID[i]);
       h.normal = Eigen::Vector3f(rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]).normalized();
     }
+  };
+  if (inThisThread(packets)) {
+    for (long p = 0; p < packets; ++p) cast(p);
+    return;
   }
+#pragma omp parallel for schedule(static, 32)
+  for (long p = 0; p < packets; ++p) cast(p);
 }
 
 double validFraction(const ImageF& depth) {

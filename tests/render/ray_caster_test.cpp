@@ -1,6 +1,7 @@
 #include "render/ray_caster.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include "render/render_albedo.h"
 #include "util/random.h"
@@ -110,6 +111,46 @@ TEST(RayCaster, BoxSeenFromInside) {
       ASSERT_LT(n.cast<double>().dot(dir), 0.0);
     }
   }
+}
+
+TEST(RayCaster, OneThreadRendersWhatSeveralDo) {
+  // With OpenMP allowed one thread (generate_pairs' workers), every call runs in the calling
+  // thread without a parallel region; the results must be those of several threads.
+  const Mesh mesh = insideCube();
+  RayCaster caster(mesh);
+  std::vector<Camera> cams;
+  for (int k = 0; k < 5; ++k) {
+    Camera cam = Camera::fromHfov(8 + 12 * k, 8 + 8 * k, 90.0);  // one tile up to several rows
+    cam.lookAt({0.1f * k, 0, 0}, {1, 0.3f * k, 0.2f}, {0, 0, 1});
+    cams.push_back(cam);
+  }
+  std::vector<Ray> rays;
+  for (int k = 0; k < 37; ++k)
+    rays.push_back({{0, 0, 0}, {std::cos(0.3f * k), std::sin(0.3f * k), 0.1f * (k % 5)}, 0, 1e30f});
+  const auto everything = [&](int threads) {
+    const int before = omp_get_max_threads();
+    omp_set_num_threads(threads);
+    std::vector<std::vector<float>> out;
+    for (const Camera& cam : cams) {
+      ImageF depth;
+      caster.renderDepth(cam, depth);
+      out.push_back(depth.data);
+      Frame frame;
+      caster.render(cam, RenderOptions{}, frame);
+      out.push_back(frame.depth.data);
+      out.emplace_back(frame.rgb.data.begin(), frame.rgb.data.end());
+    }
+    std::vector<ImageF> batch(cams.size());
+    caster.renderDepthBatch(cams.data(), batch.data(), cams.size());
+    for (const ImageF& d : batch) out.push_back(d.data);
+    std::vector<Hit> hits(rays.size());
+    caster.intersect(rays.data(), hits.data(), rays.size());
+    for (const Hit& h : hits) out.push_back({h.t, static_cast<float>(h.triangle)});
+    omp_set_num_threads(before);
+    return out;
+  };
+  EXPECT_EQ(everything(1), everything(2));
+  EXPECT_EQ(everything(1), everything(3));
 }
 
 TEST(RayCaster, MissesGiveZeroDepthAndNegativeIds) {
