@@ -25,14 +25,23 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The shipped apartment (four rooms behind walls and doors), with its BVH and sampler.
-struct Apartment {
-  Apartment() : scene(load()), caster(scene.mesh), sampler(scene, caster, {}) {}
-  static Scene load() {
-    Scene s = loadScene(testing::sourceDir() + "/scenes/apartment/apartment.obj", {});
-    s.name = "apartment";
+// A scene with its BVH and sampler, named.
+struct Loaded {
+  Loaded(const std::string& path, const std::string& name)
+      : scene(load(path, name)), caster(scene.mesh), sampler(scene, caster, {}) {}
+  static Scene load(const std::string& path, const std::string& name) {
+    Scene s = loadScene(path, {});
+    s.name = name;
     return s;
   }
+  Scene scene;
+  RayCaster caster;
+  ViewpointSampler sampler;
+};
+
+// The shipped apartment (four rooms behind walls and doors).
+struct Apartment : Loaded {
+  Apartment() : Loaded(testing::sourceDir() + "/scenes/apartment/apartment.obj", "apartment") {}
   // The summed cost of indices 0..n-1, and the covis of their samples.
   GenerationCost run(const PairOptions& o, int n, std::vector<double>* covis = nullptr) const {
     const PairGenerator gen(scene, caster, sampler, o);
@@ -45,9 +54,6 @@ struct Apartment {
     }
     return total;
   }
-  Scene scene;
-  RayCaster caster;
-  ViewpointSampler sampler;
 };
 
 const Apartment& apartment() {
@@ -292,20 +298,15 @@ TEST(NoRenderWasted, AnUpperBoundIsJudgedWithThePlainEstimate) {
 
 // The test room with one long wall left out: views through the gap see nothing there, so many
 // references lie near the valid-pixel bound.
-struct OpenRoom {
-  OpenRoom() : scene(load()), caster(scene.mesh), sampler(scene, caster, {}) {}
-  static Scene load() {
+struct OpenRoom : Loaded {
+  OpenRoom() : Loaded(write(), "open_room") {}
+  static std::string write() {
     std::vector<testing::BoxSpec> boxes = testing::roomBoxes();
     boxes.erase(boxes.begin() + 5);
     const std::string path = testing::scratchDir("open_room") + "/open_room.obj";
     testing::writeBoxesObj(path, boxes);
-    Scene s = loadScene(path, {});
-    s.name = "open_room";
-    return s;
+    return path;
   }
-  Scene scene;
-  RayCaster caster;
-  ViewpointSampler sampler;
 };
 
 const OpenRoom& openRoom() {
