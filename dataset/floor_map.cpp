@@ -323,23 +323,36 @@ FloorMap::FloorMap(const Scene& scene, const RayCaster& caster, const FloorOptio
 
   // 3. Connected regions large enough to walk in.
   const std::vector<bool> keep = inLargeRegions(open, grid, o);
-  cellPoints_.assign(grid.cells(), {});
+  std::vector<size_t> cells;  // of each point
   for (size_t k = 0; k < open.size(); ++k) {
     if (!keep[k]) continue;
-    cellPoints_[open[k].cell].push_back(static_cast<int>(points_.size()));
     points_.push_back(open[k].point);
+    cells.push_back(open[k].cell);
   }
+  indexByCell(cells, grid.cells());
   measureEmptyRings();
+}
+
+// The points again, cell by cell (in points_' order within a cell), with where each cell's run
+// starts: snap reads a cell's points from one place.
+void FloorMap::indexByCell(const std::vector<size_t>& cellOf, size_t cells) {
+  cellStart_.assign(cells + 1, 0);
+  for (size_t c : cellOf) ++cellStart_[c + 1];
+  for (size_t c = 0; c < cells; ++c) cellStart_[c + 1] += cellStart_[c];
+  std::vector<uint32_t> next(cellStart_.begin(), cellStart_.end() - 1);
+  byCell_.resize(points_.size());
+  for (size_t k = 0; k < points_.size(); ++k) byCell_[next[cellOf[k]]++] = points_[k];
 }
 
 // Chebyshev distances to the nearest cell with points: the two-pass chamfer transform with
 // unit steps to all eight neighbours, which is exact for that metric.
 void FloorMap::measureEmptyRings() {
   constexpr int kFar = std::numeric_limits<int>::max() / 2;
-  emptyRings_.assign(cellPoints_.size(), kFar);
-  for (size_t c = 0; c < cellPoints_.size(); ++c)
-    if (!cellPoints_[c].empty()) emptyRings_[c] = 0;
-  auto at = [&](int i, int j) -> int& { return emptyRings_[static_cast<size_t>(i) * nB_ + j]; };
+  const size_t cells = cellStart_.size() - 1;
+  std::vector<int> rings(cells, kFar);
+  for (size_t c = 0; c < cells; ++c)
+    if (cellStart_[c + 1] > cellStart_[c]) rings[c] = 0;
+  auto at = [&](int i, int j) -> int& { return rings[static_cast<size_t>(i) * nB_ + j]; };
   auto relax = [&](int i, int j, int di, int dj) {
     const int ni = i + di, nj = j + dj;
     if (ni >= 0 && ni < nA_ && nj >= 0 && nj < nB_) at(i, j) = std::min(at(i, j), at(ni, nj) + 1);
@@ -351,6 +364,10 @@ void FloorMap::measureEmptyRings() {
   for (int i = nA_ - 1; i >= 0; --i)
     for (int j = nB_ - 1; j >= 0; --j)
       for (const auto& [di, dj] : {std::pair{1, 1}, {1, 0}, {1, -1}, {0, 1}}) relax(i, j, di, dj);
+  // Capped: a ring below the true one only starts snap's search early.
+  emptyRings_.resize(cells);
+  for (size_t c = 0; c < cells; ++c)
+    emptyRings_[c] = static_cast<uint16_t>(std::min<int>(rings[c], kMaxRing));
 }
 
 double FloorMap::area() const {
@@ -381,19 +398,17 @@ std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double r
   float best = std::numeric_limits<float>::infinity();
   double beyond =
       best;  // (|best| + kSlack)^2: cells whose centres lie farther hold no nearer point
-  int bestIndex = -1;
-  size_t bestOrder = 0;  // cell * (max list length) order, as the full scan meets points
+  // Where the best point lies in byCell_, which is the full scan's order of meeting points.
+  int64_t bestIndex = -1;
   const auto visit = [&](int i, int j) {
     if (i < 0 || i >= nA_ || j < 0 || j >= nB_) return;
     const double da = (i + 0.5) * cell_ - a, db = (j + 0.5) * cell_ - b;
     if (da * da + db * db > beyond) return;
     const size_t cell = static_cast<size_t>(i) * nB_ + j;
-    const std::vector<int>& list = cellPoints_[cell];
-    for (size_t pos = 0; pos < list.size(); ++pos) {
-      const float d = (points_[list[pos]] - p).squaredNorm();
-      const size_t order = cell * points_.size() + pos;
-      if (d < best || (d == best && order < bestOrder)) {
-        best = d, bestIndex = list[pos], bestOrder = order;
+    for (uint32_t k = cellStart_[cell]; k < cellStart_[cell + 1]; ++k) {
+      const float d = (byCell_[k] - p).squaredNorm();
+      if (d < best || (d == best && k < bestIndex)) {
+        best = d, bestIndex = k;
         beyond = (std::sqrt(best) + kSlack) * (std::sqrt(best) + kSlack);
       }
     }
@@ -425,7 +440,7 @@ std::optional<Eigen::Vector3f> FloorMap::snap(const Eigen::Vector3f& p, double r
     }
   }
   if (bestIndex < 0 || best > radius * radius) return std::nullopt;
-  return points_[bestIndex];
+  return byCell_[bestIndex];
 }
 
 }  // namespace paircast

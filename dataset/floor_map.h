@@ -15,6 +15,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -59,11 +60,16 @@ class FloorMap {
   Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();  // (a, b) of cell (0, 0)'s corner
   int nA_ = 0, nB_ = 0;
   bool hasCeiling_ = false;
-  std::vector<Eigen::Vector3f> points_;       // walkable points, cell centres on the floor
-  std::vector<std::vector<int>> cellPoints_;  // [nA * nB] indices into points_
-  // [nA * nB] the ring (Chebyshev distance in cells) of the nearest cell with points, so that
-  // snap starts its search there
-  std::vector<int> emptyRings_;
+  std::vector<Eigen::Vector3f> points_;  // walkable points, cell centres on the floor
+  // The same points cell by cell: cell c's are byCell_[cellStart_[c], cellStart_[c + 1]). Small
+  // and in one place, as snap visits dozens of cells for each step of a walk.
+  std::vector<Eigen::Vector3f> byCell_;
+  std::vector<uint32_t> cellStart_;  // [nA * nB + 1]
+  // [nA * nB] the ring (Chebyshev distance in cells) of the nearest cell with points, at most
+  // kMaxRing, so that snap starts its search there
+  static constexpr int kMaxRing = 65535;
+  std::vector<uint16_t> emptyRings_;
+  void indexByCell(const std::vector<size_t>& cellOf, size_t cells);
   void measureEmptyRings();
 };
 
