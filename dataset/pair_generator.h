@@ -118,6 +118,9 @@ struct PairOptions {
 
 // The screening resolution in use (kAutoScreen resolved), 0 when off.
 int screenResolution(const PairOptions& options);
+// The fewest of n pixels whose share (count / n, in double) is not below `share`: 0 to n + 1,
+// where n + 1 means that no count passes.
+long fewestToPass(double share, long n);
 
 // One screening stage: the side of its depth maps and how far outside the band its covis
 // estimate may fall.
@@ -257,6 +260,7 @@ class PairGenerator {
     CovisOptions covis;  // for the estimate against the lower bound (screenScaleTolerance)
   };
   bool screenReference(View& v, GenerationCost& cost) const;
+  bool referenceFailsGlance(size_t stage, const View& v, GenerationCost& cost) const;
   bool frameBound() const;
   bool outOfFrame(const View& ref, const View& v, GenerationCost& cost) const;
   bool outOfSight(const View& ref, const View& v, GenerationCost& cost) const;

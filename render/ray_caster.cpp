@@ -317,6 +317,27 @@ void RayCaster::renderDepthBatch(const Camera* cameras, ImageF* depths, size_t c
   for (size_t k = 0; k < count; ++k) render(k);
 }
 
+bool RayCaster::hitsAtLeast(const Camera& camera, long count) const {
+  PAIRCAST_CHECK(camera.width > 0 && camera.height > 0);
+  const PrimaryRays P(camera);
+  const int W = camera.width, H = camera.height;
+  embree::Query query = primaryQuery(W, H, impl_->largeMesh);
+  RTCRayHit8 rh;
+  alignas(32) int valid[kPacket];
+  long hits = 0, left = static_cast<long>(W) * H;
+  for (int y = 0; y < H; ++y) {
+    for (int x0 = 0; x0 < W; x0 += kPacket) {
+      if (hits >= count) return true;
+      if (hits + left < count) return false;
+      setupPacket(P, x0, y, W, 0.5f, 0.5f, rh, valid);
+      query.intersect8(valid, impl_->scene, rh);
+      for (int i = 0; i < kPacket && x0 + i < W; ++i, --left)
+        hits += rh.hit.geomID[i] != RTC_INVALID_GEOMETRY_ID && rh.ray.tfar[i] > 0.0f;
+    }
+  }
+  return hits >= count;
+}
+
 void RayCaster::render(const Camera& camera, const RenderOptions& options, Frame& frame) const {
   PAIRCAST_CHECK(camera.width > 0 && camera.height > 0);
   const int W = camera.width, H = camera.height;

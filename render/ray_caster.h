@@ -40,6 +40,9 @@ class RayCaster {
   // Z-depth of many small views in one parallel pass over all their tiles: the per-call set-up
   // (thread team, tile split) is paid once, not per view. depths[k] is resized to cameras[k].
   void renderDepthBatch(const Camera* cameras, ImageF* depths, size_t count) const;
+  // Whether at least `count` of the camera's pixels see the scene (depth > 0): pixel rows are
+  // cast top-down, a packet at a time, only until that is decided. On the calling thread.
+  bool hitsAtLeast(const Camera& camera, long count) const;
   // Everything the options ask for. Buffers in `frame` are reused when the size matches.
   void render(const Camera& camera, const RenderOptions& options, Frame& frame) const;
   // Arbitrary rays, in parallel.

@@ -209,6 +209,24 @@ TEST(NoRenderWasted, TheConfirmStageIsTwiceTheLastWhenItFits) {
   EXPECT_LT(with.candidateFunnel[5].entered, with.candidateFunnel[4].entered);
 }
 
+TEST(ScreenPlan, FewestToPassIsTheCountAtWhichTheShareStopsFailing) {
+  // The reference glance counts hits only up to this number, so it must match failsStage's test
+  // (count / n < bound fails) at every count, bounds that round badly in double included (0.7 -
+  // 0.15 is 0.5499999999999999).
+  for (long n : {1L, 7L, 64L, 100L, 256L, 1000L}) {
+    for (double share : {-0.1, 0.0, 0.7 - 0.15, 0.55, 0.5, 1.0 / 3.0, 0.695, 0.7, 1.0, 1.2}) {
+      const long k = fewestToPass(share, n);
+      ASSERT_GE(k, 0);
+      ASSERT_LE(k, n + 1);
+      for (long c = 0; c <= n; ++c)
+        EXPECT_EQ(static_cast<double>(c) / n < share, c < k) << n << " " << share << " " << c;
+    }
+  }
+  EXPECT_EQ(fewestToPass(1.2, 64), 65);  // no count passes
+  EXPECT_EQ(fewestToPass(0.0, 64), 0);
+  EXPECT_EQ(fewestToPass(0.7 - 0.15, 64), 36);
+}
+
 TEST(ScreenPlan, ReferencesTakeTheirPointsFrom32AndCheckTheFinestOnlyNearTheBound) {
   PairOptions o;  // 256: the glance (8), 16, 32, 64
   ScreenPlan plan = screenPlan(o);

@@ -153,6 +153,32 @@ TEST(RayCaster, OneThreadRendersWhatSeveralDo) {
   EXPECT_EQ(everything(1), everything(3));
 }
 
+TEST(RayCaster, HitsAtLeastAgreesWithTheDepthMap) {
+  // A square that fills part of each view: hitsAtLeast(c) must say whether the depth map has c
+  // valid pixels or more, for counts around that number, whatever the size (rows of a partial
+  // packet included) and wherever the hits lie.
+  const Mesh mesh = planeMesh(4.0f, 1.5f);
+  RayCaster caster(mesh);
+  Rng rng(5);
+  int partial = 0;
+  for (int k = 0; k < 60; ++k) {
+    const int w = 1 + static_cast<int>(rng.below(20)), h = 1 + static_cast<int>(rng.below(12));
+    Camera cam = Camera::fromHfov(w, h, 60.0 + 60.0 * rng.uniform());
+    const Eigen::Vector3d at(rng.uniform(-3, 3), rng.uniform(-3, 3), 4.0);
+    cam.lookAt({0, 0, 0}, at, {0, 1, 0});
+    ImageF depth;
+    caster.renderDepth(cam, depth);
+    long valid = 0;
+    for (float d : depth.data) valid += d > 0.0f;
+    const long n = static_cast<long>(w) * h;
+    partial += valid > 0 && valid < n;
+    for (long count : {0L, 1L, valid - 1, valid, valid + 1, n, n + 1})
+      EXPECT_EQ(caster.hitsAtLeast(cam, count), valid >= count)
+          << w << "x" << h << " valid " << valid << " count " << count;
+  }
+  EXPECT_GT(partial, 20);  // the cases that can stop early either way
+}
+
 TEST(RayCaster, MissesGiveZeroDepthAndNegativeIds) {
   Mesh mesh;
   int mat = mesh.addMaterial(Material{});
