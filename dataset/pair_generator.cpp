@@ -537,23 +537,25 @@ bool PairGenerator::inBand(double covis) const {
                          : covis >= options_.minCovis && covis <= options_.maxCovis;
 }
 
-// A reference's low-resolution stages (valid pixels only); whether it passed.
+// A reference's low-resolution stages (valid pixels only); whether it passed. Only the stage its
+// points come from keeps a depth map: the others count its valid pixels.
 bool PairGenerator::screenReference(View& v, GenerationCost& cost) const {
   for (size_t k = 0; k < plan_.reference.size(); ++k) {
     const size_t stage = plan_.reference[k];
     if (funnelTest(cost.referenceFunnel[k], nullptr, v, cost, [&] {
-          return screens_[stage].validOnly ? referenceFailsGlance(stage, v, cost)
-                                           : failsStage(stage, nullptr, v, cost);
+          return stage == pointsStage_ ? failsStage(stage, nullptr, v, cost)
+                                       : tooFewValid(stage, v, cost);
         }))
       return false;
   }
   return true;
 }
 
-// A reference's glance, as failsStage judges it, with its pixels cast only until the verdict is
-// known: no later stage needs its depth map. Most references that fail it (93 % on an open room)
-// look over the walls, so their top rows decide it at half the rays.
-bool PairGenerator::referenceFailsGlance(size_t stage, const View& v, GenerationCost& cost) const {
+// Whether v has too few valid pixels at the stage, as failsStage judges it, with its pixels cast
+// only until the verdict is known and no depth map kept (a stage that needs it later renders
+// it). Most references that fail the glance (93 % on an open room) look over the walls, so their
+// top rows decide it at half the rays.
+bool PairGenerator::tooFewValid(size_t stage, const View& v, GenerationCost& cost) const {
   const Camera camera = stageCamera(stage, v);
   const auto t0 = Clock::now();
   const bool enough = caster_.hitsAtLeast(

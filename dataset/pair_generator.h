@@ -260,7 +260,7 @@ class PairGenerator {
     CovisOptions covis;  // for the estimate against the lower bound (screenScaleTolerance)
   };
   bool screenReference(View& v, GenerationCost& cost) const;
-  bool referenceFailsGlance(size_t stage, const View& v, GenerationCost& cost) const;
+  bool tooFewValid(size_t stage, const View& v, GenerationCost& cost) const;
   bool frameBound() const;
   bool outOfFrame(const View& ref, const View& v, GenerationCost& cost) const;
   bool outOfSight(const View& ref, const View& v, GenerationCost& cost) const;
