@@ -28,6 +28,8 @@ constexpr size_t kBoundSlot = 0, kSightSlot = 1, kFirstStageSlot = 2;
 // A sight line stops short of its point by this share of its length, or this many metres if more,
 // so that the surface the point lies on does not block it.
 constexpr float kSightRelTol = 0.02f, kSightAbsTol = 0.05f;
+// Sight lines are cast this many at a time (RayCaster::occluded's packet).
+constexpr size_t kSightPacket = 8;
 
 }  // namespace
 
@@ -640,12 +642,21 @@ bool PairGenerator::outOfSight(const View& ref, const View& v, GenerationCost& c
     const float length = (p - eye).norm();
     rays.push_back({eye, p - eye, 0.0f, 1.0f - std::max(kSightRelTol, kSightAbsTol / length)});
   }
-  std::vector<uint8_t> blocked(rays.size());
-  caster_.occluded(rays.data(), blocked.data(), rays.size());
-  const size_t seen = rays.size() - std::count(blocked.begin(), blocked.end(), uint8_t{1});
+  // A packet of rays at a time, until enough are seen to pass: a candidate that passes needs no
+  // exact share, one that is turned down casts them all (its share is recorded).
+  const double needed = options_.minCovis - options_.screenSightMargin;
+  const size_t enough = points.empty() ? (needed <= 0 ? 0 : 1)
+                                       : static_cast<size_t>(fewestToPass(needed, points.size()));
+  size_t seen = 0;
+  uint8_t blocked[kSightPacket];
+  for (size_t k0 = 0; k0 < rays.size() && seen < enough; k0 += kSightPacket) {
+    const size_t n = std::min(kSightPacket, rays.size() - k0);
+    caster_.occluded(rays.data() + k0, blocked, n);
+    seen += n - std::count(blocked, blocked + n, uint8_t{1});
+  }
   const double share = points.empty() ? 0.0 : static_cast<double>(seen) / points.size();
   cost.screenSeconds += since(t0);
-  if (share >= options_.minCovis - options_.screenSightMargin) return false;
+  if (seen >= enough) return false;
   cost.candidateCovis.push_back(static_cast<float>(share));
   return true;
 }
