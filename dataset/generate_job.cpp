@@ -428,7 +428,9 @@ void GenerateRun::finishItem(size_t i, Result r) {
   }
   std::lock_guard<std::mutex> lock(mu_);
   results_[i] = std::move(r);
-  produced_.notify_all();
+  // The writer waits for item nextToWrite_ alone: waking it for another would only switch it in
+  // and out of a core the workers need.
+  if (i == nextToWrite_) produced_.notify_all();
 }
 
 // One sample: generated (or taken from the scene's check), encoded, its CroCo files written; the
