@@ -33,6 +33,8 @@ void writeCrocoSample(const std::string& stem, const EncodedPair& enc,
     }
     if (!enc.covisPng.empty())
       writeFileAtomic(view + "_covis.png", bytesView(enc.covisPng[k]), Durability::NoSync);
+    if (!enc.flowFlo.empty())
+      writeFileAtomic(view + "_flow.flo", bytesView(enc.flowFlo[k]), Durability::NoSync);
   }
   for (int k = 0; k < views; ++k)
     writeFileAtomic(stem + "_" + std::to_string(k + 1) + ".jpeg", bytesView(enc.jpeg[k]),

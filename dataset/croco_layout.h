@@ -1,6 +1,6 @@
 // CroCo's folder layout (its habitat_release), shared by generate_pairs and its --from-metadata
 // replay: <scene>/<idx:08>_<k>.jpeg for views k = 1..N, with _<k>_depth.exr,
-// _<k>_camera_params.json and _<k>_covis.png when asked for; pairs.txt lists the (1, k) pairs.
+// _<k>_camera_params.json, _<k>_covis.png and _<k>_flow.flo when asked for; pairs.txt lists the (1, k) pairs.
 #pragma once
 
 #include <string>
@@ -16,7 +16,8 @@ std::string crocoIndex(uint64_t index);
 
 // Writes one sample's files under `stem` (<dir>/<idx:08>), each atomically (no fsync: a kill
 // cannot lose them). The last view's image is written last, so that its presence means the
-// sample is whole. Depth and camera files come with `enc.depthExr`, masks with `enc.covisPng`.
+// sample is whole. Depth and camera files come with `enc.depthExr`, masks with `enc.covisPng`,
+// flow with `enc.flowFlo`.
 void writeCrocoSample(const std::string& stem, const EncodedPair& enc,
                       const std::vector<Camera>& cameras);
 

@@ -495,7 +495,7 @@ void GenerateRun::loadScene(SceneJob& job) {
                {"bytes", residentBytes() - std::min(before, residentBytes())},
                {"warnings", job.scene->warnings}};
   PairOptions po = cfg_.pair;
-  po.keepDepth = cfg_.saveDepth;
+  po.keepDepth = cfg_.saveDepth || cfg_.saveFlow;
   job.generator = std::make_unique<PairGenerator>(*job.scene, *job.caster, *job.sampler, po);
 }
 
@@ -559,7 +559,7 @@ Result GenerateRun::failedResult(const SceneJob& job, const Item& item,
 Result GenerateRun::keptResult(const SceneJob& job, const Item& item, const PairSample& sample,
                                const GenerationCost& spent) {
   auto t0 = Clock::now();
-  EncodedPair enc = encodePair(sample, cfg_.saveDepth, cfg_.jpegQuality);
+  EncodedPair enc = encodePair(sample, cfg_.saveDepth, cfg_.jpegQuality, cfg_.saveFlow);
   enc.record["candidate_covis"] = sample.candidateCovis;
   enc.record["screened"] = spent.screened;
   enc.record["up"] = job.scene->up == UpAxis::Z ? "z" : "y";  // resolved (--up auto)
@@ -672,6 +672,7 @@ void GenerateRun::writeShardIndex(const nlohmann::json& perScene) {
                                 {"pairs_per_scene", perScene},
                                 {"covis_histogram", histogram_},
                                 {"depth", cfg_.saveDepth},
+                                {"flow", cfg_.saveFlow},
                                 {"covis_masks", cfg_.pair.covisMasks},
                                 {"resolution", cfg_.pair.resolution},
                                 {"hfov", cfg_.pair.hfov},
@@ -745,6 +746,7 @@ void GenerateRun::writeSceneMetadata(const SceneJob& job, const std::string& up,
                                {"views_count", cfg_.pair.views},
                                {"size", cfg_.pairsPerScene},
                                {"generate_depth", cfg_.saveDepth},
+                               {"generate_flow", cfg_.saveFlow},
                                {"resolution", cfg_.pair.resolution},
                                {"hfov", cfg_.pair.hfov},
                                {"minimum_covisibility", cfg_.pair.minCovis},

@@ -29,6 +29,9 @@ struct GenerateConfig {
   bool shards = true;      // pairs-NNNNNN.tar + index.json
   bool croco = false;      // <scene>/<idx>_1.jpeg ... + metadata.json + pairs.txt
   bool saveDepth = false;  // also z-depth EXR (and camera JSON in the CroCo layout)
+  // Also each view's optical flow (.flo, pixels) into view flowTarget(k): view 1's into view 2,
+  // every other view's into view 1 (shard/shard_format.h).
+  bool saveFlow = false;
   int shardSize = 1000;    // pairs per shard
   uint64_t shardMaxBytes = 1ull << 30;
   int jpegQuality = 90;

@@ -8,9 +8,11 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "covis/flow.h"
 #include "dataset/habitat_frame.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/flo_io.h"
 #include "util/image_io.h"
 
 namespace paircast {
@@ -45,16 +47,18 @@ nlohmann::json sampleRecord(const PairSample& s) {
   return recordToJson(sampleRecordOf(s));
 }
 
-EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality) {
+EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality, bool withFlow) {
   EncodedPair e;
   e.key = sampleKey(s.scene, s.index);
   for (int k = 0; k < s.views(); ++k) {
     e.jpeg.push_back(encodeImage(s.rgb[k], "jpg", jpegQuality));
-    if (withDepth) {
-      PAIRCAST_CHECK_MSG(!s.depth[k].data.empty(), "depth requested but not kept");
-      e.depthExr.push_back(encodeExr(s.depth[k]));
-    }
+    if (withDepth || withFlow)
+      PAIRCAST_CHECK_MSG(!s.depth[k].data.empty(), "depth or flow requested but depth not kept");
+    if (withDepth) e.depthExr.push_back(encodeExr(s.depth[k]));
     if (!s.covisMask.empty()) e.covisPng.push_back(encodeImage(s.covisMask[k], "png", 0));
+    if (withFlow)
+      e.flowFlo.push_back(
+          encodeFlo(opticalFlow(s.camera[k], s.depth[k], s.camera[flowTarget(k)])));
   }
   e.record = sampleRecord(s);
   return e;
@@ -113,6 +117,9 @@ void ShardWriter::add(const EncodedPair& p) {
     if (k < p.covisPng.size())
       addFile(memberName(p.key, MemberKind::kCovisMask, view), p.covisPng[k].data(),
               p.covisPng[k].size());
+    if (k < p.flowFlo.size())
+      addFile(memberName(p.key, MemberKind::kFlow, view), p.flowFlo[k].data(),
+              p.flowFlo[k].size());
   }
   const std::string json = p.record.dump();
   addFile(memberName(p.key, MemberKind::kRecord), json.data(), json.size());
@@ -147,6 +154,7 @@ size_t readShard(const std::string& path, const std::function<void(ShardSample&&
     out.jpeg = readAll(s.image);
     out.depthExr = readAll(s.depth);
     out.covisPng = readAll(s.covisMask);
+    out.flowFlo = readAll(s.flow);
     out.record = s.json;
     onSample(std::move(out));
   }

@@ -28,9 +28,12 @@ struct EncodedPair {
   std::vector<Bytes> jpeg;      // [views]
   std::vector<Bytes> depthExr;  // [views], or empty without depth
   std::vector<Bytes> covisPng;  // [views], or empty without masks
+  std::vector<Bytes> flowFlo;   // [views] .flo (into view flowTarget(k)), or empty without flow
   nlohmann::json record;
 };
-EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality);
+// withFlow: each view's optical flow (covis/flow.h) into view flowTarget(k), from its depth.
+EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality,
+                       bool withFlow = false);
 
 // Writes one shard to a temporary name and renames it into place on close(), so a shard
 // under its final name is always whole. Throws paircast::Error naming the shard on failure
@@ -61,6 +64,7 @@ struct ShardSample {
   std::vector<Bytes> jpeg;      // [views]
   std::vector<Bytes> depthExr;  // [views] when the shard has depth, else empty
   std::vector<Bytes> covisPng;  // [views] when the shard has masks, else empty
+  std::vector<Bytes> flowFlo;   // [views] when the shard has flow, else empty
   nlohmann::json record;
 };
 

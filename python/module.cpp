@@ -21,6 +21,7 @@
 #include <thread>
 
 #include "covis/covisibility.h"
+#include "covis/flow.h"
 #include "dataset/pair_stream.h"
 #include "dataset/shard.h"
 #include "render/ray_caster.h"
@@ -28,6 +29,7 @@
 #include "shard/shard_batches.h"
 #include "shard/shard_set.h"
 #include "util/error.h"
+#include "util/flo_io.h"
 #include "util/image_io.h"
 
 namespace py = pybind11;
@@ -137,8 +139,9 @@ py::dict cameraToPy(const Camera& c) {
 
 // ---- Samples ------------------------------------------------------------------------------------
 
-// The one conversion of a PairSample to Python, shared by every sample source.
-py::dict sampleToDict(const PairSample& s) {
+// The one conversion of a PairSample to Python, shared by every sample source. `flows`, when
+// given for every view, become "flows": float32 [V, H, W, 2], view k's flow into flowTarget(k).
+py::dict sampleToDict(const PairSample& s, const std::vector<ImageF>& flows = {}) {
   const int V = s.views();
   PAIRCAST_CHECK(V >= 1 && s.rgb.size() == static_cast<size_t>(V) &&
                  s.covis.size() == static_cast<size_t>(V));
@@ -156,6 +159,11 @@ py::dict sampleToDict(const PairSample& s) {
   py::dict d;
   d["images"] = stack(rgb);                                    // uint8 [V, H, W, 3]
   if (depth.size() == rgb.size()) d["depths"] = stack(depth);  // float32 [V, H, W]
+  if (flows.size() == rgb.size()) {
+    std::vector<const ImageF*> flow;
+    for (const ImageF& f : flows) flow.push_back(&f);
+    d["flows"] = stack(flow);
+  }
   d["cameras"] = cameras;
   d["covis"] = covis;  // [V - 1]: covis of each view k >= 1 with view 0 (the reference)
   if (s.visibility.size() == static_cast<size_t>(V)) {
@@ -255,7 +263,8 @@ class PyPairStream {
  public:
   PyPairStream(py::handle scenes, uint64_t seed, int resolution, double hfov, double minCovis,
                double maxCovis, int views, const std::string& up, double scale, int threads,
-               int start, int step, uint64_t offset, size_t queue) {
+               int start, int step, uint64_t offset, size_t queue, bool flow)
+      : flow_(flow) {
     // The pair options are checked by PairOptions::validate(), as generate_pairs' are; these
     // two are the binding's own.
     if (threads < 0) throw Error("threads must be >= 0 (0: one per core)");
@@ -290,7 +299,13 @@ class PyPairStream {
       s = stream->next();
     }
     if (!s) throw py::stop_iteration();
-    return sampleToDict(*s);
+    std::vector<ImageF> flows;
+    if (flow_) {
+      py::gil_scoped_release release;
+      for (int k = 0; k < s->views(); ++k)
+        flows.push_back(opticalFlow(s->camera[k], s->depth[k], s->camera[flowTarget(k)]));
+    }
+    return sampleToDict(*s, flows);
   }
 
   void close() {
@@ -305,6 +320,7 @@ class PyPairStream {
   uint64_t position() const { return stream_ ? stream_->position() : 0; }
 
  private:
+  bool flow_;
   std::shared_ptr<PairStream> stream_;
 };
 
@@ -326,10 +342,14 @@ class PyShardReader {
     SampleRecord record;
     std::vector<Image8> rgb;
     std::vector<ImageF> depth;
+    std::vector<ImageF> flow;
   };
 
-  PyShardReader(py::handle path, bool depth, size_t queue)
-      : path_(pathFromPy(path)), depth_(depth), capacity_(std::max<size_t>(1, queue)) {
+  PyShardReader(py::handle path, bool depth, size_t queue, bool flow)
+      : path_(pathFromPy(path)),
+        depth_(depth),
+        flow_(flow),
+        capacity_(std::max<size_t>(1, queue)) {
     thread_ = std::thread([this] { run(); });
   }
   ~PyShardReader() { close(); }
@@ -385,7 +405,7 @@ class PyShardReader {
 
   Decoded decode(const ShardIndex& index, size_t i) {
     const IndexedSample& s = index[i];
-    Decoded d{s.key, s.record, {}, {}};
+    Decoded d{s.key, s.record, {}, {}, {}};
     for (int k = 0; k < s.record.views; ++k) {
       const std::string name = index.describe(i, MemberKind::kImage, k + 1);
       const Bytes jpeg = index.read(s.image[k]);
@@ -397,6 +417,13 @@ class PyShardReader {
         d.depth.push_back(
             decodeImageF(exr.data(), exr.size(), index.describe(i, MemberKind::kDepth, k + 1)));
       }
+      if (flow_) {
+        const std::string name = index.describe(i, MemberKind::kFlow, k + 1);
+        const Bytes flo = index.read(s.flow[k]);
+        d.flow.push_back(decodeFlo(flo.data(), flo.size(), name));
+        if (d.flow.back().width != d.rgb[k].width || d.flow.back().height != d.rgb[k].height)
+          throw Error(name, "differs in size from its image");
+      }
     }
     return d;
   }
@@ -406,6 +433,10 @@ class PyShardReader {
       const ShardIndex index = ShardIndex::open(path_, [&](const std::string& m) { warn(m); });
       if (index.damaged() && index.size() == 0) throw Error(path_, index.damage());
       index.warnOfDamage([&](const std::string& m) { warn(m); });
+      for (size_t i = 0; i < index.size() && flow_; ++i)
+        if (index[i].flow.empty())
+          throw Error(path_, "sample " + index[i].key +
+                                 " has no flow (write it with generate_pairs --save-flow)");
       for (size_t i = 0; i < index.size(); ++i) {
         std::optional<Decoded> d;
         try {
@@ -448,13 +479,13 @@ class PyShardReader {
                          : k == 1                         ? r.covis
                                                           : 0.0;
     s.visibility = r.pairwiseVisibility;
-    py::dict out = sampleToDict(s);
+    py::dict out = sampleToDict(s, d.flow);
     out["key"] = d.key;
     return out;
   }
 
   std::string path_;
-  bool depth_;
+  bool depth_, flow_;
   size_t capacity_;
   std::mutex mu_;
   std::condition_variable cv_;
@@ -711,12 +742,12 @@ PYBIND11_MODULE(_paircast, m) {
   py::class_<PyPairStream>(m, "PairStream",
                            "Pairs rendered live by worker threads, as generate_pairs makes them")
       .def(py::init<py::handle, uint64_t, int, double, double, double, int, const std::string&,
-                    double, int, int, int, uint64_t, size_t>(),
+                    double, int, int, int, uint64_t, size_t, bool>(),
            py::arg("scenes"), py::arg("seed") = 0, py::arg("resolution") = 256,
            py::arg("hfov") = 60.0, py::arg("min_covis") = 0.5, py::arg("max_covis") = 1.0,
            py::arg("views") = 2, py::arg("up") = "y", py::arg("scale") = 1.0,
            py::arg("threads") = 0, py::arg("start") = 0, py::arg("step") = 1, py::arg("offset") = 0,
-           py::arg("queue") = 16)
+           py::arg("queue") = 16, py::arg("flow") = false)
       .def("__iter__", [](py::object self) { return self; })
       .def("__next__", &PyPairStream::next)
       .def("close", &PyPairStream::close)
@@ -726,8 +757,8 @@ PYBIND11_MODULE(_paircast, m) {
       .def_property_readonly("position", &PyPairStream::position);
 
   py::class_<PyShardReader>(m, "ShardReader", "The samples of one tar shard, decoded")
-      .def(py::init<py::handle, bool, size_t>(), py::arg("path"), py::arg("depth") = false,
-           py::arg("queue") = 8)
+      .def(py::init<py::handle, bool, size_t, bool>(), py::arg("path"), py::arg("depth") = false,
+           py::arg("queue") = 8, py::arg("flow") = false)
       .def("__iter__", [](py::object self) { return self; })
       .def("__next__", &PyShardReader::next)
       .def("close", &PyShardReader::close)

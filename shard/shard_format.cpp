@@ -31,7 +31,8 @@ struct KindSuffix {
 };
 constexpr KindSuffix kViewSuffixes[] = {{MemberKind::kImage, "jpg"},
                                         {MemberKind::kDepth, "depth.exr"},
-                                        {MemberKind::kCovisMask, "covis.png"}};
+                                        {MemberKind::kCovisMask, "covis.png"},
+                                        {MemberKind::kFlow, "flow.flo"}};
 
 }  // namespace
 

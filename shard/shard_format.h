@@ -2,8 +2,9 @@
 // reader goes through it (docs/dataset.md, "The shard format").
 //
 // A shard is a ustar archive of samples. The sample with key K and V views is the consecutive
-// members K.1.jpg ... K.V.jpg, each optionally followed by K.k.depth.exr and K.k.covis.png, then
-// K.json, its record. Depth and masks are there for every view or for none. The record carries
+// members K.1.jpg ... K.V.jpg, each optionally followed by K.k.depth.exr, K.k.covis.png and
+// K.k.flow.flo, then K.json, its record. Depth, masks and flow are there for every view or for
+// none. The record carries
 // paircast_shard_version; a reader refuses a shard of another version.
 //
 // Legend: V views.
@@ -30,9 +31,11 @@ std::string sanitizeName(const std::string& name);
 
 // ---- Member names ------------------------------------------------------------------------------
 
-enum class MemberKind { kImage, kDepth, kCovisMask, kRecord };
+enum class MemberKind { kImage, kDepth, kCovisMask, kFlow, kRecord };
+// The kinds stored per view, in the order a sample's members of one view are written.
+constexpr int kViewMemberKinds = 4;
 
-// "K.k.jpg", "K.k.depth.exr", "K.k.covis.png" (view k from 1) or "K.json".
+// "K.k.jpg", "K.k.depth.exr", "K.k.covis.png", "K.k.flow.flo" (view k from 1) or "K.json".
 std::string memberName(const std::string& key, MemberKind kind, int view = 0);
 
 struct MemberName {
@@ -43,6 +46,10 @@ struct MemberName {
 // What memberName() wrote, or nullopt for a name it never writes (another extension, a view
 // number out of [1, kMaxViews] or with a leading zero). Keys have no dots.
 std::optional<MemberName> parseMemberName(const std::string& name);
+
+// The view that view `view`'s flow (K.k.flow.flo, from 0 here) goes into: view 0's flow goes
+// into view 1 (CroCo's views 1 and 2 of a pair), every other view's into view 0, the reference.
+inline int flowTarget(int view) { return view == 0 ? 1 : 0; }
 
 // ---- The record --------------------------------------------------------------------------------
 

@@ -124,7 +124,7 @@ struct PendingSample {
   std::string key;
   Extent record;
   bool hasRecord = false;
-  std::vector<Extent> member[3];  // by MemberKind (image, depth, mask), [view - 1]
+  std::vector<Extent> member[kViewMemberKinds];  // by MemberKind, [view - 1]
 };
 
 // Walks the headers and groups members into samples; the record checks are the caller's.
@@ -234,7 +234,7 @@ class HeaderWalker {
   PendingSample current_;
 };
 
-// Every view has its image, and depth and masks are there for every view or for none.
+// Every view has its image, and depth, masks and flow are there for every view or for none.
 bool wholeViews(const std::vector<Extent>& list, int views, bool optional) {
   if (optional && list.empty()) return true;
   return list.size() == static_cast<size_t>(views) &&
@@ -295,8 +295,9 @@ ShardIndex ShardIndex::open(const std::string& path, const Warn& warn,
     }
     const int V = s.record.views;
     if (!wholeViews(p.member[0], V, false) || !wholeViews(p.member[1], V, true) ||
-        !wholeViews(p.member[2], V, true)) {
-      const size_t found = std::max({p.member[0].size(), p.member[1].size(), p.member[2].size()});
+        !wholeViews(p.member[2], V, true) || !wholeViews(p.member[3], V, true)) {
+      const size_t found = std::max(
+          {p.member[0].size(), p.member[1].size(), p.member[2].size(), p.member[3].size()});
       return report(found > static_cast<size_t>(V)
                         ? sample + " has members of " + std::to_string(found) +
                               " views but its record names " + std::to_string(V) + ", skipped"
@@ -307,6 +308,7 @@ ShardIndex ShardIndex::open(const std::string& path, const Warn& warn,
     s.image = std::move(p.member[0]);
     s.depth = std::move(p.member[1]);
     s.covisMask = std::move(p.member[2]);
+    s.flow = std::move(p.member[3]);
     index.samples_.push_back(std::move(s));
   });
   if (!damage.empty()) index.damage_ = damageMessage(damage);

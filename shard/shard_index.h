@@ -29,6 +29,7 @@ struct IndexedSample {
   std::vector<Extent> image;      // [V] K.k.jpg
   std::vector<Extent> depth;      // [V] K.k.depth.exr, or empty
   std::vector<Extent> covisMask;  // [V] K.k.covis.png, or empty
+  std::vector<Extent> flow;       // [V] K.k.flow.flo, or empty (flowTarget says into which view)
 };
 
 struct ShardIndexOptions {

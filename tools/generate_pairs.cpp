@@ -58,6 +58,10 @@ int main(int argc, char** argv) {
   app.add_option("--scale", cfg.load.scale, "Multiply scene positions by this (to metres)");
   app.add_flag("--save-depth", cfg.saveDepth,
                "Also write z-depth EXR (and camera JSON in croco layout)");
+  app.add_flag("--save-flow", cfg.saveFlow,
+               "Also write exact optical flow, Middlebury .flo in pixels: view 1's into view 2 "
+               "(_1_flow.flo, K.1.flow.flo) and each other view's into view 1 (_k_flow.flo); "
+               "+inf where a pixel has no depth or lies behind the other camera");
   app.add_option("--seed", cfg.seed,
                  "Random seed; the output depends only on it and the arguments");
   app.add_option("--jobs", cfg.jobs, "Worker threads (default: all cores)")

@@ -14,6 +14,15 @@ crop1, crop2 (the (top, left) of each crop), plus the sample's own keys: images 
 [V, H, W, 3]), depths (float32 [V, H, W], z-depth, 0 on a miss), cameras (one dict per view),
 covis ([V - 1], of each view with view 0), visibility ([V, V], v_ij, valid fractions on the
 diagonal), scene, index.
+
+flow=True (shards written with generate_pairs --save-flow, or the live stream) adds the exact
+ground truth of the pair, cropped as the images are: flow1 (float32 [2, h, w], pixels: where each
+pixel of crop 1 lands in crop 2, the offset between the crops applied), valid1 (bool [h, w]: the
+flow is known, i.e. the pixel has depth and lies in front of view 2), flow2 and valid2 (view 2's
+pixels into crop 1), and pose (float64 [4, 4]: view 2's camera in view 1's, mapping view 2's
+camera coordinates to view 1's). With flow=True the pair is always views 1 and 2, whose flows
+the files hold (shards keep view 1's flow into view 2 and every other view's into view 1).
+Without return_dict it yields (image1, image2, flow1, valid1, pose).
 """
 
 import glob
@@ -61,7 +70,7 @@ def reader_part(rank=None, world_size=None):
 class _Pairs(IterableDataset):
     """What LivePairs and ShardPairs share: turning a sample dict into CroCo's pair."""
 
-    def __init__(self, seed, crop, normalize, return_dict, rank, world_size):
+    def __init__(self, seed, crop, normalize, return_dict, rank, world_size, flow=False):
         super().__init__()
         if crop is not None:
             crop = (crop, crop) if isinstance(crop, int) else tuple(int(c) for c in crop)
@@ -71,6 +80,7 @@ class _Pairs(IterableDataset):
         self.crop = crop
         self.normalize = bool(normalize)
         self.return_dict = bool(return_dict)
+        self.flow = bool(flow)
         self.rank = rank
         self.world_size = world_size
         self.epoch = 0
@@ -102,8 +112,9 @@ class _Pairs(IterableDataset):
         return top, left, h, w
 
     def _other_view(self, views, rng):
-        """The view paired with view 0: view 1 of a pair, else one drawn from rng."""
-        return 1 if views == 2 else int(rng.integers(1, views))
+        """The view paired with view 0: view 1 of a pair (or with flow), else one drawn from
+        rng."""
+        return 1 if views == 2 or self.flow else int(rng.integers(1, views))
 
     def _image(self, image, rng):
         """uint8 [H, W, 3] -> float32 [3, h, w] in [0, 1] (normalised), and the crop's corner."""
@@ -125,11 +136,24 @@ class _Pairs(IterableDataset):
         other = self._other_view(images.shape[0], rng)
         image1, crop1 = self._image(images[0], rng)
         image2, crop2 = self._image(images[other], rng)
+        truth = self._ground_truth(sample, image1.shape[1:], crop1, crop2) if self.flow else {}
         if not self.return_dict:
+            if self.flow:
+                return image1, image2, truth["flow1"], truth["valid1"], truth["pose"]
             return image1, image2
         out = dict(sample)
-        out.update(image1=image1, image2=image2, view2=other, crop1=crop1, crop2=crop2)
+        out.update(image1=image1, image2=image2, view2=other, crop1=crop1, crop2=crop2, **truth)
         return out
+
+    def _ground_truth(self, sample, size, crop1, crop2):
+        """flow1, valid1, flow2, valid2 and pose of views 0 and 1, for crops at crop1, crop2."""
+        if "flows" not in sample:
+            raise Error(f"sample {sample.get('key', sample['index'])} has no flow "
+                        "(generate_pairs --save-flow)")
+        flow1, valid1 = crop_flow(sample["flows"][0], crop1, crop2, size)
+        flow2, valid2 = crop_flow(sample["flows"][1], crop2, crop1, size)
+        pose = relative_pose(sample["cameras"][0], sample["cameras"][1])
+        return dict(flow1=flow1, valid1=valid1, flow2=flow2, valid2=valid2, pose=pose)
 
 
 class LivePairs(_Pairs):
@@ -146,8 +170,8 @@ class LivePairs(_Pairs):
 
     def __init__(self, scenes, seed=0, resolution=256, hfov=60.0, min_covis=0.5, max_covis=1.0,
                  views=2, up="y", scale=1.0, threads=0, crop=None, normalize=True,
-                 return_dict=False, length=None, rank=None, world_size=None, queue=16):
-        super().__init__(seed, crop, normalize, return_dict, rank, world_size)
+                 return_dict=False, length=None, rank=None, world_size=None, queue=16, flow=False):
+        super().__init__(seed, crop, normalize, return_dict, rank, world_size, flow)
         if int(views) < 2:
             raise ValueError(f"views={views}: a pair needs at least 2 views")
         if isinstance(scenes, (str, os.PathLike)):
@@ -183,7 +207,7 @@ class LivePairs(_Pairs):
             if count == 0:
                 return
         stream = PairStream(self.scenes, seed=self.seed, threads=threads, start=part, step=parts,
-                            offset=offset, **self.stream_options)
+                            offset=offset, flow=self.flow, **self.stream_options)
         try:
             for n, sample in enumerate(stream):
                 yield self._pair(sample)
@@ -216,8 +240,8 @@ class ShardPairs(_Pairs):
 
     def __init__(self, pattern, crop=None, normalize=True, return_dict=False, depth=False,
                  shuffle=False, seed=0, rank=None, world_size=None, dtype="float32",
-                 batch_size=None, drop_last=False, buffers=4):
-        super().__init__(seed, crop, normalize, return_dict, rank, world_size)
+                 batch_size=None, drop_last=False, buffers=4, flow=False):
+        super().__init__(seed, crop, normalize, return_dict, rank, world_size, flow)
         if int(buffers) < 1:
             raise ValueError(f"buffers must be positive, not {buffers}")
         self.buffers = int(buffers)
@@ -225,15 +249,16 @@ class ShardPairs(_Pairs):
         if batch_size is not None:
             if int(batch_size) < 1:
                 raise ValueError(f"batch_size must be positive, not {batch_size}")
-            if return_dict or depth or crop is None:
+            if return_dict or depth or flow or crop is None:
                 raise ValueError("batch_size= batches pairs of one crop size: give crop=, "
-                                 "without return_dict and depth")
+                                 "without return_dict, depth and flow")
         self.batch_size = None if batch_size is None else int(batch_size)
         self.drop_last = bool(drop_last)
         if dtype not in ("float32", "uint8"):
             raise ValueError(f"dtype must be 'float32' or 'uint8', not {dtype!r}")
-        if dtype == "uint8" and (return_dict or depth):
-            raise ValueError("dtype='uint8' is for pairs: use it without return_dict and depth")
+        if dtype == "uint8" and (return_dict or depth or flow):
+            raise ValueError("dtype='uint8' is for pairs: use it without return_dict, depth and "
+                             "flow")
         self.dtype = dtype
         patterns = [pattern] if isinstance(pattern, (str, os.PathLike)) else list(pattern)
         files = []
@@ -247,7 +272,7 @@ class ShardPairs(_Pairs):
         self.depth = bool(depth)
         self.shuffle = bool(shuffle)
         self._shards = None
-        if not (return_dict or depth):
+        if not (return_dict or depth or flow):
             self._index()  # here, so that a bad shard fails now and forked workers inherit it
 
     def __getstate__(self):
@@ -275,7 +300,7 @@ class ShardPairs(_Pairs):
 
     def __iter__(self):
         mine, by_file, part, parts = self._mine()
-        if self.return_dict or self.depth:
+        if self.return_dict or self.depth or self.flow:
             yield from self._samples(mine, by_file, part, parts)
         elif self.batch_size is not None:
             yield from self._batches(mine, by_file, part, parts)
@@ -286,7 +311,7 @@ class ShardPairs(_Pairs):
         """Whole samples through ShardReader, as dicts (or pairs) made by _pair."""
         n = 0
         for path in files:
-            with ShardReader(path, depth=self.depth) as reader:
+            with ShardReader(path, depth=self.depth, flow=self.flow) as reader:
                 for sample in reader:
                     n += 1
                     if by_file or (n - 1) % parts == part:
@@ -462,6 +487,31 @@ class ShardLoader:
         pairs = len(self._order())
         b = self.batch_size
         return pairs // b if self._pairs.drop_last else -(-pairs // b)
+
+
+def crop_flow(flow, crop_from, crop_to, size):
+    """A view's flow (float32 [H, W, 2], pixels, +inf where unknown) cut to the crop at crop_from
+    ((top, left), of size (h, w)) and moved into the frame of the other view's crop at crop_to:
+    (float32 [2, h, w], bool [h, w] where it is known)."""
+    (top, left), (h, w) = crop_from, size
+    part = np.asarray(flow[top:top + h, left:left + w], dtype=np.float32)
+    shift = np.array([left - crop_to[1], top - crop_to[0]], dtype=np.float32)
+    out = torch.from_numpy((part + shift).transpose(2, 0, 1).copy())
+    valid = torch.isfinite(out).all(dim=0)
+    return out, valid
+
+
+def relative_pose(camera1, camera2):
+    """float64 [4, 4]: camera 2's pose in camera 1's frame (R1^T R2, R1^T (t2 - t1)), from the
+    cameras' R_cam2world and t_cam2world."""
+    r1 = np.asarray(camera1["R_cam2world"], dtype=np.float64)
+    r2 = np.asarray(camera2["R_cam2world"], dtype=np.float64)
+    t1 = np.asarray(camera1["t_cam2world"], dtype=np.float64).reshape(3)
+    t2 = np.asarray(camera2["t_cam2world"], dtype=np.float64).reshape(3)
+    pose = np.eye(4)
+    pose[:3, :3] = r1.T @ r2
+    pose[:3, 3] = r1.T @ (t2 - t1)
+    return torch.from_numpy(pose)
 
 
 def normalize(images, out=None):

@@ -83,3 +83,13 @@ def stream(**kwargs):
 def take(n, **kwargs):
     with stream(**kwargs) as s:
         return [next(s) for _ in range(n)]
+
+
+@pytest.fixture(scope="session")
+def flow_shards(tmp_path_factory):
+    """generate_pairs' shards and croco layout with flow and depth: 3 pairs of the room, seed 3."""
+    out = tmp_path_factory.mktemp("flow")
+    run_tool("generate_pairs", "--scenes", ROOM, "--out", out, "--pairs-per-scene", 3,
+             "--resolution", RESOLUTION, "--seed", 3, "--jobs", 1, "--format", "both",
+             "--save-depth", "--save-flow")
+    return out
