@@ -3,6 +3,9 @@
 // MaskedMSE and AdamW, model only) in Python when --croco-dir names a checkout of naver/croco.
 // CPU by default (tiny and small at batch 16); on CUDA (--device cuda --amp bf16) it also gives
 // the model FLOP utilisation, with the paper's FLOP convention and with the full count.
+// --finetune times finetune's flow step instead (DPT head, LaplacianLossBounded, data included)
+// beside naver/croco's CroCo-Flow step (CroCoDownstreamBinocular with PixelwiseTaskWithDPT,
+// model only), same preset, size, batch and threads.
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -18,6 +21,9 @@
 #if PAIRCAST_WITH_RENDER
 #include "dataset/generate_job.h"
 #endif
+#if PAIRCAST_WITH_FINETUNE
+#include "finetune/finetune.h"
+#endif
 
 using namespace paircast;
 namespace fs = std::filesystem;
@@ -29,7 +35,7 @@ struct Options {
   int batch = 16, steps = 12, warmupSteps = 2, threads = 2, workers = 2, imgSize = 224;
   std::string crocoDir, python = "/usr/bin/python3", device = "cpu", amp = "bf16";
   std::vector<std::string> data;  // shards; none: generated from scenes/ (full build)
-  bool live = true, fusedAdamW = true;
+  bool live = true, fusedAdamW = true, finetune = false;
   double peakTflops = 800.0;
 };
 
@@ -73,6 +79,67 @@ std::pair<double, double> steadyRate(const std::string& out, int batch, int skip
   return {n * batch / seconds, wait / seconds};
 }
 
+// Seconds per step of naver/croco's CroCo-Flow model (bench/croco_flow_step.py); 0 when it could
+// not run.
+double officialFlowSeconds(const Options& o, const std::string& preset,
+                           const std::vector<int>& hooks) {
+  if (o.crocoDir.empty()) return 0;
+  std::string cmd = o.python + " " + std::string(PAIRCAST_SOURCE_DIR) +
+                    "/bench/croco_flow_step.py --preset " + preset + " --batch " +
+                    std::to_string(o.batch) + " --threads " + std::to_string(o.threads) +
+                    " --img-size " + std::to_string(o.imgSize) + " --croco-dir '" + o.crocoDir +
+                    "' --hooks";
+  for (int h : hooks) cmd += " " + std::to_string(h);
+  std::string line;
+  if (FILE* p = popen((cmd + " 2>&1 | grep ^SUMMARY").c_str(), "r")) {
+    char buf[1024];
+    while (fgets(buf, sizeof buf, p)) line += buf;
+    pclose(p);
+  }
+  const size_t at = line.find("train_s=");
+  return at == std::string::npos ? 0 : std::stod(line.substr(at + 8));
+}
+
+#if PAIRCAST_WITH_FINETUNE
+// finetune's flow step (DPT head) for each preset, beside the official one.
+nlohmann::json finetuneRows(const Options& o, const std::vector<std::string>& shards,
+                            const std::string& tmp) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& preset : o.presets) {
+    FinetuneConfig c;
+    c.data = shards;
+    c.model.croco = presetConfig(preset);
+    c.model.croco.img_size = o.imgSize;
+    c.train.batchSize = o.batch;
+    c.train.maxSteps = o.steps;
+    c.train.epochs = 100;
+    c.train.saveEvery = 1000000;
+    c.train.out = tmp + "/finetune-" + preset;
+    c.train.device = o.device;
+    c.train.amp = o.amp;
+    c.train.progress = false;
+    const nlohmann::json s = runFinetune(c);
+    auto [pps, wait] = steadyRate(c.train.out, o.batch, o.warmupSteps);
+    std::printf("%-6s finetune flow (dpt) %8.2f pairs/s  data-wait %5.1f%%\n", preset.c_str(), pps,
+                100 * wait);
+    nlohmann::json row = {{"preset", preset}, {"task", "flow"}, {"head", "dpt"},
+                          {"pairs_per_s", pps}, {"data_wait", wait}};
+    const double off = officialFlowSeconds(o, preset, s["hooks"].get<std::vector<int>>());
+    if (off > 0) {
+      std::printf("%-6s official CroCo-Flow train step (model only): %8.2f pairs/s -> ours %.2fx\n",
+                  preset.c_str(), o.batch / off, pps / (o.batch / off));
+      row["official_pairs_per_s"] = o.batch / off;
+      row["ratio"] = pps / (o.batch / off);
+    } else if (!o.crocoDir.empty()) {
+      std::printf("%-6s official CroCo-Flow step did not run (%s with torch, --croco-dir)\n",
+                  preset.c_str(), o.python.c_str());
+    }
+    rows.push_back(row);
+  }
+  return rows;
+}
+#endif
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -97,6 +164,8 @@ int main(int argc, char** argv) {
                  "A checkout of naver/croco, to time its train step alongside");
   app.add_option("--python", o.python, "The Python with torch that runs the official step");
   app.add_flag("!--no-live", o.live, "Skip the live-rendering runs");
+  app.add_flag("--finetune", o.finetune,
+               "Time finetune's flow step (DPT head) instead, beside naver/croco's CroCo-Flow step");
   CLI11_PARSE(app, argc, argv);
   try {
     torch::set_num_threads(o.threads);
@@ -111,6 +180,7 @@ int main(int argc, char** argv) {
       g.out = tmp + "/pairs";
       g.pairsPerScene = (o.batch * (o.steps + 2)) / 3 + 8;
       g.pair.resolution = 256;
+      g.saveFlow = g.saveDepth = o.finetune;
       g.progress = false;
       runGenerate(g);
       shards = {tmp + "/pairs/pairs-*.tar"};
@@ -120,6 +190,16 @@ int main(int argc, char** argv) {
     o.live = false;
 #endif
     nlohmann::json rows = nlohmann::json::array();
+#if PAIRCAST_WITH_FINETUNE
+    if (o.finetune) {
+      std::printf("batch %d, %s, %d torch threads, %dx%d crops, %d steps (%d left out)\n", o.batch,
+                  o.device.c_str(), o.threads, o.imgSize, o.imgSize, o.steps, o.warmupSteps);
+      rows = finetuneRows(o, shards, tmp);
+      o.presets.clear();
+    }
+#else
+    if (o.finetune) throw Error("this build has no finetune");
+#endif
     std::printf(
         "batch %d, %s%s, %d torch threads, %d workers, %dx%d crops, %d steps (%d left out)\n",
         o.batch, o.device.c_str(), o.device == "cuda" ? (" " + o.amp).c_str() : "", o.threads,

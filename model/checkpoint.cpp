@@ -197,25 +197,36 @@ void writePickled(const std::string& path, const c10::IValue& value) {
 
 }  // namespace
 
-std::map<std::string, torch::Tensor> stateDict(CroCoNet& model) {
+std::map<std::string, torch::Tensor> stateDict(const torch::nn::Module& module) {
   std::map<std::string, torch::Tensor> out;
-  for (const auto& p : model->named_parameters()) out[p.key()] = p.value();
-  for (const auto& b : model->named_buffers()) out[b.key()] = b.value();
+  for (const auto& p : module.named_parameters()) out[p.key()] = p.value();
+  for (const auto& b : module.named_buffers()) out[b.key()] = b.value();
   return out;
+}
+
+std::map<std::string, torch::Tensor> stateDict(CroCoNet& model) {
+  return stateDict(*model);
+}
+
+void saveCheckpoint(const std::string& path, const std::map<std::string, torch::Tensor>& state,
+                    int64_t epoch, const nlohmann::json& entries,
+                    const std::map<std::string, torch::Tensor>& extraTensors) {
+  c10::impl::GenericDict root(c10::StringType::get(), c10::AnyType::get());
+  root.insert("model", tensorDict(state));
+  root.insert("epoch", epoch);
+  for (auto it = entries.begin(); it != entries.end(); ++it)
+    root.insert(it.key(), jsonToIValue(it.value()));
+  auto nested = nestTensors(extraTensors);
+  for (const auto& entry : nested) root.insert_or_assign(entry.key(), entry.value());
+  writePickled(path, root);
 }
 
 void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
                     const nlohmann::json& extra,
                     const std::map<std::string, torch::Tensor>& extraTensors) {
-  c10::impl::GenericDict root(c10::StringType::get(), c10::AnyType::get());
-  root.insert("model", tensorDict(stateDict(model)));
-  root.insert("args", jsonToIValue(configToJson(model->config())));
-  root.insert("epoch", epoch);
-  for (auto it = extra.begin(); it != extra.end(); ++it)
-    root.insert(it.key(), jsonToIValue(it.value()));
-  auto nested = nestTensors(extraTensors);
-  for (const auto& entry : nested) root.insert_or_assign(entry.key(), entry.value());
-  writePickled(path, root);
+  nlohmann::json entries = extra;
+  entries["args"] = configToJson(model->config());
+  saveCheckpoint(path, stateDict(model), epoch, entries, extraTensors);
 }
 
 void saveTensors(const std::string& path, const std::map<std::string, torch::Tensor>& tensors) {
@@ -323,7 +334,13 @@ Checkpoint loadCheckpoint(const std::string& path) {
 
 void loadStateDictStrict(CroCoNet& model, const std::map<std::string, torch::Tensor>& state,
                          const std::string& source) {
-  auto own = stateDict(model);
+  loadStateDictStrict(*model, state, source);
+}
+
+void loadStateDictStrict(torch::nn::Module& module,
+                         const std::map<std::string, torch::Tensor>& state,
+                         const std::string& source) {
+  auto own = stateDict(module);
   std::vector<std::string> missing, unexpected, shapes;
   for (const auto& [k, t] : own) {
     auto it = state.find(k);

@@ -36,6 +36,12 @@ void saveCheckpoint(const std::string& path, CroCoNet& model, int64_t epoch,
                     const nlohmann::json& extra = nlohmann::json::object(),
                     const std::map<std::string, torch::Tensor>& extraTensors = {});
 
+// The same for any module: {'model': state, 'epoch': e, ...entries} (entries hold 'args' or
+// 'croco_kwargs' and the rest).
+void saveCheckpoint(const std::string& path, const std::map<std::string, torch::Tensor>& state,
+                    int64_t epoch, const nlohmann::json& entries,
+                    const std::map<std::string, torch::Tensor>& extraTensors = {});
+
 // Writes a dict of tensors {'name': tensor} atomically, without TorchScript's type tags, so that
 // Python's torch.load reads it with its defaults (weights_only=True since PyTorch 2.6).
 void saveTensors(const std::string& path, const std::map<std::string, torch::Tensor>& tensors);
@@ -48,9 +54,14 @@ Checkpoint loadCheckpoint(const std::string& path);
 // The error lists the missing and unexpected keys and the shape mismatches.
 void loadStateDictStrict(CroCoNet& model, const std::map<std::string, torch::Tensor>& state,
                          const std::string& source);
+void loadStateDictStrict(torch::nn::Module& module,
+                         const std::map<std::string, torch::Tensor>& state,
+                         const std::string& source);
 
-// The model's state_dict with the official names.
+// The model's state_dict with the official names (a module shared under two names, as the DPT
+// head's, appears under both, as in PyTorch's).
 std::map<std::string, torch::Tensor> stateDict(CroCoNet& model);
+std::map<std::string, torch::Tensor> stateDict(const torch::nn::Module& module);
 
 // The configuration a checkpoint's tensors imply, for files without args: widths, depths,
 // patch and image size from the shapes; head counts cannot be read from shapes and come from

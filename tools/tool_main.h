@@ -35,7 +35,8 @@ inline int runTool(const char* name, CLI::App& app, int argc, char** argv,
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version exit 0; every malformed command line exits 2, whatever CLI11 calls it.
+    return app.exit(e) == 0 ? 0 : 2;
   }
   try {
     return body();

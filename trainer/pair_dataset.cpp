@@ -19,9 +19,7 @@
 namespace paircast {
 namespace fs = std::filesystem;
 
-namespace {
-
-std::vector<std::string> expandPatterns(const std::vector<std::string>& patterns) {
+std::vector<std::string> expandShardPatterns(const std::vector<std::string>& patterns) {
   std::vector<std::string> files;
   for (const auto& p : patterns) {
     glob_t g{};
@@ -37,6 +35,8 @@ std::vector<std::string> expandPatterns(const std::vector<std::string>& patterns
   }
   return files;
 }
+
+namespace {
 
 // The whole file, or [offset, offset + length) of it.
 std::vector<unsigned char> readMember(const std::string& file, uint64_t offset, uint64_t length) {
@@ -55,7 +55,7 @@ void warn(const std::string& message) {
 
 PairDataset PairDataset::fromShards(const std::vector<std::string>& patterns) {
   PairDataset ds;
-  for (const auto& file : expandPatterns(patterns)) {
+  for (const auto& file : expandShardPatterns(patterns)) {
     const ShardIndex index = ShardIndex::open(file, warn);
     index.warnOfDamage(warn);
     size_t single = 0;

@@ -14,6 +14,10 @@
 
 namespace paircast {
 
+// The files that shard paths and glob patterns name, in order (each pattern's matches sorted).
+// Throws paircast::Error naming a pattern that matches nothing.
+std::vector<std::string> expandShardPatterns(const std::vector<std::string>& patterns);
+
 class PairDataset {
  public:
   // Shards: files or glob patterns, read through ShardIndex. A sample the index refuses (a

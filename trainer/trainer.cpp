@@ -1,108 +1,23 @@
 #include "trainer/trainer.h"
 
 #include <ATen/CPUGeneratorImpl.h>
-#include <link.h>
-#include <signal.h>
 
-#include <atomic>
-#include <chrono>
 #include <cmath>
-#include <condition_variable>
-#include <cstdio>
-#include <deque>
 #include <filesystem>
-#include <fstream>
 #include <map>
-#include <mutex>
-#include <numeric>
-#include <thread>
 
-#include "model/autocast.h"
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
 #include "model/reconstruct.h"
 #include "trainer/batch_loader.h"
 #include "trainer/distributed.h"
-#include "trainer/fused_adamw.h"
-#include "trainer/grad_scaler.h"
 #include "trainer/pair_dataset.h"
-#include "util/atomic_file.h"
+#include "trainer/training_loop.h"
 #include "util/error.h"
 #include "util/image_io.h"
-#include "util/plot.h"
-#include "util/progress_line.h"
-#include "util/timer.h"
 
 namespace paircast {
 namespace fs = std::filesystem;
-
-namespace {
-
-using Clock = SteadyClock;
-constexpr auto since = secondsSince;
-
-std::atomic<int> gSignal{0};
-void onSignal(int sig) {
-  gSignal = sig;
-}
-
-// AdamW state, by parameter position, as "optimizer/state/<i>/{exp_avg,exp_avg_sq,step}".
-#if TORCH_VERSION_MAJOR >= 2
-void* stateKey(const torch::Tensor& p) {
-  return p.unsafeGetTensorImpl();
-}
-#else
-std::string stateKey(const torch::Tensor& p) {
-  return c10::guts::to_string(p.unsafeGetTensorImpl());
-}
-#endif
-
-std::map<std::string, torch::Tensor> optimizerTensors(torch::optim::AdamW& opt,
-                                                      const std::vector<torch::Tensor>& params) {
-  std::map<std::string, torch::Tensor> out;
-  auto& state = opt.state();
-  for (size_t i = 0; i < params.size(); ++i) {
-    auto it = state.find(stateKey(params[i]));
-    if (it == state.end()) continue;
-    auto& s = static_cast<torch::optim::AdamWParamState&>(*it->second);
-    const std::string base = "optimizer/state/" + std::to_string(i) + "/";
-    out[base + "exp_avg"] = s.exp_avg();
-    out[base + "exp_avg_sq"] = s.exp_avg_sq();
-    out[base + "step"] = torch::tensor(static_cast<int64_t>(s.step()));
-  }
-  return out;
-}
-
-void restoreOptimizer(torch::optim::AdamW& opt, const std::vector<torch::Tensor>& params,
-                      const std::map<std::string, torch::Tensor>& tensors,
-                      const std::string& source) {
-  auto& state = opt.state();
-  for (size_t i = 0; i < params.size(); ++i) {
-    const std::string base = "optimizer/state/" + std::to_string(i) + "/";
-    auto a = tensors.find(base + "exp_avg"), b = tensors.find(base + "exp_avg_sq"),
-         s = tensors.find(base + "step");
-    if (a == tensors.end() || b == tensors.end() || s == tensors.end()) continue;
-    if (a->second.sizes() != params[i].sizes())
-      throw Error(source, "optimizer state " + base + " has the wrong shape");
-    auto st = std::make_unique<torch::optim::AdamWParamState>();
-    st->step(s->second.item<int64_t>());
-    st->exp_avg(a->second.to(params[i].device()).clone());
-    st->exp_avg_sq(b->second.to(params[i].device()).clone());
-    state[stateKey(params[i])] = std::move(st);
-  }
-}
-
-void writeLossCurve(const std::string& path,
-                    const std::vector<std::pair<int64_t, double>>& points) {
-  if (points.size() < 2) return;
-  plot::Series loss;
-  loss.label = "loss";
-  loss.markers = false;
-  for (const auto& [step, value] : points) loss.x.push_back(step), loss.y.push_back(value);
-  writeFileAtomic(path, plot::lines({loss}, {"training loss by step", "step", "loss", 640, 360}));
-}
-
-}  // namespace
 
 DecayGroups weightDecayGroups(const std::vector<std::pair<std::string, torch::Tensor>>& named) {
   DecayGroups g;
@@ -153,72 +68,70 @@ nlohmann::json runPretrain(const TrainConfig& c) {
 
 namespace {
 
-// SIGINT and SIGTERM, while training: the loop saves a checkpoint at the next step and stops.
-class StopSignals {
+// CroCo pre-training as a task of the shared loop: the data sources through BatchLoader, the
+// masked reconstruction loss, and reconstruction grids.
+class PretrainTask : public TrainingTask {
  public:
-  StopSignals() {
-    gSignal = 0;
-    oldInt_ = signal(SIGINT, onSignal);
-    oldTerm_ = signal(SIGTERM, onSignal);
+  explicit PretrainTask(const TrainConfig& c) : c_(c) { openDataSources(); }
+
+  std::string tool() const override { return "pretrain"; }
+
+  std::shared_ptr<torch::nn::Module> buildModel() override {
+    model_ = CroCoNet(c_.model);
+    return model_.ptr();
   }
-  ~StopSignals() {
-    signal(SIGINT, oldInt_);
-    signal(SIGTERM, oldTerm_);
+
+  std::vector<std::pair<std::string, torch::Tensor>> trainable() override {
+    std::vector<std::pair<std::string, torch::Tensor>> named;
+    for (const auto& p : model_->named_parameters()) named.emplace_back(p.key(), p.value());
+    return named;
   }
-  bool raised() const { return gSignal != 0; }
+
+  int64_t startData(int64_t iter, int rank, int world) override {
+    loader_ = std::make_unique<BatchLoader>(sources_, c_, iter, rank, world, livePosition_);
+    return loader_->perEpoch();
+  }
+
+  void fetch(int64_t iter) override { batch_ = loader_->get(iter); }
+
+  torch::Tensor loss(const torch::Device& device) override {
+    // On CUDA the batch is pinned uint8, finished there; the loss's .item() waits for the
+    // copies before the loader may fill the buffer again.
+    const Batch b = finishBatch(batch_, device);
+    auto out = pretrainForward(model_, c_.task, b.img1, b.img2, b.mask);
+    return maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
+  }
+
+  void save(const std::string& path, int64_t epoch, const nlohmann::json& extra,
+            const std::map<std::string, torch::Tensor>& tensors) override {
+    saveCheckpoint(path, model_, epoch, extra, tensors);
+  }
+
+  void restore(const Checkpoint& ck, const std::string& path) override {
+    if (ck.hasArgs && configFromJson(ck.args, path).enc_embed_dim != c_.model.enc_embed_dim)
+      throw Error(path, "checkpoint was trained with other hyper-parameters than the model config");
+    if (trainedTask(ck) != c_.task)
+      throw Error(path, "checkpoint was trained on task " + trainedTask(ck) + ", not " + c_.task +
+                            "; use another --out");
+    loadStateDictStrict(model_, ck.model, path);
+    livePosition_ = ck.extra.value("live_position", uint64_t{0});
+  }
+
+  nlohmann::json checkpointEntries() const override {
+    return {{"live_position", loader_ ? loader_->livePosition() : 0}, {"task", c_.task}};
+  }
+
+  void afterStep(int64_t iter, const torch::Device& device) override {
+    if (c_.reconEvery > 0 && iter % c_.reconEvery == 0 && reconData_)
+      writeReconstruction(device);
+  }
+
+  void summarise(nlohmann::json& s) override {
+    s["task"] = c_.task;
+    s["pairs_by_source"] = loader_->counts();
+  }
 
  private:
-  using Handler = void (*)(int);
-  Handler oldInt_, oldTerm_;
-};
-
-// The loaded OpenBLAS when it is Debian's pthread build ("" otherwise). Its own threads spin
-// against LibTorch's OpenMP threads: CPU training steps ran 1.2-10x slower (docs/releases.md).
-std::string pthreadOpenBlas() {
-  std::string found;
-  dl_iterate_phdr(
-      [](dl_phdr_info* info, size_t, void* out) {
-        const std::string name = info->dlpi_name ? info->dlpi_name : "";
-        if (name.find("/openblas-pthread/") == std::string::npos) return 0;
-        *static_cast<std::string*>(out) = name;
-        return 1;
-      },
-      &found);
-  return found;
-}
-
-// One run of runPretrain. Its stages, in order: the constructor (device and output folder),
-// openDataSources, buildModelAndOptimizer, resumeOrStartLog, startLoaders, trainSteps and
-// summary. Members are declared in the order they are made, so that they are destroyed in
-// reverse: the loader's threads stop before the datasets they read go away.
-class Pretraining {
- public:
-  Pretraining(const TrainConfig& c, Distributed* dist)
-      : c_(c),
-        dist_(dist),
-        rank_(dist ? dist->rank() : 0),
-        world_(dist ? dist->worldSize() : 1),
-        lead_(rank_ == 0),
-        progress_(c.progress && lead_) {
-    if (c.device == "cuda") {
-      if (!torch::cuda::is_available())
-        throw OptionError("device", "device cuda, but this LibTorch has no CUDA device");
-      device_ =
-          torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
-      allowTf32();
-    }
-    if (const std::string blas = lead_ && !device_.is_cuda() ? pthreadOpenBlas() : "";
-        !blas.empty())
-      std::fprintf(stderr,
-                   "pretrain: warning: LibTorch runs on the pthread OpenBLAS (%s), 1.2-10x slower "
-                   "on the CPU than libopenblas0-openmp; scripts/setup.sh selects that one\n",
-                   blas.c_str());
-    makeDirs(c.out);
-    if (lead_) removeStaleTemporaries(c.out);  // left by a killed run
-    ckptPath_ = (fs::path(c.out) / "checkpoint-last.pth").string();
-    logPath_ = (fs::path(c.out) / "log.jsonl").string();
-  }
-
   void openDataSources() {
     if (!c_.shards.empty()) {
       shardSet_ = std::make_unique<PairDataset>(PairDataset::fromShards(c_.shards));
@@ -233,301 +146,8 @@ class Pretraining {
     reconData_ = shardSet_ ? shardSet_.get() : crocoSet_.get();
   }
 
-  // AdamW with no weight decay on biases and 1-D parameters (norms), and CroCo's lr scaling.
-  void buildModelAndOptimizer() {
-    torch::manual_seed(c_.seed);
-    model_ = CroCoNet(c_.model);
-    std::vector<std::pair<std::string, torch::Tensor>> named;
-    for (const auto& p : model_->named_parameters()) named.emplace_back(p.key(), p.value());
-    const DecayGroups names = weightDecayGroups(named);
-    std::vector<torch::Tensor> decay, noDecay;
-    for (const auto& [name, t] : named) {
-      ordered_.push_back(t);
-      const bool isDecay =
-          std::find(names.decay.begin(), names.decay.end(), name) != names.decay.end();
-      (isDecay ? decay : noDecay).push_back(t);
-    }
-    const int effBatch = c_.batchSize * c_.accumIter * world_;
-    lr_ = c_.blr * effBatch / 256.0;
-    const auto adamw = torch::optim::AdamWOptions(lr_).betas({0.9, 0.95});
-    std::vector<torch::optim::OptimizerParamGroup> groups;
-    groups.emplace_back(decay, std::make_unique<torch::optim::AdamWOptions>(
-                                   torch::optim::AdamWOptions(adamw).weight_decay(c_.weightDecay)));
-    groups.emplace_back(noDecay, std::make_unique<torch::optim::AdamWOptions>(
-                                     torch::optim::AdamWOptions(adamw).weight_decay(0.0)));
-    opt_ = std::make_unique<torch::optim::AdamW>(groups, adamw);
-    // fp16 needs a loss scale; bf16 has float32's range and does not.
-    scaler_ =
-        std::make_unique<GradScaler>((device_.is_cuda() && c_.amp == "fp16") || c_.forceLossScaling,
-                                     c_.initScale, c_.scaleGrowthInterval);
-  }
-
-  // From OUT/checkpoint-last.pth with --resume (the log cut back to its step), else a new log.
-  // The model goes to its device first, so that restored optimizer state lands there too; then
-  // rank 0's weights go to every rank.
-  void resumeOrStartLog() {
-    model_->to(device_);
-    if (c_.resume && fs::exists(ckptPath_)) {
-      restoreCheckpoint();
-      cutLogToCheckpoint();
-      std::fprintf(stderr, "pretrain: resumed from %s at step %lld\n", ckptPath_.c_str(),
-                   static_cast<long long>(iter_));
-    } else if (!c_.resume && lead_) {
-      writeFileAtomic(logPath_, "");
-    }
-    if (dist_) dist_->broadcast(ordered_);
-  }
-
-  void startLoaders() {
-    loader_ = std::make_unique<BatchLoader>(sources_, c_, iter_, rank_, world_, livePosition_);
-    perEpoch_ = loader_->perEpoch();
-    const int64_t total = static_cast<int64_t>(c_.epochs) * perEpoch_;
-    stopAt_ = c_.maxSteps >= 0 ? std::min(total, c_.maxSteps) : total;
-    saveEvery_ = std::max<int64_t>(c_.accumIter,
-                                   (c_.saveEvery + c_.accumIter - 1) / c_.accumIter * c_.accumIter);
-  }
-
-  // Steps until stopAt, --max-steps or a signal; checkpoints, log lines, progress and
-  // reconstruction grids on the way.
-  void trainSteps() {
-    const StopSignals signals;
-    if (lead_) log_.open(logPath_, std::ios::app);
-    start_ = Clock::now();
-    firstIter_ = iter_;
-    model_->train();
-    while (iter_ < stopAt_) {
-      const auto t0 = Clock::now();
-      const Batch batch = loader_->get(iter_);
-      const double wait = since(t0);
-      epoch_ = static_cast<double>(iter_) / perEpoch_;
-      if (iter_ % c_.accumIter == 0) setLearningRate();
-      stepLoss_ = step(batch);
-      ++iter_;
-      const double stepTime = since(t0);
-      waitTotal_ += wait;
-      stepTotal_ += stepTime;
-      if (lead_ && std::isfinite(stepLoss_) && ((iter_ - 1) % c_.logEvery == 0 || iter_ == stopAt_))
-        logStep(wait, stepTime);
-      if (progress_.due()) progress_.show(progressText());
-      const bool boundary = iter_ % c_.accumIter == 0;
-      const bool stopNow = stopRequested(signals, boundary);
-      if (boundary &&
-          (iter_ % saveEvery_ == 0 || iter_ % perEpoch_ == 0 || iter_ == stopAt_ || stopNow)) {
-        if (lead_) saveCheckpoints();
-        if (stopNow) {
-          interrupted_ = true;
-          progress_.breakLine();
-          if (lead_)
-            std::fprintf(stderr, "pretrain: signal: checkpoint saved at step %lld, exiting\n",
-                         static_cast<long long>(iter_));
-          break;
-        }
-      }
-      if (lead_ && c_.reconEvery > 0 && iter_ % c_.reconEvery == 0 && reconData_)
-        writeReconstruction();
-    }
-    if (iter_ > firstIter_) progress_.show(progressText(), /*last=*/true);
-  }
-
-  nlohmann::json summary() {
-    const double seconds = since(start_);
-    nlohmann::json s = {
-        {"steps", iter_},
-        {"task", c_.task},
-        {"steps_this_run", iter_ - firstIter_},
-        {"loss", lastLoss_},
-        {"seconds", seconds},
-        {"pairs_per_s", (iter_ - firstIter_) * c_.batchSize / std::max(seconds, 1e-9)},
-        {"data_wait", waitTotal_ / std::max(stepTotal_, 1e-9)},
-        {"skipped_steps", skipped_},
-        {"interrupted", interrupted_},
-        {"checkpoint", ckptPath_}};
-    s["world_size"] = world_;
-    s["fused_adamw"] = c_.fusedAdamW && device_.is_cuda() && fusedAdamWCompiled();
-    s["pairs_by_source"] = loader_->counts();
-    if (scaler_->enabled()) s["loss_scale"] = scaler_->scale();
-    if (lead_) writeFileAtomic((fs::path(c_.out) / "summary.json").string(), s.dump(1) + "\n");
-    if (dist_) dist_->barrier();
-    return s;
-  }
-
- private:
-  void restoreCheckpoint() {
-    const Checkpoint ck = loadCheckpoint(ckptPath_);
-    if (ck.hasArgs && configFromJson(ck.args, ckptPath_).enc_embed_dim != c_.model.enc_embed_dim)
-      throw Error(ckptPath_,
-                  "checkpoint was trained with other hyper-parameters than the model "
-                  "config");
-    if (trainedTask(ck) != c_.task)
-      throw Error(ckptPath_, "checkpoint was trained on task " + trainedTask(ck) + ", not " +
-                                 c_.task + "; use another --out");
-    loadStateDictStrict(model_, ck.model, ckptPath_);
-    restoreOptimizer(*opt_, ordered_, ck.extraTensors, ckptPath_);
-    iter_ = ck.extra.value("step", int64_t{0});
-    livePosition_ = ck.extra.value("live_position", uint64_t{0});
-    if (ck.extra.contains("scaler")) scaler_->restore(ck.extra["scaler"]);
-    auto rng = ck.extraTensors.find("rng/torch");
-    if (rng != ck.extraTensors.end()) {
-      auto gen = at::detail::getDefaultCPUGenerator();
-      std::lock_guard<std::mutex> lock(gen.mutex());
-      gen.set_state(rng->second);
-    }
-  }
-
-  // Keeps the log up to the checkpoint: lines a killed run wrote after it are dropped. A
-  // resumed run that has no step left still reports the last logged loss.
-  void cutLogToCheckpoint() {
-    std::ifstream in(logPath_);
-    std::string line, kept;
-    while (std::getline(in, line)) {
-      auto j = nlohmann::json::parse(line, nullptr, false);
-      if (j.is_object() && j.value("step", int64_t{-1}) < iter_) {
-        kept += line + "\n";
-        curve_.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
-      }
-    }
-    if (lead_) writeFileAtomic(logPath_, kept);
-    if (!curve_.empty()) lastLoss_ = curve_.back().second;
-  }
-
-  void setLearningRate() {
-    const double l = learningRate(lr_, c_.minLr, c_.warmupEpochs, c_.epochs, epoch_);
-    for (auto& g : opt_->param_groups())
-      static_cast<torch::optim::AdamWOptions&>(g.options()).lr(l);
-  }
-  double currentLr() const {
-    return static_cast<torch::optim::AdamWOptions&>(opt_->param_groups()[0].options()).lr();
-  }
-
-  // Forward and backward of iteration iter_, and the optimizer step when it ends an
-  // accumulation. Returns the loss averaged over the ranks; a non-finite one skips the step.
-  double step(const Batch& batch) {
-    torch::Tensor loss;
-    // On CUDA the batch is pinned uint8, finished there; the loss's .item() below waits for the
-    // copies before the loader may fill the buffer again.
-    const Batch b = finishBatch(batch, device_);
-    {
-      // On CUDA: bf16 or fp16 autocast; the loss itself in float32.
-      AutocastGuard autocast(device_.is_cuda() && c_.amp != "none",
-                             c_.amp == "fp16" ? at::kHalf : at::kBFloat16);
-      auto out = pretrainForward(model_, c_.task, b.img1, b.img2, b.mask);
-      loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
-    }
-    if (iter_ == c_.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
-    // The ranks agree on the loss (and so on skipping a non-finite one).
-    auto lossAll = loss.detach().to(torch::kCPU, torch::kFloat64).reshape({1});
-    if (dist_) dist_->allReduceMean({lossAll});
-    const double lossValue = lossAll.item<double>();
-    if (!std::isfinite(lossValue)) {
-      ++skipped_;
-      if (++nanRun_ > c_.maxNanSkips)
-        throw Error(c_.out, "loss is not finite for " + std::to_string(nanRun_) +
-                                " steps in a row (step " + std::to_string(iter_) +
-                                "); stopped, the last checkpoint is kept");
-      progress_.breakLine();
-      std::fprintf(stderr, "pretrain: warning: non-finite loss at step %lld, step skipped\n",
-                   static_cast<long long>(iter_));
-      opt_->zero_grad();
-      return lossValue;
-    }
-    nanRun_ = 0;
-    scaler_->scaleLoss(loss / c_.accumIter).backward();
-    if ((iter_ + 1) % c_.accumIter == 0) optimizerStep();
-    lastLoss_ = lossValue;
-    return lossValue;
-  }
-
-  void optimizerStep() {
-    if (dist_) {
-      std::vector<torch::Tensor> grads;
-      for (auto& p : ordered_)
-        if (p.grad().defined()) grads.push_back(p.grad());
-      dist_->allReduceMean(grads);
-    }
-    // With a loss scale, gradients that overflowed skip the step (on every rank alike: they
-    // were all-reduced) and the scale backs off.
-    const bool finite = scaler_->unscale(ordered_);
-    if (finite && !(c_.fusedAdamW && fusedAdamWStep(*opt_))) opt_->step();
-    scaler_->update(finite);
-    if (!finite && lead_) {
-      progress_.breakLine();
-      std::fprintf(stderr,
-                   "pretrain: warning: fp16 gradients overflowed at step %lld; step skipped, "
-                   "loss scale now %g\n",
-                   static_cast<long long>(iter_), scaler_->scale());
-    }
-    opt_->zero_grad();
-  }
-
-  // One line of log.jsonl for the step just taken (iter_ - 1).
-  void logStep(double wait, double stepTime) {
-    nlohmann::json j = {{"step", iter_ - 1},
-                        {"epoch", epoch_},
-                        {"loss", stepLoss_},
-                        {"lr", currentLr()},
-                        {"pairs_per_s", c_.batchSize / stepTime},
-                        {"data_wait", wait / stepTime}};
-    log_ << j.dump() << "\n";
-    log_.flush();
-    curve_.emplace_back(iter_ - 1, stepLoss_);
-  }
-
-  std::string progressText() const {
-    const double rate = (iter_ - firstIter_) / std::max(1e-9, since(start_));
-    char line[256];
-    std::snprintf(line, sizeof line,
-                  "[pretrain] step %lld/%lld  epoch %.2f  loss %.4f  lr %.2e  %.1f pairs/s  "
-                  "data-wait %.1f%%  ETA %.0fs",
-                  static_cast<long long>(iter_), static_cast<long long>(stopAt_), epoch_, stepLoss_,
-                  currentLr(), rate * c_.batchSize, 100 * waitTotal_ / std::max(1e-9, stepTotal_),
-                  (stopAt_ - iter_) / std::max(rate, 1e-9));
-    return line;
-  }
-
-  // A signal to any rank stops them all, at the same accumulation boundary.
-  bool stopRequested(const StopSignals& signals, bool boundary) {
-    bool stop = signals.raised();
-    if (dist_ && boundary) {
-      auto flag = torch::tensor({stop ? 1.0 : 0.0}, torch::kFloat64);
-      dist_->allReduceMean({flag});
-      stop = flag.item<double>() > 0;
-    }
-    return stop;
-  }
-
-  // checkpoint-last.pth and the loss curve; checkpoint-<epoch>.pth every --keep-every epochs.
-  void saveCheckpoints() {
-    save(ckptPath_, iter_);
-    writeLossCurve((fs::path(c_.out) / "loss.svg").string(), curve_);
-    if (c_.keepEvery > 0 && iter_ % perEpoch_ == 0 && (iter_ / perEpoch_) % c_.keepEvery == 0)
-      save((fs::path(c_.out) / ("checkpoint-" + std::to_string(iter_ / perEpoch_) + ".pth"))
-               .string(),
-           iter_);
-  }
-
-  void save(const std::string& path, int64_t step) {
-    for (const auto& p : model_->parameters())
-      if (!torch::isfinite(p).all().item<bool>())
-        throw Error(path, "weights are not finite at step " + std::to_string(step) +
-                              ": checkpoint not written");
-    auto tensors = optimizerTensors(*opt_, ordered_);
-    {
-      auto gen = at::detail::getDefaultCPUGenerator();
-      std::lock_guard<std::mutex> lock(gen.mutex());
-      tensors["rng/torch"] = gen.get_state();
-    }
-    nlohmann::json extra = {{"step", step},
-                            {"live_position", loader_ ? loader_->livePosition() : 0},
-                            {"seed", c_.seed},
-                            {"task", c_.task},
-                            {"batch_size", c_.batchSize},
-                            {"accum_iter", c_.accumIter}};
-    if (scaler_->enabled()) extra["scaler"] = scaler_->state();
-    saveCheckpoint(path, model_, step / perEpoch_, extra, tensors);
-  }
-
   // recon-latest.png: the first pair of the disk data with a fixed mask.
-  void writeReconstruction() {
+  void writeReconstruction(const torch::Device& device) {
     torch::NoGradGuard ng;
     model_->eval();
     auto [x, y] = reconData_->load(0);
@@ -536,56 +156,29 @@ class Pretraining {
     auto mask = torch::argsort(torch::rand({1, c_.model.numPatches()}, gen), 1, false) <
                 c_.model.numMasked();
     const Reconstruction r = reconstructWith(
-        model_, imageTensor(x, c_.model.img_size).to(device_),
-        taskReference(c_.task, imageTensor(y, c_.model.img_size).to(device_)), mask.to(device_));
+        model_, imageTensor(x, c_.model.img_size).to(device),
+        taskReference(c_.task, imageTensor(y, c_.model.img_size).to(device)), mask.to(device));
     writeImage((fs::path(c_.out) / "recon-latest.png").string(), r.grid);
-    model_->train();
   }
 
-  // Set-up.
   const TrainConfig& c_;
-  Distributed* dist_;
-  const int rank_, world_;
-  const bool lead_;  // rank 0: writes checkpoints, logs and images
-  torch::Device device_{torch::kCPU};
-  std::string ckptPath_, logPath_;
-  ProgressLine progress_;
-  // Data.
+  // Data. Members are declared in the order they are made, so that they are destroyed in
+  // reverse: the loader's threads stop before the datasets they read go away.
   std::unique_ptr<PairDataset> shardSet_, crocoSet_;
   std::vector<Source> sources_;
   const PairDataset* reconData_ = nullptr;  // the recon grid's pair
-  // Model and optimizer.
   CroCoNet model_{nullptr};
-  std::vector<torch::Tensor> ordered_;  // parameters, in named_parameters() order
-  double lr_ = 0;                       // the peak lr
-  std::unique_ptr<torch::optim::AdamW> opt_;
-  std::unique_ptr<GradScaler> scaler_;
-  // Position.
-  int64_t iter_ = 0, firstIter_ = 0;
   uint64_t livePosition_ = 0;
-  std::vector<std::pair<int64_t, double>> curve_;  // (step, loss) of the logged steps
   std::unique_ptr<BatchLoader> loader_;
-  int64_t perEpoch_ = 0, stopAt_ = 0, saveEvery_ = 0;
-  // The step loop's state and tallies.
-  std::ofstream log_;
-  Clock::time_point start_ = Clock::now();
-  double epoch_ = 0, stepLoss_ = NAN, lastLoss_ = NAN;
-  double waitTotal_ = 0, stepTotal_ = 0;
-  int nanRun_ = 0, skipped_ = 0;
-  bool interrupted_ = false;
+  Batch batch_;
 };
 
 }  // namespace
 
 nlohmann::json runPretrain(const TrainConfig& c, Distributed* dist) {
   c.validate();
-  Pretraining run(c, dist);
-  run.openDataSources();
-  run.buildModelAndOptimizer();
-  run.resumeOrStartLog();
-  run.startLoaders();
-  run.trainSteps();
-  return run.summary();
+  PretrainTask task(c);
+  return runTraining(c, task, dist);
 }
 
 }  // namespace paircast

@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Times naver/croco's CroCo-Flow train step on the CPU: CroCoDownstreamBinocular with
+PixelwiseTaskWithDPT (3 channels), stereoflow's LaplacianLossBounded and AdamW (betas 0.9, 0.95,
+weight decay 0.05 but on biases and 1-D parameters), from a checkout of naver/croco.
+
+  croco_flow_step.py --croco-dir DIR --preset tiny --img-size 224 --batch 8 --threads 2 \
+      --hooks 5 5 6 7
+Prints one line: SUMMARY croco_flow_step ... train_s=<median seconds per step>.
+"""
+import argparse
+import sys
+import time
+
+import torch
+
+PRESETS = {
+    "tiny": dict(enc_embed_dim=192, enc_depth=6, enc_num_heads=3, dec_embed_dim=128, dec_depth=2,
+                 dec_num_heads=4),
+    "small": dict(enc_embed_dim=384, enc_depth=12, enc_num_heads=6, dec_embed_dim=256,
+                  dec_depth=4, dec_num_heads=8),
+    "base": dict(enc_embed_dim=768, enc_depth=12, enc_num_heads=12, dec_embed_dim=512,
+                 dec_depth=8, dec_num_heads=16),
+}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--croco-dir", required=True)
+    ap.add_argument("--preset", default="tiny", choices=sorted(PRESETS))
+    ap.add_argument("--img-size", type=int, default=224)
+    ap.add_argument("--batch", type=int, default=8)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--hooks", type=int, nargs=4, required=True)
+    a = ap.parse_args()
+    torch.set_num_threads(a.threads)
+    sys.path.insert(0, a.croco_dir)
+    from models.croco_downstream import CroCoDownstreamBinocular  # noqa: E402
+    from models.head_downstream import PixelwiseTaskWithDPT  # noqa: E402
+    from stereoflow.criterion import LaplacianLossBounded  # noqa: E402
+
+    torch.manual_seed(0)
+    head = PixelwiseTaskWithDPT(hooks_idx=a.hooks, num_channels=3)
+    net = CroCoDownstreamBinocular(head, img_size=a.img_size, **PRESETS[a.preset])
+    crit = LaplacianLossBounded()
+    decay = [p for n, p in net.named_parameters() if p.ndim > 1 and not n.endswith(".bias")]
+    rest = [p for n, p in net.named_parameters() if p.ndim <= 1 or n.endswith(".bias")]
+    opt = torch.optim.AdamW([{"params": decay, "weight_decay": 0.05},
+                             {"params": rest, "weight_decay": 0.0}], lr=1e-4, betas=(0.9, 0.95))
+    s = a.img_size
+    img1, img2 = torch.randn(a.batch, 3, s, s), torch.randn(a.batch, 3, s, s)
+    gt = 5 * torch.randn(a.batch, 2, s, s)
+
+    def step():
+        out = net(img1, img2)
+        loss = crit(out[:, :2], gt, out[:, 2:3])
+        loss.backward()
+        opt.step()
+        opt.zero_grad(set_to_none=True)
+
+    step()
+    times = []
+    for _ in range(a.repeat):
+        t = time.perf_counter()
+        step()
+        times.append(time.perf_counter() - t)
+    times.sort()
+    print("SUMMARY croco_flow_step preset=%s batch=%d threads=%d img=%d torch=%s train_s=%.4f"
+          % (a.preset, a.batch, a.threads, s, torch.__version__, times[len(times) // 2]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

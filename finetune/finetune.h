@@ -1,0 +1,60 @@
+// finetune: a pre-trained CroCo (or random weights) made into a flow, depth or relative-pose
+// model on pairs with exact ground truth, through the training loop pretrain uses
+// (trainer/training_loop.h), then measured on held-out pairs against a trivial baseline.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "model/downstream.h"
+#include "trainer/trainer.h"
+
+namespace paircast {
+
+class Distributed;
+
+struct FinetuneConfig {
+  // Checks what a user sets; throws OptionError naming the field.
+  void validate() const;
+
+  // The loop's settings (batch, schedule, out, resume, device, amp, seed, checkpoints, log, NaN
+  // guard); its data and task fields are unused.
+  TrainConfig train;
+  DownstreamConfig model;
+  std::vector<std::string> data;      // shards written with --save-flow --save-depth
+  std::vector<std::string> evalData;  // held-out shards (other scenes); empty: no evaluation
+  size_t evalPairs = 0;               // held-out pairs measured (0: all)
+  // "random", or a pre-training checkpoint: the encoder, and the decoder of a cross-view one
+  // (an mae checkpoint gives its encoder, the decoder stays random).
+  std::string init = "random";
+  bool colorJitter = true;
+};
+
+// Trains and evaluates; returns the summary (also <out>/summary.json), with "heldout" (model and
+// baseline figures, also <out>/heldout.json with each pair's). Data-parallel when WORLD_SIZE > 1.
+nlohmann::json runFinetune(const FinetuneConfig& config);
+nlohmann::json runFinetune(const FinetuneConfig& config, Distributed* dist);
+
+// The held-out figures of a fine-tuned checkpoint alone (the summary's "heldout").
+nlohmann::json evaluateCheckpoint(const std::string& checkpoint,
+                                  const std::vector<std::string>& evalData, size_t evalPairs,
+                                  const std::string& device);
+
+// The loss of a task's output against a batch's truth (float32 scalar): flow with the DPT head,
+// naver/croco's LaplacianLossBounded (a = 0.25, b = 4, pixels with known flow under 1e4 px);
+// flow with the linear head, the squared error over pixels whose flow lands inside the other
+// view's crop; depth, the L1 error of
+// log-depth over pixels with depth; pose, ||R - R^||_F^2 + 100 ||t - t^||^2.
+torch::Tensor finetuneLoss(const std::string& task, const std::string& head,
+                           const torch::Tensor& out, const torch::Tensor& flow,
+                           const torch::Tensor& depth, const torch::Tensor& pose);
+
+// finetune --predict: the model of `checkpoint` on one pair (depth: image 1 alone), written to
+// `out`: flow .flo (and a colour-wheel PNG beside it, same name with .png), depth .exr (metres),
+// pose .json. Returns what was written.
+nlohmann::json predictToFile(const std::string& checkpoint, const std::string& image1,
+                             const std::string& image2, const std::string& out,
+                             const std::string& device);
+
+}  // namespace paircast

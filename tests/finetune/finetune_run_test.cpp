@@ -1,0 +1,260 @@
+// finetune end to end on a shipped scene: shards with flow and depth from generate_pairs, short
+// fine-tunes that beat their trivial baselines on held-out pairs, exact resume, refusals,
+// bad flags, and --predict.
+#include "finetune/finetune.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+
+#include "finetune/finetune_data.h"
+#include "model/checkpoint.h"
+#include "test_errors.h"
+#include "test_paths.h"
+#include "test_process.h"
+#include "util/atomic_file.h"
+#include "util/flo_io.h"
+#include "util/image_io.h"
+
+namespace paircast {
+namespace {
+namespace fs = std::filesystem;
+
+std::string tool(const std::string& name) {
+  return std::string(PAIRCAST_BINARY_DIR) + "/tools/" + name;
+}
+
+// 80 pairs of a shipped scene at 64 pixels with flow and depth, made once and reused: the first
+// shard's 64 to train on, the second's 16 held out.
+std::string truthShards(const std::string& scene, int shard) {
+  const std::string out = fs::path(::testing::TempDir()) / "paircast" / ("truth-" + scene);
+  if (!fs::exists(out + "/summary.json")) {
+    const int status = testing::runProcess(
+        {tool("generate_pairs"), "--scenes", testing::sourceDir() + "/scenes/" + scene, "--out",
+         out, "--pairs-per-scene", "80", "--shard-size", "64", "--resolution", "64",
+         "--save-flow", "--save-depth", "--seed", "3", "--quiet", "--jobs", "2"});
+    EXPECT_EQ(status, 0) << "generate_pairs on " << scene;
+  }
+  return out + "/pairs-00000" + std::to_string(shard) + ".tar";
+}
+
+FinetuneConfig smallRun(const std::string& task, const std::string& out) {
+  FinetuneConfig c;
+  c.data = {truthShards("apartment", 0)};
+  c.evalData = {truthShards("apartment", 1)};
+  c.model.croco = presetConfig("tiny");
+  c.model.croco.img_size = 64;
+  c.model.task = task;
+  c.model.head = task == "pose" ? "pose" : "linear";
+  c.train.out = out;
+  c.train.batchSize = 8;
+  c.train.epochs = 20;
+  c.train.warmupEpochs = 1;
+  c.train.blr = 1e-2;
+  c.train.progress = false;
+  c.train.saveEvery = 1000;
+  return c;
+}
+
+double heldOut(const nlohmann::json& s, const char* who, const char* metric) {
+  return s.at("heldout").at(who).at(metric).get<double>();
+}
+
+TEST(FinetuneData, ShardsHoldTheFlowThatTheDepthAndCamerasGive) {
+  const TruthPairs data = TruthPairs::fromShards({truthShards("apartment", 1)});
+  ASSERT_GT(data.size(), 4u);
+  for (size_t i = 0; i < 4; ++i) {
+    const TruthPair p = data.load(i);
+    ASSERT_EQ(p.flow.width, 64);
+    size_t known = 0;
+    for (int v = 0; v < 64; v += 7)
+      for (int u = 0; u < 64; u += 7) {
+        const float z = p.depth1.data[v * 64 + u];
+        const float* f = p.flow.pixel(u, v);
+        if (!(z > 0)) {
+          EXPECT_TRUE(std::isinf(f[0]) && std::isinf(f[1]));
+          continue;
+        }
+        // The pixel's point, seen from camera 2, lands at the pixel plus the flow.
+        const Eigen::Vector3d world =
+            p.camera1.worldFromCamera() *
+            (z * (p.camera1.K.inverse() * Eigen::Vector3d(u + 0.5, v + 0.5, 1)));
+        const Eigen::Vector3d c2 = p.camera2.cameraFromWorld() * world;
+        if (c2.z() <= 0) continue;
+        const Eigen::Vector3d q = p.camera2.K * c2 / c2.z();
+        EXPECT_NEAR(u + 0.5 + f[0], q.x(), 2e-3);
+        EXPECT_NEAR(v + 0.5 + f[1], q.y(), 2e-3);
+        ++known;
+      }
+    EXPECT_GT(known, 20u);
+  }
+}
+
+TEST(FinetuneData, ShardsWithoutFlowAreRefusedNamingThem) {
+  const std::string out = testing::scratchDir("noflow");
+  ASSERT_EQ(testing::runProcess({tool("generate_pairs"), "--scenes",
+                                 testing::sourceDir() + "/scenes/room", "--out", out,
+                                 "--pairs-per-scene", "2", "--resolution", "32", "--save-depth",
+                                 "--quiet"}),
+            0);
+  EXPECT_ERROR_CONTAINS(TruthPairs::fromShards({out + "/pairs-*.tar"}), "pairs-000000.tar",
+                        "has no flow (generate_pairs --save-flow)");
+  EXPECT_ERROR_CONTAINS(TruthPairs::fromShards({out + "/nothing-*.tar"}), "no shard matches");
+}
+
+TEST(FinetuneRun, FlowBeatsZeroFlowOnHeldOutPairs) {
+  const nlohmann::json s = runFinetune(smallRun("flow", testing::scratchDir("flow")));
+  std::printf("held-out flow %s\n", s["heldout"].dump().c_str());
+  EXPECT_LT(heldOut(s, "model", "aepe_covisible"), 0.9 * heldOut(s, "baseline", "aepe_covisible"));
+  EXPECT_GT(heldOut(s, "model", "pairs"), 10);
+}
+
+TEST(FinetuneRun, DepthBeatsAConstantOnHeldOutPairs) {
+  const nlohmann::json s = runFinetune(smallRun("depth", testing::scratchDir("depth")));
+  std::printf("held-out depth %s\n", s["heldout"].dump().c_str());
+  EXPECT_LT(heldOut(s, "model", "absrel"), heldOut(s, "baseline", "absrel"));
+  EXPECT_GT(heldOut(s, "model", "delta1"), heldOut(s, "baseline", "delta1"));
+}
+
+TEST(FinetuneRun, PoseBeatsIdentityOnHeldOutPairs) {
+  const nlohmann::json s = runFinetune(smallRun("pose", testing::scratchDir("pose")));
+  std::printf("held-out pose %s\n", s["heldout"].dump().c_str());
+  EXPECT_LT(heldOut(s, "model", "median_rot_err"), heldOut(s, "baseline", "median_rot_err"));
+}
+
+TEST(FinetuneRun, ResumesExactly) {
+  FinetuneConfig whole = smallRun("flow", testing::scratchDir("whole"));
+  whole.evalData.clear();
+  whole.train.maxSteps = 6;
+  runFinetune(whole);
+  FinetuneConfig half = whole;
+  half.train.out = testing::scratchDir("half");
+  half.train.maxSteps = 3;
+  runFinetune(half);
+  half.train.maxSteps = 6;
+  half.train.resume = true;
+  EXPECT_EQ(runFinetune(half)["steps"], 6);
+  const Checkpoint a = loadCheckpoint(whole.train.out + "/checkpoint-last.pth");
+  const Checkpoint b = loadCheckpoint(half.train.out + "/checkpoint-last.pth");
+  ASSERT_EQ(a.model.size(), b.model.size());
+  for (const auto& [k, t] : a.model) EXPECT_TRUE(torch::equal(t, b.model.at(k))) << k;
+}
+
+TEST(FinetuneRun, RefusesCheckpointsOfAnotherTaskOrModel) {
+  FinetuneConfig flow = smallRun("flow", testing::scratchDir("ck"));
+  flow.evalData.clear();
+  flow.train.maxSteps = 1;
+  runFinetune(flow);
+  FinetuneConfig depth = smallRun("depth", flow.train.out);
+  depth.evalData.clear();
+  depth.train.resume = true;
+  EXPECT_ERROR_CONTAINS(runFinetune(depth), "checkpoint-last.pth",
+                        "checkpoint of task flow (head linear), not depth");
+  FinetuneConfig bigger = flow;
+  bigger.train.resume = true;
+  bigger.model.croco = presetConfig("small");
+  bigger.model.croco.img_size = 64;
+  EXPECT_ERROR_CONTAINS(runFinetune(bigger), "checkpoint of another model");
+  // --init takes pre-training checkpoints, of the same widths.
+  FinetuneConfig init = smallRun("flow", testing::scratchDir("init"));
+  init.init = flow.train.out + "/checkpoint-last.pth";
+  EXPECT_ERROR_CONTAINS(runFinetune(init), "is a fine-tuning checkpoint (task flow)");
+  const std::string pre = testing::scratchDir("pre") + "/small.pth";
+  CroCoConfig small = presetConfig("small");
+  small.img_size = 64;
+  CroCoNet net(small);
+  saveCheckpoint(pre, net, 0);
+  init.init = pre;
+  EXPECT_ERROR_CONTAINS(runFinetune(init), "small.pth",
+                        "checkpoint of another model: enc_embed_dim 384, not 192");
+}
+
+TEST(FinetuneRun, MaeInitKeepsTheSeedsRandomDecoderAndCrossViewCopiesIt) {
+  CroCoConfig tiny = presetConfig("tiny");
+  tiny.img_size = 64;
+  torch::manual_seed(11);
+  CroCoNet pre(tiny);
+  const std::string dir = testing::scratchDir("mae");
+  saveCheckpoint(dir + "/mae.pth", pre, 0, {{"task", "mae"}});
+  saveCheckpoint(dir + "/croco.pth", pre, 0, {{"task", "croco"}});
+  DownstreamConfig c;
+  c.croco = tiny;
+  c.task = "flow";
+  c.head = "linear";
+  torch::manual_seed(5);
+  DownstreamNet fresh(c);
+  torch::manual_seed(5);
+  DownstreamNet mae(c);
+  EXPECT_EQ(mae->initFromPretrained(loadCheckpoint(dir + "/mae.pth"), "mae.pth"), "encoder");
+  torch::manual_seed(5);
+  DownstreamNet cross(c);
+  EXPECT_EQ(cross->initFromPretrained(loadCheckpoint(dir + "/croco.pth"), "croco.pth"),
+            "encoder+decoder");
+  const auto f = fresh->state(), m = mae->state(), x = cross->state(), p = stateDict(pre);
+  EXPECT_TRUE(torch::equal(m.at("dec_blocks.1.mlp.fc2.weight"), f.at("dec_blocks.1.mlp.fc2.weight")));
+  EXPECT_TRUE(torch::equal(m.at("decoder_embed.weight"), f.at("decoder_embed.weight")));
+  EXPECT_TRUE(torch::equal(m.at("enc_blocks.3.attn.qkv.weight"), p.at("enc_blocks.3.attn.qkv.weight")));
+  EXPECT_TRUE(torch::equal(x.at("dec_blocks.1.mlp.fc2.weight"), p.at("dec_blocks.1.mlp.fc2.weight")));
+  EXPECT_FALSE(torch::equal(f.at("dec_blocks.1.mlp.fc2.weight"), p.at("dec_blocks.1.mlp.fc2.weight")));
+}
+
+int runTool(const std::vector<std::string>& args, std::string* err) {
+  const std::string log = testing::scratchDir("log") + "/stderr.txt";
+  std::string cmd = tool("finetune");
+  for (const auto& a : args) cmd += " '" + a + "'";
+  const int status = std::system((cmd + " 2> " + log).c_str());
+  *err = readFile(log);
+  return WEXITSTATUS(status);
+}
+
+TEST(FinetuneCli, BadFlagsExit2WithOneLine) {
+  const std::string data = truthShards("apartment", 1), out = testing::scratchDir("cli");
+  std::string err;
+  EXPECT_EQ(runTool({"--data", data, "--out", out, "--task", "segmentation"}, &err), 2) << err;
+  EXPECT_EQ(runTool({"--data", data, "--out", out, "--img-size", "112"}, &err), 2);
+  EXPECT_NE(err.find("finetune: error: --img-size: the DPT head needs an image side divisible by "
+                     "32"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(runTool({"--data", data, "--out", out, "--task", "pose", "--head", "dpt"}, &err), 2);
+  EXPECT_NE(err.find("--task pose takes --head pose"), std::string::npos) << err;
+  EXPECT_EQ(runTool({"--out", out}, &err), 2);
+  EXPECT_NE(err.find("--data: give shards written with generate_pairs --save-flow"),
+            std::string::npos)
+      << err;
+  EXPECT_EQ(runTool({"--predict", "--out", out + "/x.flo"}, &err), 2);
+  EXPECT_NE(err.find("--checkpoint is required"), std::string::npos) << err;
+  EXPECT_EQ(runTool({"--batch-size", "0", "--out", out}, &err), 2);
+}
+
+TEST(FinetuneCli, PredictWritesFloAndAPicture) {
+  const std::string dir = testing::scratchDir("predict");
+  std::string err;
+  ASSERT_EQ(runTool({"--data", truthShards("apartment", 0), "--out", dir + "/run", "--img-size",
+                     "64", "--head", "linear", "--max-steps", "1", "--quiet"},
+                    &err),
+            0)
+      << err;
+  // Two views of the studio, larger than the model's tiles: written as images.
+  const TruthPair p = TruthPairs::fromShards({truthShards("apartment", 1)}).load(0);
+  writeImage(dir + "/a.png", p.rgb1);
+  writeImage(dir + "/b.png", p.rgb2);
+  ASSERT_EQ(runTool({"--predict", "--checkpoint", dir + "/run/checkpoint-last.pth", "--image1",
+                     dir + "/a.png", "--image2", dir + "/b.png", "--out", dir + "/flow.flo"},
+                    &err),
+            0)
+      << err;
+  const ImageF flow = readFlo(dir + "/flow.flo");
+  EXPECT_EQ(flow.width, 64);
+  EXPECT_EQ(flow.channels, 2);
+  EXPECT_TRUE(fs::exists(dir + "/flow.png"));
+  EXPECT_EQ(runTool({"--predict", "--checkpoint", dir + "/run/checkpoint-last.pth", "--image1",
+                     dir + "/a.png", "--image2", dir + "/missing.png", "--out", dir + "/x.flo"},
+                    &err),
+            1);
+  EXPECT_NE(err.find("missing.png"), std::string::npos) << err;
+}
+
+}  // namespace
+}  // namespace paircast
