@@ -474,8 +474,11 @@ TEST(Pretrain, SigtermSavesACheckpointAndExits) {
 // put first on the library path in turn, and only the pthread one earns the warning.
 TEST(Pretrain, WarnsOnThePthreadOpenBlas) {
   const std::string lib = "/usr/lib/x86_64-linux-gnu/openblas-";
-  if (!fs::exists(lib + "pthread/libblas.so.3") || !fs::exists(lib + "openmp/libblas.so.3"))
-    GTEST_SKIP() << "needs libopenblas0-pthread and libopenblas0-openmp";
+  if (!fs::exists(lib + "openmp/libblas.so.3"))
+    GTEST_SKIP() << "libopenblas0-openmp is not installed (scripts/setup.sh installs it)";
+  // setup.sh installs only the OpenMP build, so CI's machines skip here (scripts/skip_policy.py).
+  if (!fs::exists(lib + "pthread/libblas.so.3"))
+    GTEST_SKIP() << "libopenblas0-pthread is not installed: the OpenMP OpenBLAS is the only one";
   const std::string dir = testing::scratchDir("blas");
   const std::string run = "LD_LIBRARY_PATH=" + lib + "%s " + PAIRCAST_BINARY_DIR +
                           "/tools/pretrain --data '" + pairsDir() +
