@@ -81,9 +81,16 @@ class SlurmCluster {
       startLog_ = "mkdtemp in /tmp failed";
       return;
     }
+    // Status 3 is the script's "Slurm can't run here", the one skip. Anything else (1: it died,
+    // 2: a syntax error, 126: not executable, 127: missing) is a broken script: the test fails.
     const Output check = shell(script() + " check");
+    if (check.status == 3) {
+      skip_ = check.text.empty() ? "slurm_cluster.sh check: Slurm can't run here" : check.text;
+      return;
+    }
     if (check.status != 0) {
-      skip_ = check.text.empty() ? "slurm_cluster.sh check failed" : check.text;
+      startLog_ = "slurm_cluster.sh check exited " + std::to_string(check.status) +
+                  " (3 would mean Slurm can't run here): " + check.text;
       return;
     }
     // Ports from the test's pid, below the ephemeral range: parallel test runs do not meet.
@@ -93,8 +100,6 @@ class SlurmCluster {
                                std::to_string(port));
     up_ = start.status == 0;
     startLog_ = start.text;
-    // Status 4: a Slurm whose auth/slurm setup (>= 23.11) could not start here; untested.
-    if (start.status == 4) skip_ = start.text;
     upSeconds_ = secondsSince(started_);
   }
   // Stops whatever the start got to, even if it was cut short by its timeout.
