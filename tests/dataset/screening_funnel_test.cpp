@@ -1,4 +1,4 @@
-// Issue 33's screening: references rendered in full only once a partner has passed screening,
+// Screening: references rendered in full only once a partner has passed screening,
 // the sight lines, the batched first stage, the scaled tolerances, the skip of clear candidates,
 // the references' fine check, the funnel's accounting, the give-up, and the covis distribution
 // and bytes it leaves unchanged.
@@ -262,7 +262,8 @@ PairOptions fullSizeOptions() {
   return o;
 }
 
-// The previous estimates: covis' own tolerances at every side, with the margins they needed.
+// Plain estimates (--screen-plain-tolerance): covis' own tolerances at every side, with the
+// margins they need.
 PairOptions plainTolerance(PairOptions o) {
   o.screenScaleTolerance = false;
   o.screenCovisMargin = 0.18;
@@ -356,9 +357,9 @@ TEST(NoRenderWasted, AReferenceNearTheValidBoundIsCheckedAtTheFinestStageFirst) 
 }
 
 TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
-  // The open room again, one reference an index. A reference that fails its fine check with no
-  // candidate drawn was checked at once (below the bound at its last stage); before, every
-  // reference waited for a candidate to pass screening, and its candidates were wasted.
+  // The open room again, one reference an index. A reference below the bound at its last stage
+  // takes its fine check at once, before any candidate is drawn, so that a reference that fails
+  // it wastes no candidates' renders.
   const OpenRoom& room = openRoom();
   PairOptions o = fullSizeOptions();
   o.maxAttempts = 20;
