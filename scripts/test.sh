@@ -9,9 +9,10 @@
 #                                Combines with --sanitize and --require-all.
 #   scripts/test.sh --require-all   fails on any skipped test, the allowed ones below included.
 #
-# After ctest, scripts/skip_policy.py reads each skipped test's reason (ctest's JUnit file, and
-# pytest's for the Python tests) and fails on any skip that is not allowed on CI's machines. It
-# prints the skips it allowed and why. The allowed skips:
+# Before the build, scripts/check_history.sh fails on comments, help text or docs that narrate
+# history (it belongs in git log). After ctest, scripts/skip_policy.py reads each skipped test's
+# reason (ctest's JUnit file, and pytest's for the Python tests) and fails on any skip that is not
+# allowed on CI's machines. It prints the skips it allowed and why. The allowed skips:
 #   - CUDA without a GPU: the Cuda.* tests and Pretrain.CudaStep, "no CUDA device".
 #   - torchrun on Debian 13's torch (no libuv): the Torchrun.* test, on Debian 13 only.
 #   - the pthread-OpenBLAS warning where only the OpenMP OpenBLAS is installed (setup.sh's choice):
@@ -65,6 +66,8 @@ if [[ -n "$release" ]]; then
   ((require_all)) && inner+=(--require-all)
   exec scripts/chroot.sh "$release" scripts/test.sh "${inner[@]}"
 fi
+
+scripts/check_history.sh
 
 JOBS=${JOBS:-$(nproc)}
 export JOBS
