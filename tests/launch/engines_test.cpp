@@ -15,7 +15,7 @@
 #include <thread>
 
 #include "dataset/generate_job.h"
-#include "model/checkpoint.h"
+#include "test_checkpoints.h"
 #include "test_files.h"
 #include "test_pairs.h"
 #include "test_paths.h"
@@ -363,17 +363,9 @@ void trainAlone(const std::string& out) {
   ASSERT_EQ(testing::runProcess(args), 0);
 }
 
-// The largest difference between the weights of two checkpoints.
-double weightDifference(const std::string& a, const std::string& b) {
-  const Checkpoint x = loadCheckpoint(a), y = loadCheckpoint(b);
-  double worst = 0;
-  for (const auto& [k, t] : x.model)
-    worst = std::max(worst, (t - y.model.at(k)).abs().max().item<double>());
-  return worst;
-}
-
 void expectTwoRanksEqualOne(const std::string& one, const std::string& two) {
-  EXPECT_LT(weightDifference(one + "/checkpoint-last.pth", two + "/checkpoint-last.pth"), 1e-5);
+  EXPECT_LT(testing::weightDifference(one + "/checkpoint-last.pth", two + "/checkpoint-last.pth"),
+            1e-5);
   const auto s = nlohmann::json::parse(readFile(two + "/summary.json"));
   EXPECT_EQ(s["world_size"], 2);
 }
@@ -517,8 +509,8 @@ TEST(Slurm, CovisSweepUnderSrunEqualsTheRanksStartedByHand) {
   for (size_t i = 0; i < hand["runs"].size(); ++i) {
     const std::string run = hand["runs"][i]["set"].get<std::string>() + "/seed-" +
                             std::to_string(hand["runs"][i]["seed_index"].get<int>());
-    EXPECT_LT(weightDifference(dir + "/hand/runs/" + run + "/checkpoint-last.pth",
-                               dir + "/srun/runs/" + run + "/checkpoint-last.pth"),
+    EXPECT_LT(testing::weightDifference(dir + "/hand/runs/" + run + "/checkpoint-last.pth",
+                                        dir + "/srun/runs/" + run + "/checkpoint-last.pth"),
               1e-5)
         << run;
     EXPECT_NEAR(hand["runs"][i]["xv_loss"].get<double>(), slurm["runs"][i]["xv_loss"].get<double>(),
