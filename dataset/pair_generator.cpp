@@ -18,8 +18,8 @@ constexpr auto since = secondsSince;
 // outOfFrame projects about a kFrameScreenSide^2 grid of the reference's pixels.
 constexpr int kFrameScreenSide = 64;
 constexpr int kMaxScreenBatch = 64;
-// How much wider a stage's covis margin is than the next finer one's, below 32x32 (16x16: 0.45
-// with the default 0.18 at 32x32, docs/dataset.md).
+// How much wider a stage's covis margin is than the next finer one's, below 32x32 (16x16: 0.075
+// with the default 0.03 at 32x32, docs/dataset.md).
 constexpr double kCoarseMarginRatio = 2.5;
 // Screening stages of this side or more take the fine valid margin.
 constexpr int kFineSide = 64;

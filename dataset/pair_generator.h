@@ -94,8 +94,8 @@ struct PairOptions {
   // The confirm stage: a candidate whose last-stage estimate lies within that stage's margin of
   // a bound of the band (so it may go either way) is rendered once more at twice the side, when
   // that is at most half the output's, and must then come within the confirm margin (128 at 256:
-  // 0.024). The rest of the candidates skip it. Off by default: at 256 it costs more than the
-  // full renders it saves (docs/dataset.md).
+  // 0.005, half the 64x64 one). The rest of the candidates skip it. Off by default: at 256 it
+  // costs more than the full renders it saves (docs/dataset.md).
   bool screenConfirm = false;
   // The valid-pixel margin of the stages of side 64 or more (and of the confirm stage), whose
   // valid fractions lie within 0.004 of full resolution's (references that failed at full

@@ -100,7 +100,7 @@ int main(int argc, char** argv) {
   app.add_flag_callback(
       "--screen-plain-tolerance", [&cfg] { cfg.pair.screenScaleTolerance = false; },
       "Screening estimates take covis' own depth tolerances at every side (default: "
-      "scaled with the side, docs/dataset.md); the earlier generator took them with "
+      "scaled with the side, docs/dataset.md); they then need wider margins: "
       "--screen-margin 0.18 --screen-fine-margin 0.04 --screen-glance-margin 0.25");
   app.add_option("--screen-frame-margin", cfg.pair.screenFrameMargin,
                  "Before rendering, turn down candidates whose share of the reference inside their "

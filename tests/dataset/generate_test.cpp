@@ -89,29 +89,42 @@ TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
 
 // The summary splits the full-resolution renders into those of views kept in a sample and those
 // wasted, and the seconds add up. With screening (64 px and more) each kept view is rendered once
-// in full, colour with depth; without it (48 px), depth first and colour once kept: two each.
+// in full, colour with depth; without it (48 px), depth first and colour once kept: two each. A
+// narrow band wastes some full renders; the whole band [0, 1] keeps the first candidate, so none,
+// and then no seconds are counted as wasted.
 TEST(GeneratePairs, SummaryCountsTheFullRendersKeptAndWasted) {
   for (const int resolution : {48, 64}) {
-    const std::string dir = testing::scratchDir("renders" + std::to_string(resolution));
-    GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
-    c.pair.resolution = resolution;
-    c.pair.minCovis = 0.5;
-    c.pair.maxCovis = 0.6;  // narrow: some full renders end in no pair
-    const nlohmann::json summary = runGenerate(c);
-    const auto pairs = summary["pairs_this_run"].get<uint64_t>();
-    ASSERT_GT(pairs, 0u);
-    const auto& renders = summary["renders"];
-    EXPECT_EQ(renders["kept"].get<uint64_t>(), (resolution < 64 ? 4 : 2) * pairs) << resolution;
-    EXPECT_GT(renders["wasted"].get<uint64_t>(), 0u) << resolution;
-    EXPECT_EQ(renders["full"].get<uint64_t>(),
-              renders["kept"].get<uint64_t>() + renders["wasted"].get<uint64_t>());
-    EXPECT_DOUBLE_EQ(renders["per_pair"].get<double>(),
-                     renders["full"].get<double>() / static_cast<double>(pairs));
-    const auto& t = summary["time_seconds"];
-    EXPECT_GT(t["render_kept"].get<double>(), 0);
-    EXPECT_GE(t["render_wasted"].get<double>(), 0);
-    EXPECT_NEAR(t["render_kept"].get<double>() + t["render_wasted"].get<double>(),
-                t["render"].get<double>(), 1e-9);
+    for (const bool narrow : {true, false}) {
+      const std::string name = std::to_string(resolution) + (narrow ? " narrow" : " whole band");
+      const std::string dir = testing::scratchDir("renders" + std::to_string(resolution) +
+                                                  (narrow ? "narrow" : "whole"));
+      GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
+      c.pair.resolution = resolution;
+      c.pair.minCovis = narrow ? 0.5 : 0.0;
+      c.pair.maxCovis = narrow ? 0.6 : 1.0;
+      const nlohmann::json summary = runGenerate(c);
+      const auto pairs = summary["pairs_this_run"].get<uint64_t>();
+      ASSERT_GT(pairs, 0u) << name;
+      const auto& renders = summary["renders"];
+      const auto wasted = renders["wasted"].get<uint64_t>();
+      EXPECT_EQ(renders["kept"].get<uint64_t>(), (resolution < 64 ? 4 : 2) * pairs) << name;
+      EXPECT_EQ(renders["full"].get<uint64_t>(), renders["kept"].get<uint64_t>() + wasted) << name;
+      EXPECT_DOUBLE_EQ(renders["per_pair"].get<double>(),
+                       renders["full"].get<double>() / static_cast<double>(pairs))
+          << name;
+      const auto& t = summary["time_seconds"];
+      EXPECT_GT(t["render_kept"].get<double>(), 0) << name;
+      EXPECT_NEAR(t["render_kept"].get<double>() + t["render_wasted"].get<double>(),
+                  t["render"].get<double>(), 1e-9)
+          << name;
+      if (narrow) {
+        EXPECT_GT(wasted, 0u) << name;
+        EXPECT_GT(t["render_wasted"].get<double>(), 0) << name;
+      } else {
+        EXPECT_EQ(wasted, 0u) << name;
+        EXPECT_NEAR(t["render_wasted"].get<double>(), 0, 1e-9) << name;
+      }
+    }
   }
 }
 

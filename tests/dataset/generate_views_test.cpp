@@ -1,4 +1,4 @@
-// Issue 12's generation engine: candidate screening, N-view samples, co-visibility masks, the
+// The generation engine: candidate screening, N-view samples, co-visibility masks, the
 // journal, and the command's exit status.
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// Issue 33's screening: references rendered in full only once a partner has passed screening,
+// Screening: references rendered in full only once a partner has passed screening,
 // the sight lines, the batched first stage, the scaled tolerances, the skip of clear candidates,
 // the references' fine check, the funnel's accounting, the give-up, and the covis distribution
 // and bytes it leaves unchanged.
@@ -18,6 +18,7 @@
 #include "test_errors.h"
 #include "test_files.h"
 #include "test_paths.h"
+#include "test_stats.h"
 #include "util/error.h"
 
 namespace paircast {
@@ -66,6 +67,19 @@ PairOptions smallOptions() {
   o.resolution = 128;  // screened at 16 and 32, the references glanced at 8 first
   o.keepDepth = false;
   return o;
+}
+
+// The covis of the samples of indices 0..n-1 without screening, at smallOptions' resolution: the
+// distribution that screening must keep.
+const std::vector<double>& unscreenedCovis(int n) {
+  static std::map<int, std::vector<double>> made;
+  auto& covis = made[n];
+  if (covis.empty()) {
+    PairOptions o = smallOptions();
+    o.screenResolution = 0;
+    apartment().run(o, n, &covis);
+  }
+  return covis;
 }
 
 // Candidates that passed every screening stage: each was rendered in full once.
@@ -137,28 +151,30 @@ TEST(NoRenderWasted, SightLinesTurnDownCandidatesBehindWallsNotOnesThatWouldBeKe
   EXPECT_EQ(noGlance.candidateFunnel[3].entered, c.candidateFunnel[2].entered);
 }
 
+TEST(TwoSampleKs, MeasuresTheLargestDistanceBetweenTheEmpiricalDistributions) {
+  EXPECT_NEAR(testing::ksStatistic({1, 2, 3}, {1.5, 2.5, 3.5}), 1.0 / 3, 1e-12);
+  EXPECT_NEAR(testing::ksStatistic({1, 2, 3}, {2, 3, 1}), 0.0, 1e-12);
+  EXPECT_NEAR(testing::ksStatistic({1, 2}, {3, 4, 5}), 1.0, 1e-12);
+  EXPECT_NEAR(testing::ksStatistic({1, 1, 2}, {1, 2, 2}), 1.0 / 3, 1e-12);  // ties
+  // 200 values a sample: the critical value at 0.01 is 1.628 / 10 = 0.163.
+  std::vector<double> a, near, far;
+  for (int i = 0; i < 200; ++i) {
+    a.push_back(i / 200.0);
+    near.push_back(i / 200.0 + 0.1);
+    far.push_back(i / 200.0 + 0.2);
+  }
+  EXPECT_TRUE(testing::sameDistribution(a, near));  // 0.1
+  EXPECT_FALSE(testing::sameDistribution(a, far));  // 0.2
+  EXPECT_FALSE(testing::sameDistribution(a, {}));
+}
+
 TEST(NoRenderWasted, ScreenedPairsKeepTheUnscreenedCovisDistribution) {
-  // Two-sample Kolmogorov-Smirnov test at alpha = 0.01: the statistic stays below the critical
-  // value, so p >= 0.01.
-  PairOptions o = smallOptions();
-  std::vector<double> screened, plain;
-  apartment().run(o, 200, &screened);
-  o.screenResolution = 0;
-  apartment().run(o, 200, &plain);
+  std::vector<double> screened;
+  apartment().run(smallOptions(), 200, &screened);
+  const std::vector<double>& plain = unscreenedCovis(200);
   ASSERT_GE(screened.size(), 180u);
   ASSERT_GE(plain.size(), 180u);
-  std::sort(screened.begin(), screened.end());
-  std::sort(plain.begin(), plain.end());
-  double d = 0;
-  for (double x : screened) {
-    const double a = (std::upper_bound(screened.begin(), screened.end(), x) - screened.begin()) /
-                     static_cast<double>(screened.size());
-    const double b = (std::upper_bound(plain.begin(), plain.end(), x) - plain.begin()) /
-                     static_cast<double>(plain.size());
-    d = std::max(d, std::abs(a - b));
-  }
-  const double n = screened.size(), m = plain.size();
-  EXPECT_LT(d, 1.628 * std::sqrt((n + m) / (n * m)));
+  EXPECT_TRUE(testing::sameDistribution(screened, plain, 0.01));
 }
 
 TEST(NoRenderWasted, GivingUpIsCountedAndDeterministic) {
@@ -200,13 +216,19 @@ TEST(NoRenderWasted, TheConfirmStageIsTwiceTheLastWhenItFits) {
   EXPECT_EQ(confirmStage(o)->side, 32);
   o.resolution = 48;  // no screening
   EXPECT_FALSE(confirmStage(o).has_value());
-  // With it on, the ambiguous candidates go through it, and the output keeps its distribution.
+  // With it on, the ambiguous candidates go through it, and the kept pairs' covis keeps the
+  // unscreened distribution (two-sample Kolmogorov-Smirnov, alpha 0.01).
   PairOptions c = smallOptions();
   c.screenConfirm = true;
-  const GenerationCost with = apartment().run(c, 20);
+  std::vector<double> confirmed;
+  const GenerationCost with = apartment().run(c, 200, &confirmed);
   ASSERT_EQ(with.candidateFunnel.size(), 6u);
   EXPECT_GT(with.candidateFunnel[5].entered, 0u);
   EXPECT_LT(with.candidateFunnel[5].entered, with.candidateFunnel[4].entered);
+  const std::vector<double>& plain = unscreenedCovis(200);
+  ASSERT_GE(confirmed.size(), 180u);
+  ASSERT_GE(plain.size(), 180u);
+  EXPECT_TRUE(testing::sameDistribution(confirmed, plain, 0.01));
 }
 
 TEST(ScreenPlan, FewestToPassIsTheCountAtWhichTheShareStopsFailing) {
@@ -262,7 +284,8 @@ PairOptions fullSizeOptions() {
   return o;
 }
 
-// The previous estimates: covis' own tolerances at every side, with the margins they needed.
+// Plain estimates (--screen-plain-tolerance): covis' own tolerances at every side, with the
+// margins they need.
 PairOptions plainTolerance(PairOptions o) {
   o.screenScaleTolerance = false;
   o.screenCovisMargin = 0.18;
@@ -356,9 +379,9 @@ TEST(NoRenderWasted, AReferenceNearTheValidBoundIsCheckedAtTheFinestStageFirst) 
 }
 
 TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
-  // The open room again, one reference an index. A reference that fails its fine check with no
-  // candidate drawn was checked at once (below the bound at its last stage); before, every
-  // reference waited for a candidate to pass screening, and its candidates were wasted.
+  // The open room again, one reference an index. A reference below the bound at its last stage
+  // takes its fine check at once, before any candidate is drawn, so that a reference that fails
+  // it wastes no candidates' renders.
   const OpenRoom& room = openRoom();
   PairOptions o = fullSizeOptions();
   o.maxAttempts = 20;
@@ -421,7 +444,11 @@ TEST(RayCasterBatch, BatchedDepthEqualsOneViewAtATime) {
     EXPECT_EQ(batch[k].width, one.width);
     EXPECT_EQ(batch[k].data, one.data) << "view " << k;
   }
-  a.caster.renderDepthBatch(nullptr, nullptr, 0);  // nothing to do
+  // An empty batch writes nothing.
+  ImageF untouched(3, 2, 1, 7.0f);
+  a.caster.renderDepthBatch(cams.data(), &untouched, 0);
+  EXPECT_EQ(untouched.width, 3);
+  EXPECT_EQ(untouched.data, std::vector<float>(6, 7.0f));
 }
 
 TEST(RayCasterBatch, ShadowRaysStopAtTheFirstSurface) {

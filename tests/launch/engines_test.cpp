@@ -15,7 +15,7 @@
 #include <thread>
 
 #include "dataset/generate_job.h"
-#include "model/checkpoint.h"
+#include "test_checkpoints.h"
 #include "test_files.h"
 #include "test_pairs.h"
 #include "test_paths.h"
@@ -81,9 +81,16 @@ class SlurmCluster {
       startLog_ = "mkdtemp in /tmp failed";
       return;
     }
+    // Status 3 is the script's "Slurm can't run here", the one skip. Anything else (1: it died,
+    // 2: a syntax error, 126: not executable, 127: missing) is a broken script: the test fails.
     const Output check = shell(script() + " check");
+    if (check.status == 3) {
+      skip_ = check.text.empty() ? "slurm_cluster.sh check: Slurm can't run here" : check.text;
+      return;
+    }
     if (check.status != 0) {
-      skip_ = check.text.empty() ? "slurm_cluster.sh check failed" : check.text;
+      startLog_ = "slurm_cluster.sh check exited " + std::to_string(check.status) +
+                  " (3 would mean Slurm can't run here): " + check.text;
       return;
     }
     // Ports from the test's pid, below the ephemeral range: parallel test runs do not meet.
@@ -93,8 +100,6 @@ class SlurmCluster {
                                std::to_string(port));
     up_ = start.status == 0;
     startLog_ = start.text;
-    // Status 4: a Slurm whose auth/slurm setup (>= 23.11) could not start here; untested.
-    if (start.status == 4) skip_ = start.text;
     upSeconds_ = secondsSince(started_);
   }
   // Stops whatever the start got to, even if it was cut short by its timeout.
@@ -358,17 +363,9 @@ void trainAlone(const std::string& out) {
   ASSERT_EQ(testing::runProcess(args), 0);
 }
 
-// The largest difference between the weights of two checkpoints.
-double weightDifference(const std::string& a, const std::string& b) {
-  const Checkpoint x = loadCheckpoint(a), y = loadCheckpoint(b);
-  double worst = 0;
-  for (const auto& [k, t] : x.model)
-    worst = std::max(worst, (t - y.model.at(k)).abs().max().item<double>());
-  return worst;
-}
-
 void expectTwoRanksEqualOne(const std::string& one, const std::string& two) {
-  EXPECT_LT(weightDifference(one + "/checkpoint-last.pth", two + "/checkpoint-last.pth"), 1e-5);
+  EXPECT_LT(testing::weightDifference(one + "/checkpoint-last.pth", two + "/checkpoint-last.pth"),
+            1e-5);
   const auto s = nlohmann::json::parse(readFile(two + "/summary.json"));
   EXPECT_EQ(s["world_size"], 2);
 }
@@ -512,8 +509,8 @@ TEST(Slurm, CovisSweepUnderSrunEqualsTheRanksStartedByHand) {
   for (size_t i = 0; i < hand["runs"].size(); ++i) {
     const std::string run = hand["runs"][i]["set"].get<std::string>() + "/seed-" +
                             std::to_string(hand["runs"][i]["seed_index"].get<int>());
-    EXPECT_LT(weightDifference(dir + "/hand/runs/" + run + "/checkpoint-last.pth",
-                               dir + "/srun/runs/" + run + "/checkpoint-last.pth"),
+    EXPECT_LT(testing::weightDifference(dir + "/hand/runs/" + run + "/checkpoint-last.pth",
+                                        dir + "/srun/runs/" + run + "/checkpoint-last.pth"),
               1e-5)
         << run;
     EXPECT_NEAR(hand["runs"][i]["xv_loss"].get<double>(), slurm["runs"][i]["xv_loss"].get<double>(),

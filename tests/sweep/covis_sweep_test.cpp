@@ -10,6 +10,7 @@
 #include "model/checkpoint.h"
 #include "sweep/depth_probe.h"
 #include "sweep/sweep_report.h"
+#include "test_checkpoints.h"
 #include "test_errors.h"
 #include "test_paths.h"
 #include "test_process.h"
@@ -256,12 +257,10 @@ TEST(CovisSweep, TwoRanksTrainEachSetLikeOneWithTheDoubledBatch) {
   for (size_t i = 0; i < one["runs"].size(); ++i) {
     const std::string run = one["runs"][i]["set"].get<std::string>() + "/seed-" +
                             std::to_string(one["runs"][i]["seed_index"].get<int>());
-    const Checkpoint a = loadCheckpoint(dir + "/one/runs/" + run + "/checkpoint-last.pth");
-    const Checkpoint b = loadCheckpoint(dir + "/two/runs/" + run + "/checkpoint-last.pth");
-    double worst = 0;
-    for (const auto& [k, t] : a.model)
-      worst = std::max(worst, (t - b.model.at(k)).abs().max().item<double>());
-    EXPECT_LT(worst, 1e-5) << run;
+    EXPECT_LT(testing::weightDifference(dir + "/one/runs/" + run + "/checkpoint-last.pth",
+                                        dir + "/two/runs/" + run + "/checkpoint-last.pth"),
+              1e-5)
+        << run;
     EXPECT_NEAR(one["runs"][i]["xv_loss"].get<double>(), two["runs"][i]["xv_loss"].get<double>(),
                 1e-4)
         << run;

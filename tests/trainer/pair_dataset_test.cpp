@@ -1,5 +1,6 @@
 // Samples of N views (CroCo's views_count) in the trainer's datasets: view 1 with another view
-// drawn by the caller, from hand-made 3-view shards and CroCo folders; 2-view data as before.
+// drawn by the caller, from hand-made 3-view shards and CroCo folders; 2-view data ignore the
+// draw.
 #include "trainer/pair_dataset.h"
 
 #include <gtest/gtest.h>
@@ -82,7 +83,7 @@ TEST(PairDatasetViews, ThreeViewShardsPairViewOneWithTheDrawnView) {
     seen.insert(other);
     // The same draw, the same view.
     EXPECT_EQ(viewOf(ds.load(0, draw).second, 0), other);
-    // A pair ignores the draw: view 2, as before N views.
+    // A pair ignores the draw: always view 2.
     const auto [a, b] = ds.load(1, draw);
     EXPECT_EQ(viewOf(a, 1), 1);
     EXPECT_EQ(viewOf(b, 1), 2);

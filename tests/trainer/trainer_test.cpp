@@ -16,6 +16,7 @@
 #include "dataset/generate_job.h"
 #include "model/checkpoint.h"
 #include "model/reconstruct.h"
+#include "test_checkpoints.h"
 #include "test_errors.h"
 #include "test_pairs.h"
 #include "test_paths.h"
@@ -474,8 +475,11 @@ TEST(Pretrain, SigtermSavesACheckpointAndExits) {
 // put first on the library path in turn, and only the pthread one earns the warning.
 TEST(Pretrain, WarnsOnThePthreadOpenBlas) {
   const std::string lib = "/usr/lib/x86_64-linux-gnu/openblas-";
-  if (!fs::exists(lib + "pthread/libblas.so.3") || !fs::exists(lib + "openmp/libblas.so.3"))
-    GTEST_SKIP() << "needs libopenblas0-pthread and libopenblas0-openmp";
+  if (!fs::exists(lib + "openmp/libblas.so.3"))
+    GTEST_SKIP() << "libopenblas0-openmp is not installed (scripts/setup.sh installs it)";
+  // setup.sh installs only the OpenMP build, so CI's machines skip here (scripts/skip_policy.py).
+  if (!fs::exists(lib + "pthread/libblas.so.3"))
+    GTEST_SKIP() << "libopenblas0-pthread is not installed: the OpenMP OpenBLAS is the only one";
   const std::string dir = testing::scratchDir("blas");
   const std::string run = "LD_LIBRARY_PATH=" + lib + "%s " + PAIRCAST_BINARY_DIR +
                           "/tools/pretrain --data '" + pairsDir() +
@@ -554,12 +558,9 @@ TEST(Pretrain, TwoGlooProcessesEqualOneWithTheDoubledBatch) {
         args(dir + "/two", 2), {"WORLD_SIZE=2", "RANK=" + std::to_string(r),
                                 "LOCAL_RANK=" + std::to_string(r), "MASTER_ADDR=127.0.0.1", port}));
   for (pid_t p : ranks) ASSERT_EQ(testing::waitProcess(p), 0);
-  const Checkpoint a = loadCheckpoint(dir + "/one/checkpoint-last.pth");
-  const Checkpoint b = loadCheckpoint(dir + "/two/checkpoint-last.pth");
-  double worst = 0;
-  for (const auto& [k, t] : a.model)
-    worst = std::max(worst, (t - b.model.at(k)).abs().max().item<double>());
-  EXPECT_LT(worst, 1e-5);
+  EXPECT_LT(
+      testing::weightDifference(dir + "/one/checkpoint-last.pth", dir + "/two/checkpoint-last.pth"),
+      1e-5);
   const auto s = nlohmann::json::parse(readFile(dir + "/two/summary.json"));
   EXPECT_EQ(s["world_size"], 2);
 }

@@ -199,7 +199,7 @@ TEST(JobPart, NoEngineIsOnePartOrTheFlags) {
   EXPECT_EQ(one.index, 0);
   EXPECT_EQ(one.count, 1);
   EXPECT_EQ(one.describe(), "");
-  // --num-shards alone, as before: part 0.
+  // --num-shards alone: part 0.
   const JobPart first = jobPart(envOf({}), std::nullopt, 3);
   EXPECT_EQ(first.index, 0);
   EXPECT_EQ(first.count, 3);
@@ -267,7 +267,7 @@ TEST(LaunchRole, TorchrunVariablesWin) {
   // Set by hand, without torchrun: the same variables, said so.
   vars.erase("TORCHELASTIC_RUN_ID");
   EXPECT_EQ(launchRole(envOf(vars)).engine, "RANK/WORLD_SIZE");
-  // Defaults as before: 127.0.0.1:29500, local rank 0.
+  // The defaults: 127.0.0.1:29500, local rank 0.
   const LaunchRole d = launchRole(envOf({{"WORLD_SIZE", "2"}, {"RANK", "0"}}));
   EXPECT_EQ(d.masterAddr, "127.0.0.1");
   EXPECT_EQ(d.masterPort, 29500);
