@@ -21,6 +21,7 @@
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
 #include "model/reconstruct.h"
+#include "model/torch_compat.h"
 #include "trainer/batch_loader.h"
 #include "trainer/distributed.h"
 #include "trainer/fused_adamw.h"
@@ -47,15 +48,9 @@ void onSignal(int sig) {
 }
 
 // AdamW state, by parameter position, as "optimizer/state/<i>/{exp_avg,exp_avg_sq,step}".
-#if TORCH_VERSION_MAJOR >= 2
-void* stateKey(const torch::Tensor& p) {
-  return p.unsafeGetTensorImpl();
+auto stateKey(const torch::Tensor& p) {
+  return torch_compat::optimizerStateKey(p);
 }
-#else
-std::string stateKey(const torch::Tensor& p) {
-  return c10::guts::to_string(p.unsafeGetTensorImpl());
-}
-#endif
 
 std::map<std::string, torch::Tensor> optimizerTensors(torch::optim::AdamW& opt,
                                                       const std::vector<torch::Tensor>& params) {
