@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "model/torch_compat.h"
 #include "util/error.h"
 
 namespace paircast {
@@ -22,18 +23,7 @@ torch::Tensor linear(const torch::nn::Linear& layer, const torch::Tensor& x) {
   return torch::linear(x, layer->weight, layer->bias);
 }
 
-// softmax(q k^T / sqrt(Dh)) v over [B, H, Nq, Dh] x [B, H, Nk, Dh].
-torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& v) {
-#if TORCH_VERSION_MAJOR >= 2
-  // One fused kernel (flash or memory-efficient attention on CUDA, a flash kernel on CPU).
-  return at::scaled_dot_product_attention(q, k, v);
-#else
-  // The scale is applied to q [Nq, Dh], not to the scores [Nq, Nk]: matmul copies the strided
-  // q into a contiguous one anyway, so the multiplication takes that copy's place.
-  const double scale = 1.0 / std::sqrt(static_cast<double>(q.size(-1)));
-  return torch::softmax(torch::matmul(q * scale, k.transpose(-2, -1)), -1).matmul(v);
-#endif
-}
+using torch_compat::scaledDotProductAttention;
 
 }  // namespace
 
@@ -100,7 +90,7 @@ torch::Tensor AttentionImpl::forward(const torch::Tensor& x, const torch::Tensor
     q = applyRope2d(q, pos, ropeFreq);
     k = applyRope2d(k, pos, ropeFreq);
   }
-  return linear(proj, attention(q, k, v).transpose(1, 2).reshape({B, N, C}));
+  return linear(proj, scaledDotProductAttention(q, k, v).transpose(1, 2).reshape({B, N, C}));
 }
 
 CrossAttentionImpl::CrossAttentionImpl(int dim, int heads_, double rope)
@@ -126,7 +116,7 @@ torch::Tensor CrossAttentionImpl::forward(const torch::Tensor& query, const torc
   }
   if (scores)
     *scores = torch::matmul(q, k.transpose(-2, -1)) / std::sqrt(static_cast<double>(C / heads));
-  return linear(proj, attention(q, k, v).transpose(1, 2).reshape({B, Nq, C}));
+  return linear(proj, scaledDotProductAttention(q, k, v).transpose(1, 2).reshape({B, Nq, C}));
 }
 
 BlockImpl::BlockImpl(int dim, int heads, int mlpRatio, double rope) {

@@ -1,13 +1,13 @@
 #include "sweep/mechanism_probe.h"
 
 #include <ATen/CPUGeneratorImpl.h>
-#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
 #include <map>
 #include <optional>
 
+#include "dataset/generate_range.h"
 #include "model/reconstruct.h"
 #include "sweep/depth_probe.h"
 #include "util/error.h"
@@ -20,11 +20,9 @@ namespace {
 // `want` pairs are found or 8 * want indices were tried.
 std::vector<PairSample> scenePairs(const PairGenerator& gen, uint64_t seed, int want, int threads) {
   std::vector<PairSample> got;
-  if (threads <= 0) threads = omp_get_max_threads();
   for (int first = 0; static_cast<int>(got.size()) < want && first < 8 * want; first += want) {
-    std::vector<std::optional<PairSample>> round(want);
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-    for (int i = 0; i < want; ++i) round[i] = gen.generate(seed, static_cast<uint64_t>(first + i));
+    std::vector<std::optional<PairSample>> round = generateRange(
+        [&gen](uint64_t) -> const PairGenerator& { return gen; }, seed, first, want, threads);
     for (auto& s : round)
       if (s && static_cast<int>(got.size()) < want) got.push_back(std::move(*s));
   }

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <optional>
 
+#include "dataset/generate_range.h"
 #include "dataset/pair_generator.h"
 #include "dataset/shard.h"
 #include "sweep/sweep_scene.h"
@@ -102,12 +103,9 @@ nlohmann::json samplePoolRound(const SweepConfig& c,
   std::vector<std::unique_ptr<PairGenerator>> gens;
   for (auto& s : scenes)
     gens.push_back(std::make_unique<PairGenerator>(*s->scene, *s->caster, *s->sampler, po));
-  std::vector<std::optional<PairSample>> got(m);
-#pragma omp parallel for schedule(dynamic, 1) num_threads(sweepThreads(c))
-  for (int i = 0; i < m; ++i) {
-    const uint64_t idx = nextIndex + i;
-    got[i] = gens[idx % gens.size()]->generate(c.seed, idx);
-  }
+  const std::vector<std::optional<PairSample>> got = generateRange(
+      [&gens](uint64_t idx) -> const PairGenerator& { return *gens[idx % gens.size()]; }, c.seed,
+      nextIndex, m, sweepThreads(c));
   // Keep, in index order, the pairs whose bucket still needs them.
   char name[64];
   std::snprintf(name, sizeof name, "pool-%06d.tar", round);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdlib>
 
+#include "model/torch_compat.h"
 #include "util/error.h"
 
 #if defined(PAIRCAST_HAVE_GLOO) || defined(PAIRCAST_HAVE_NCCL)
@@ -27,11 +28,7 @@ LaunchRole environmentRole() {
 #if defined(PAIRCAST_HAVE_C10D)
 struct Distributed::Impl {
   c10::intrusive_ptr<c10d::Store> store;
-#if TORCH_VERSION_MAJOR >= 2
-  c10::intrusive_ptr<c10d::Backend> group;  // Gloo and NCCL are Backends since 2.0
-#else
-  c10::intrusive_ptr<c10d::ProcessGroup> group;
-#endif
+  c10::intrusive_ptr<torch_compat::C10dGroup> group;  // Gloo's or NCCL's
 };
 #else
 struct Distributed::Impl {};
@@ -78,11 +75,9 @@ std::unique_ptr<Distributed> Distributed::fromEnvironment(const std::string& dev
   opts.isServer = d->rank_ == 0 && !role.agentStore;
   opts.numWorkers = static_cast<size_t>(world);
   opts.timeout = std::chrono::seconds(environmentInteger(env, "PAIRCAST_DIST_TIMEOUT", 300));
-#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 4)
   // Since 2.4 the store asks for its libuv backend by default, and builds without libuv (Debian
   // 13's LibTorch 2.6) then refuse to start. The classic backend is in every build.
-  opts.useLibUV = false;
-#endif
+  torch_compat::useClassicTcpStore(opts);
   d->impl_ = std::make_unique<Impl>();
   d->impl_->store = c10::make_intrusive<c10d::TCPStore>(host, opts);
   if (role.agentStore)  // as torch.distributed's _create_c10d_store: this restart's own keys

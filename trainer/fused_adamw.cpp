@@ -4,21 +4,16 @@
 #include <memory>
 #include <vector>
 
-// at::_fused_adamw_ (float lr overload) exists from LibTorch 2.1 on.
-#if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 1)
-#define PAIRCAST_HAVE_FUSED_ADAMW 1
-#else
-#define PAIRCAST_HAVE_FUSED_ADAMW 0
-#endif
+#include "model/torch_compat.h"
 
 namespace paircast {
 
 bool fusedAdamWCompiled() {
-  return PAIRCAST_HAVE_FUSED_ADAMW;
+  return torch_compat::kHasFusedAdamW;
 }
 
 bool fusedAdamWStep(torch::optim::AdamW& opt) {
-#if PAIRCAST_HAVE_FUSED_ADAMW
+  if (!torch_compat::kHasFusedAdamW) return false;
   using torch::optim::AdamWOptions;
   using torch::optim::AdamWParamState;
   for (auto& group : opt.param_groups()) {
@@ -34,7 +29,7 @@ bool fusedAdamWStep(torch::optim::AdamW& opt) {
     std::map<int64_t, torch::Tensor> stepTensors;  // one 0-d tensor per distinct step value
     for (auto& p : group.params()) {
       if (!p.grad().defined()) continue;
-      void* key = p.unsafeGetTensorImpl();
+      const auto key = torch_compat::optimizerStateKey(p);
       if (state.find(key) == state.end()) {
         auto fresh = std::make_unique<AdamWParamState>();
         fresh->step(0);
@@ -58,15 +53,10 @@ bool fusedAdamWStep(torch::optim::AdamW& opt) {
       steps.push_back(t);
     }
     if (params.empty()) continue;
-    at::_fused_adamw_(params, grads, expAvg, expAvgSq, /*max_exp_avg_sqs=*/{}, steps, o.lr(),
-                      std::get<0>(o.betas()), std::get<1>(o.betas()), o.weight_decay(), o.eps(),
-                      /*amsgrad=*/false, /*maximize=*/false);
+    torch_compat::fusedAdamW(params, grads, expAvg, expAvgSq, steps, o.lr(), std::get<0>(o.betas()),
+                             std::get<1>(o.betas()), o.weight_decay(), o.eps());
   }
   return true;
-#else
-  (void)opt;
-  return false;
-#endif
 }
 
 }  // namespace paircast

@@ -14,6 +14,7 @@
 #include <set>
 
 #include "model/autocast.h"
+#include "model/torch_compat.h"
 #include "trainer/distributed.h"
 #include "trainer/fused_adamw.h"
 #include "trainer/grad_scaler.h"
@@ -37,15 +38,9 @@ void onSignal(int sig) {
 }
 
 // AdamW state, by parameter position, as "optimizer/state/<i>/{exp_avg,exp_avg_sq,step}".
-#if TORCH_VERSION_MAJOR >= 2
-void* stateKey(const torch::Tensor& p) {
-  return p.unsafeGetTensorImpl();
+auto stateKey(const torch::Tensor& p) {
+  return torch_compat::optimizerStateKey(p);
 }
-#else
-std::string stateKey(const torch::Tensor& p) {
-  return c10::guts::to_string(p.unsafeGetTensorImpl());
-}
-#endif
 
 std::map<std::string, torch::Tensor> optimizerTensors(torch::optim::AdamW& opt,
                                                       const std::vector<torch::Tensor>& params) {

@@ -322,12 +322,18 @@ class ShardPairs(_Pairs):
         normalize=False, which then divides by 255)."""
         return "float32" if self.dtype == "float32" and self.normalize else "uint8"
 
+    def _order(self, files, by_file, part, parts):
+        """This reader's samples (ShardSet indices) in the order it reads them: every sample of
+        its files (by_file), or every parts-th of all of them."""
+        _, ranges = self._index()
+        order = [i for f in files for i in range(ranges[f][0], ranges[f][0] + ranges[f][1])]
+        return order if by_file else order[part::parts]
+
     def _plan(self, files, by_file, part, parts):
         """(shards, i, other view, box1, box2) of each of this reader's pairs, with _pair's
         draws."""
-        shards, ranges = self._index()
-        order = [i for f in files for i in range(ranges[f][0], ranges[f][0] + ranges[f][1])]
-        for i in order if by_file else order[part::parts]:
+        shards, _ = self._index()
+        for i in self._order(files, by_file, part, parts):
             key, scene, index, views, height, width = shards.info(i)
             if views < 2:
                 warnings.warn(f"{key}: one view, no pair; skipped", RuntimeWarning)
@@ -453,10 +459,7 @@ class ShardLoader:
 
     def _order(self):
         """This reader's samples of this epoch, in order, as ShardPairs reads them."""
-        mine, by_file, part, parts = self._pairs._mine()
-        _, ranges = self._pairs._index()
-        order = [i for f in mine for i in range(ranges[f][0], ranges[f][0] + ranges[f][1])]
-        return order if by_file else order[part::parts]
+        return self._pairs._order(*self._pairs._mine())
 
     def __iter__(self):
         pairs = self._pairs

@@ -13,6 +13,7 @@
 #include <optional>
 
 #include "model/croco_net.h"
+#include "model/torch_compat.h"
 #include "test_paths.h"
 #include "test_tar.h"
 #include "trainer/distributed.h"
@@ -183,11 +184,9 @@ TEST(Cuda, FusedAdamWMatchesLibTorchsStep) {
   }
   EXPECT_LT((p1 - p2).abs().max().item<double>(), 1e-6);
   EXPECT_LT((b1 - b2).abs().max().item<double>(), 1e-6);
-#if TORCH_VERSION_MAJOR >= 2  // state keys are TensorImpl pointers there (strings in 1.x)
-  auto& s =
-      static_cast<torch::optim::AdamWParamState&>(*fused.state().at(p1.unsafeGetTensorImpl()));
+  auto& s = static_cast<torch::optim::AdamWParamState&>(
+      *fused.state().at(torch_compat::optimizerStateKey(p1)));
   EXPECT_EQ(s.step(), 5);  // the integer step that checkpoints save
-#endif
 }
 
 TEST(Cuda, TrainStepResumeAndNcclGroupOfOne) {

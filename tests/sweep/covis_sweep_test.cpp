@@ -6,10 +6,12 @@
 #include <fstream>
 #include <map>
 #include <regex>
+#include <sstream>
 
 #include "model/checkpoint.h"
 #include "sweep/depth_probe.h"
 #include "sweep/sweep_report.h"
+#include "sweep/sweep_stats.h"
 #include "test_checkpoints.h"
 #include "test_errors.h"
 #include "test_paths.h"
@@ -291,6 +293,78 @@ std::string runDir(const std::string& out, const std::string& set, int seed) {
   return out + "/runs/" + set + "/seed-" + std::to_string(seed);
 }
 
+// A CSV file's rows, each as column name -> cell.
+std::vector<std::map<std::string, std::string>> readCsvRows(const std::string& path) {
+  auto cells = [](const std::string& line) {
+    std::vector<std::string> out;
+    std::stringstream in(line);
+    for (std::string cell; std::getline(in, cell, ',');) out.push_back(cell);
+    if (!line.empty() && line.back() == ',') out.emplace_back();
+    return out;
+  };
+  std::stringstream in(readFile(path));
+  std::string line;
+  std::getline(in, line);
+  const std::vector<std::string> header = cells(line);
+  std::vector<std::map<std::string, std::string>> rows;
+  while (std::getline(in, line)) {
+    const std::vector<std::string> row = cells(line);
+    EXPECT_EQ(row.size(), header.size()) << line;
+    std::map<std::string, std::string> named;
+    for (size_t i = 0; i < row.size() && i < header.size(); ++i) named[header[i]] = row[i];
+    rows.push_back(std::move(named));
+  }
+  return rows;
+}
+
+// A metric's figures of each set (and of the random encoder) are the mean and 95 % interval of
+// its runs' values, in results.json and in results.csv, where they agree with results_runs.csv's
+// per-run values to the 6 digits written. Every value lies in [lo, hi].
+void expectSetsAggregateTheirRuns(const nlohmann::json& r, const std::string& out,
+                                  const std::string& metric, double lo, double hi) {
+  std::map<std::string, std::vector<double>> jsonRuns, csvRuns;
+  for (const char* list : {"runs", "random_runs"})
+    for (const auto& run : r[list]) {
+      const double v = numberOrNan(run, metric);
+      if (std::isfinite(v)) {
+        EXPECT_GE(v, lo) << run["set"];
+        EXPECT_LE(v, hi) << run["set"];
+      }
+      jsonRuns[run["set"].get<std::string>()].push_back(v);
+    }
+  for (const auto& row : readCsvRows(out + "/results_runs.csv"))
+    csvRuns[row.at("set")].push_back(std::stod(row.at(metric)));  // "nan" reads as NaN
+  EXPECT_EQ(csvRuns.size(), jsonRuns.size());
+  std::vector<nlohmann::json> rows(r["rows"].begin(), r["rows"].end());
+  rows.push_back(r["random_encoder"]);
+  std::map<std::string, std::map<std::string, std::string>> csvRows;
+  for (const auto& row : readCsvRows(out + "/results.csv")) csvRows[row.at("set")] = row;
+  for (const auto& row : rows) {
+    const std::string set = row["set"];
+    SCOPED_TRACE(set + " " + metric);
+    ASSERT_TRUE(jsonRuns.count(set) && csvRuns.count(set) && csvRows.count(set));
+    const Interval want = interval95(jsonRuns[set]);
+    EXPECT_EQ(row["seeds"], jsonRuns[set].size());
+    const double mean = numberOrNan(row, metric + "_mean");
+    if (std::isnan(want.mean)) {
+      EXPECT_TRUE(std::isnan(mean));
+      continue;
+    }
+    EXPECT_NEAR(mean, want.mean, 1e-12);
+    const double ci = numberOrNan(row, metric + "_ci95");
+    if (std::isnan(want.halfWidth))
+      EXPECT_TRUE(std::isnan(ci));
+    else
+      EXPECT_NEAR(ci, want.halfWidth, 1e-12);
+    const double csvMean = std::stod(csvRows[set].at(metric + "_mean"));
+    const double runsMean = interval95(csvRuns[set]).mean;
+    EXPECT_NEAR(csvMean, runsMean, 1e-5 * std::max(1.0, std::abs(runsMean)));
+    EXPECT_NEAR(csvMean, want.mean, 1e-5 * std::max(1.0, std::abs(want.mean)));
+    EXPECT_GE(mean, lo);
+    EXPECT_LE(mean, hi);
+  }
+}
+
 TEST(CovisSweep, SeedsAndMaeEndToEnd) {
   const std::string clean = testing::scratchDir("e2e");
   // Through the library: 4 sets and mae, each with 2 seeds.
@@ -325,8 +399,10 @@ TEST(CovisSweep, SeedsAndMaeEndToEnd) {
     const bool mae = row["task"] == "mae";
     EXPECT_EQ(std::isnan(numberOrNan(row, "ref_gain_mean")), mae) << row["set"];
     EXPECT_EQ(std::isnan(numberOrNan(row, "xattn_pck1_mean")), mae) << row["set"];
-    EXPECT_GE(row["enc_pck1_mean"].get<double>(), 0.0);
+    EXPECT_TRUE(std::isfinite(numberOrNan(row, "enc_pck1_mean"))) << row["set"];
   }
+  expectSetsAggregateTheirRuns(r, clean, "enc_pck1", 0.0, 1.0);
+  expectSetsAggregateTheirRuns(r, clean, "xattn_pck1", 0.0, 1.0);
   EXPECT_EQ(r["config"]["mechanism_pairs"], 8);  // 4 from each held-out scene
   const std::string byCovis = readFile(clean + "/probe_by_covis.csv");
   EXPECT_EQ(byCovis.substr(0, byCovis.find('\n')),
