@@ -89,6 +89,10 @@ class FinetuneTask : public TrainingTask {
  public:
   explicit FinetuneTask(const FinetuneConfig& c)
       : c_(c), data_(TruthPairs::fromShards(c.data)) {
+    if (data_.side() < c.model.croco.img_size)
+      throw Error(c.data[0], "pairs of " + std::to_string(data_.side()) +
+                                 " pixels are smaller than the training size " +
+                                 std::to_string(c.model.croco.img_size) + " (--img-size)");
     if (!c.evalData.empty()) eval_ = std::make_unique<TruthPairs>(TruthPairs::fromShards(c.evalData));
     augment_.size = c.model.croco.img_size;
     augment_.colorJitter = c.colorJitter;

@@ -61,14 +61,15 @@ void DownstreamConfig::validate() const {
   }
 }
 
-PoseHeadImpl::PoseHeadImpl(int dim, int hidden) {
+PoseHeadImpl::PoseHeadImpl(int dim, int patches, int hidden) {
   fc1 = register_module("fc1", torch::nn::Linear(dim, hidden));
-  fc2 = register_module("fc2", torch::nn::Linear(hidden, 12));
+  fc2 = register_module("fc2", torch::nn::Linear(patches * hidden, 12));
 }
 
 torch::Tensor PoseHeadImpl::forward(const torch::Tensor& tokens) {
-  auto pooled = torch::gelu(fc1(tokens)).mean(1);  // [B, hidden]
-  auto out = fc2(pooled);                          // [B, 12]
+  // Each patch's features keep their place: where the content moved is what the pose is.
+  auto features = torch::gelu(fc1(tokens)).flatten(1);  // [B, N hidden]
+  auto out = fc2(features);                             // [B, 12]
   // 2 I + the output: the head starts near the identity, with singular values apart (the SVD's
   // gradient divides by their differences).
   auto m = out.narrow(1, 0, 9).reshape({-1, 3, 3}) + 2.0 * torch::eye(3, out.options());
@@ -119,7 +120,7 @@ DownstreamNetImpl::DownstreamNetImpl(const DownstreamConfig& c) : config_(c) {
     torch::nn::init::xavier_uniform_(prediction_head->weight);
     torch::nn::init::zeros_(prediction_head->bias);
   } else {
-    pose_head = register_module("head", PoseHead(c.croco.dec_embed_dim));
+    pose_head = register_module("head", PoseHead(c.croco.dec_embed_dim, c.croco.numPatches()));
   }
   positions_ = patchPositions(c.croco.gridSize());
 }

@@ -44,11 +44,12 @@ struct DownstreamConfig {
   std::vector<int> layerDims{96, 192, 384, 768};
 };
 
-// The relative-pose head: the decoder's last block (normalised) through a 2-layer MLP, averaged
-// over patches, to a 3x3 matrix M (plus 2 I, so that it starts near the identity) and a
-// translation; R is the rotation nearest M (SVD, with the sign that makes det R = +1).
+// The relative-pose head: each patch of the decoder's last block (normalised) through a linear
+// layer and a GELU, then all patches' features in their order through a second linear layer, to
+// a 3x3 matrix M (plus 2 I, so that it starts near the identity) and a translation; R is the
+// rotation nearest M (SVD, with the sign that makes det R = +1).
 struct PoseHeadImpl : torch::nn::Module {
-  explicit PoseHeadImpl(int dim, int hidden = 256);
+  PoseHeadImpl(int dim, int patches, int hidden = 64);
   // tokens [B, N, Dd] -> [B, 12]: R row-major (9), then t (3).
   torch::Tensor forward(const torch::Tensor& tokens);
   torch::nn::Linear fc1{nullptr}, fc2{nullptr};

@@ -80,7 +80,7 @@ int train(Flags& f) {
   c.colorJitter = !f.noJitter;
   c.model.croco = presetConfig(f.preset);
   c.model.croco.img_size = f.imgSize;
-  if (c.model.task == "pose" && c.model.head == "dpt") c.model.head = "pose";
+  if (c.model.head.empty()) c.model.head = c.model.task == "pose" ? "pose" : "dpt";
   if (!f.quiet) logLaunch("finetune", launchRole(processEnvironment()).describe());
   std::printf("%s\n", runFinetune(c).dump().c_str());
   return 0;
@@ -108,6 +108,7 @@ int predictOrEvaluate(const Flags& f) {
 int main(int argc, char** argv) {
   Flags f;
   f.c.train.epochs = 10;
+  f.c.model.head.clear();  // by task: dpt, or pose for pose
   CLI::App app{"Fine-tune CroCo for optical flow, depth or relative pose (naver/croco's names)"};
   addTrainingFlags(app, f);
   addPredictFlags(app, f);
