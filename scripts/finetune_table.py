@@ -1,0 +1,68 @@
+#!/usr/bin/env python3
+"""The fine-tuning table of scripts/finetune_table.sh: for each task, the held-out figures of
+each initialisation (mean over seeds) and the paired differences between initialisations (the
+same seed's runs share data order, crops and the random weights the pre-trained ones leave), with
+95 % t-intervals over seeds.
+
+  finetune_table.py OUT SEEDS     # writes OUT/table.md and OUT/table.json, prints the table
+"""
+import json
+import math
+import statistics
+import sys
+
+METRICS = {"flow": ["aepe", "aepe_covisible", "px1", "px3", "px5"],
+           "depth": ["delta1", "absrel", "rmse"]}
+INITS = ["random", "mae", "croco"]
+T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306,
+        9: 2.262}
+
+
+def interval(values):
+    """Mean and half-width of the 95 % t-interval (None with one value)."""
+    mean = statistics.fmean(values)
+    if len(values) < 2:
+        return mean, None
+    half = T975.get(len(values) - 1, 1.96) * statistics.stdev(values) / math.sqrt(len(values))
+    return mean, half
+
+
+def fmt(mean, half):
+    return f"{mean:.3f}" if half is None else f"{mean:.3f} ± {half:.3f}"
+
+
+def main():
+    out, seeds = sys.argv[1], int(sys.argv[2])
+    table, lines = {}, []
+    for task, metrics in METRICS.items():
+        runs = {(init, s): json.load(open(f"{out}/finetune/{task}-{init}-{s}/heldout.json"))
+                for init in INITS for s in range(seeds)}
+        base = runs[("random", 0)]["baseline"]
+        lines += [f"### {task} ({seeds} seeds, held-out pairs: {base['pairs']})", "",
+                  "| init | " + " | ".join(metrics) + " |",
+                  "| --- |" + " --- |" * len(metrics)]
+        lines.append("| trivial baseline | " + " | ".join(f"{base[m]:.3f}" for m in metrics) + " |")
+        table[task] = {"baseline": {m: base[m] for m in metrics}}
+        for init in INITS:
+            cells = [interval([runs[(init, s)]["model"][m] for s in range(seeds)])
+                     for m in metrics]
+            table[task][init] = {m: c for m, c in zip(metrics, cells)}
+            lines.append(f"| {init} | " + " | ".join(fmt(*c) for c in cells) + " |")
+        lines.append("")
+        lines.append("| paired difference | " + " | ".join(metrics) + " |")
+        lines.append("| --- |" + " --- |" * len(metrics))
+        for a, b in [("croco", "random"), ("croco", "mae"), ("mae", "random")]:
+            cells = [interval([runs[(a, s)]["model"][m] - runs[(b, s)]["model"][m]
+                               for s in range(seeds)]) for m in metrics]
+            table[task][f"{a}-{b}"] = {m: c for m, c in zip(metrics, cells)}
+            lines.append(f"| {a} - {b} | " + " | ".join(fmt(*c) for c in cells) + " |")
+        lines.append("")
+    text = "\n".join(lines)
+    open(f"{out}/table.md", "w").write(text + "\n")
+    json.dump(table, open(f"{out}/table.json", "w"), indent=1)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
