@@ -4,6 +4,7 @@
 
 #include "finetune/finetune.h"
 #include "tool_main.h"
+#include "train_flags.h"
 
 using namespace paircast;
 
@@ -41,22 +42,7 @@ void addTrainingFlags(CLI::App& app, Flags& f) {
   app.add_option("--preset", f.preset, "tiny, small or base")
       ->check(CLI::IsMember({"tiny", "small", "base"}));
   app.add_option("--img-size", f.imgSize, "Training crop size; prediction tiles by it");
-  app.add_option("--batch-size", t.batchSize, "Pairs per iteration")->check(CLI::Range(1, 65536));
-  app.add_option("--epochs", t.epochs, "Epochs of the schedule")->check(CLI::Range(1, 100000));
-  app.add_option("--max-steps", t.maxSteps, "Stop after this many iterations");
-  app.add_option("--blr", t.blr, "Base learning rate (lr = blr * effective batch / 256)");
-  app.add_option("--min-lr", t.minLr, "Final learning rate of the cosine");
-  app.add_option("--warmup-epochs", t.warmupEpochs, "Linear warmup, epochs");
-  app.add_option("--weight-decay", t.weightDecay, "AdamW weight decay (not on biases and norms)");
-  app.add_option("--seed", t.seed, "Random seed (weights, data order, crops)");
-  app.add_flag("--resume", t.resume, "Continue from OUT/checkpoint-last.pth");
-  app.add_option("--device", t.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  app.add_option("--amp", t.amp, "On CUDA: bf16, fp16 or none")
-      ->check(CLI::IsMember({"bf16", "fp16", "none"}));
-  app.add_option("--save-every", t.saveEvery, "Iterations between checkpoints");
-  app.add_option("--log-every", t.logEvery, "Iterations between log lines")
-      ->check(CLI::Range(1, 1000000));
-  app.add_option("--max-nan-skips", t.maxNanSkips, "Non-finite losses in a row before stopping");
+  addLoopFlags(app, t);
   app.add_flag("--no-jitter", f.noJitter, "No colour jitter");
   app.add_flag("--quiet", f.quiet, "No progress lines");
 }

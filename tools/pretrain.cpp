@@ -2,6 +2,7 @@
 #include <cstdio>
 
 #include "tool_main.h"
+#include "train_flags.h"
 #include "trainer/trainer.h"
 
 using namespace paircast;
@@ -24,37 +25,22 @@ int main(int argc, char** argv) {
                  "croco (complete view 1 with view 2) or mae (view 1 alone: no reference)");
   app.add_option("--decoder", decoder, "cross or cat")->check(CLI::IsMember({"cross", "cat"}));
   app.add_option("--img-size", imgSize, "Training crop size (224 as the paper)");
-  app.add_option("--batch-size", c.batchSize, "Pairs per iteration")->check(CLI::Range(1, 65536));
+  addLoopFlags(app, c);
   app.add_option("--accum-iter", c.accumIter, "Iterations per optimizer step")
       ->check(CLI::Range(1, 4096));
-  app.add_option("--epochs", c.epochs, "Epochs of the schedule")->check(CLI::Range(1, 100000));
-  app.add_option("--max-steps", c.maxSteps, "Stop after this many iterations");
-  app.add_option("--blr", c.blr, "Base learning rate (lr = blr * effective batch / 256)");
-  app.add_option("--min-lr", c.minLr, "Final learning rate of the cosine");
-  app.add_option("--warmup-epochs", c.warmupEpochs, "Linear warmup, epochs");
-  app.add_option("--weight-decay", c.weightDecay, "AdamW weight decay (not on biases and norms)");
   app.add_option("--out", c.out, "Output folder")->required();
-  app.add_flag("--resume", c.resume, "Continue from OUT/checkpoint-last.pth");
-  app.add_option("--device", c.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  app.add_option("--amp", c.amp, "On CUDA: bf16, fp16 (with a dynamic loss scale) or none")
-      ->check(CLI::IsMember({"bf16", "fp16", "none"}));
   app.add_flag("!--no-fused-adamw", c.fusedAdamW,
                "On CUDA, step AdamW with LibTorch's own per-parameter kernels instead of the "
                "fused one (LibTorch >= 2.1)");
-  app.add_option("--seed", c.seed, "Random seed");
   app.add_option("--workers", c.workers, "Data worker threads")->check(CLI::Range(1, 256));
   app.add_option("--batch-format", c.batchFormat,
                  "What the data threads hand over: float32 (normalised), uint8 (crops, jittered "
                  "and normalised on the device: a quarter of the bytes), or auto (uint8 on CUDA)")
       ->check(CLI::IsMember({"auto", "float32", "uint8"}));
-  app.add_option("--save-every", c.saveEvery, "Iterations between checkpoints");
   app.add_option("--keep-every", c.keepEvery, "Keep checkpoint-<epoch>.pth every K epochs");
-  app.add_option("--log-every", c.logEvery, "Iterations between log lines")
-      ->check(CLI::Range(1, 1000000));
   app.add_option("--recon-every", c.reconEvery,
                  "Iterations between reconstruction grids (0: never)");
   app.add_option("--live-epoch-pairs", c.liveEpochPairs, "Pairs per epoch with --live");
-  app.add_option("--max-nan-skips", c.maxNanSkips, "Non-finite losses in a row before stopping");
   bool quiet = false;
   app.add_flag("--quiet", quiet, "No progress lines");
   return runTool("pretrain", app, argc, argv, [&] {

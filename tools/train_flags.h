@@ -1,0 +1,30 @@
+// The training loop's flags, which pretrain and finetune share (trainer/training_loop.h).
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include "trainer/trainer.h"
+
+namespace paircast {
+
+// Batch, schedule, resume, device and precision, seed, checkpoints, log and NaN guard.
+inline void addLoopFlags(CLI::App& app, TrainConfig& c) {
+  app.add_option("--batch-size", c.batchSize, "Pairs per iteration")->check(CLI::Range(1, 65536));
+  app.add_option("--epochs", c.epochs, "Epochs of the schedule")->check(CLI::Range(1, 100000));
+  app.add_option("--max-steps", c.maxSteps, "Stop after this many iterations");
+  app.add_option("--blr", c.blr, "Base learning rate (lr = blr * effective batch / 256)");
+  app.add_option("--min-lr", c.minLr, "Final learning rate of the cosine");
+  app.add_option("--warmup-epochs", c.warmupEpochs, "Linear warmup, epochs");
+  app.add_option("--weight-decay", c.weightDecay, "AdamW weight decay (not on biases and norms)");
+  app.add_flag("--resume", c.resume, "Continue from OUT/checkpoint-last.pth");
+  app.add_option("--device", c.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_option("--amp", c.amp, "On CUDA: bf16, fp16 (with a dynamic loss scale) or none")
+      ->check(CLI::IsMember({"bf16", "fp16", "none"}));
+  app.add_option("--seed", c.seed, "Random seed");
+  app.add_option("--save-every", c.saveEvery, "Iterations between checkpoints");
+  app.add_option("--log-every", c.logEvery, "Iterations between log lines")
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--max-nan-skips", c.maxNanSkips, "Non-finite losses in a row before stopping");
+}
+
+}  // namespace paircast
