@@ -39,6 +39,18 @@ struct Options {
   double peakTflops = 800.0;
 };
 
+// The train_s= of the SUMMARY line a timing script prints; 0 when it printed none.
+double summarySeconds(const std::string& cmd) {
+  std::string line;
+  if (FILE* p = popen((cmd + " 2>&1 | grep ^SUMMARY").c_str(), "r")) {
+    char buf[1024];
+    while (fgets(buf, sizeof buf, p)) line += buf;
+    pclose(p);
+  }
+  const size_t at = line.find("train_s=");
+  return at == std::string::npos ? 0 : std::stod(line.substr(at + 8));
+}
+
 // The official step's seconds per iteration, timed by tests/model/croco_ref.py on the same
 // device, batch and thread count; 0 when it could not run.
 double officialTrainSeconds(const Options& o, const std::string& preset) {
@@ -49,15 +61,8 @@ double officialTrainSeconds(const Options& o, const std::string& preset) {
                           " --device " + o.device + " --amp " +
                           (o.device == "cuda" ? o.amp : "none") + " --optimizer --repeat " +
                           std::to_string(o.device == "cuda" ? 20 : 3) + " --croco-dir '" +
-                          o.crocoDir + "' 2>&1 | grep ^SUMMARY";
-  std::string line;
-  if (FILE* p = popen(cmd.c_str(), "r")) {
-    char buf[1024];
-    while (fgets(buf, sizeof buf, p)) line += buf;
-    pclose(p);
-  }
-  const size_t at = line.find("train_s=");
-  return at == std::string::npos ? 0 : std::stod(line.substr(at + 8));
+                          o.crocoDir + "'";
+  return summarySeconds(cmd);
 }
 
 // Steady-state pairs/s and data wait from OUT/log.jsonl, leaving out the first `skip` steps
@@ -90,14 +95,7 @@ double officialFlowSeconds(const Options& o, const std::string& preset,
                     " --img-size " + std::to_string(o.imgSize) + " --croco-dir '" + o.crocoDir +
                     "' --hooks";
   for (int h : hooks) cmd += " " + std::to_string(h);
-  std::string line;
-  if (FILE* p = popen((cmd + " 2>&1 | grep ^SUMMARY").c_str(), "r")) {
-    char buf[1024];
-    while (fgets(buf, sizeof buf, p)) line += buf;
-    pclose(p);
-  }
-  const size_t at = line.find("train_s=");
-  return at == std::string::npos ? 0 : std::stod(line.substr(at + 8));
+  return summarySeconds(cmd);
 }
 
 #if PAIRCAST_WITH_FINETUNE
