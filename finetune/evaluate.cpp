@@ -18,8 +18,8 @@ torch::Tensor box(const torch::Tensor& t, int64_t top, int64_t left, int64_t siz
 // The contiguous range of coordinates that tile `i` owns.
 std::pair<int64_t, int64_t> ownedRange(const TileAxis& a, size_t i) {
   const auto first = std::find(a.owner.begin(), a.owner.end(), static_cast<int64_t>(i));
-  const auto last = std::find_if(first, a.owner.end(),
-                                 [&](int64_t o) { return o != static_cast<int64_t>(i); });
+  const auto last =
+      std::find_if(first, a.owner.end(), [&](int64_t o) { return o != static_cast<int64_t>(i); });
   return {first - a.owner.begin(), last - a.owner.begin()};
 }
 
@@ -47,15 +47,15 @@ std::pair<nlohmann::json, nlohmann::json> pairFigures(DownstreamNet& net, const 
                                                       double constantDepth,
                                                       const torch::Device& device) {
   const std::string& task = net->config().task;
-  const torch::Tensor x1 = normalizedImage(p.rgb1).to(device), x2 = normalizedImage(p.rgb2).to(device);
+  const torch::Tensor x1 = normalizedImage(p.rgb1).to(device),
+                      x2 = normalizedImage(p.rgb2).to(device);
   const torch::Tensor out = predict(net, x1, x2).to(torch::kCPU).to(torch::kFloat32);
   if (task == "flow") {
     const torch::Tensor truth = planes(p.flow)[0];
     const Image8 seen = visibilityMask(p.camera1, p.depth1, p.camera2, p.depth2);
-    const torch::Tensor covisible =
-        torch::from_blob(const_cast<uint8_t*>(seen.data.data()), {seen.height, seen.width},
-                         torch::kUInt8)
-            .to(torch::kBool);
+    const torch::Tensor covisible = torch::from_blob(const_cast<uint8_t*>(seen.data.data()),
+                                                     {seen.height, seen.width}, torch::kUInt8)
+                                        .to(torch::kBool);
     return {flowMetrics(out[0].narrow(0, 0, 2), truth, covisible),
             flowMetrics(torch::zeros_like(truth), truth, covisible)};
   }
@@ -75,7 +75,8 @@ TileAxis tileAxis(int64_t length, int64_t tile) {
   const int64_t span = length - tile;
   const int64_t n = span <= 0 ? 1 : (span + tile / 2 - 1) / (tile / 2) + 1;
   for (int64_t i = 0; i < n; ++i)
-    a.origins.push_back(n == 1 ? 0 : static_cast<int64_t>(std::llround(double(i) * span / (n - 1))));
+    a.origins.push_back(n == 1 ? 0
+                               : static_cast<int64_t>(std::llround(double(i) * span / (n - 1))));
   a.owner.resize(length);
   for (int64_t x = 0; x < length; ++x) {
     double best = INFINITY;
@@ -142,8 +143,8 @@ nlohmann::json depthMetrics(const torch::Tensor& pred, const torch::Tensor& trut
 nlohmann::json poseMetrics(const torch::Tensor& pred, const torch::Tensor& truth) {
   const torch::Tensor p = pred.to(torch::kFloat64), t = truth.to(torch::kFloat64);
   const torch::Tensor Rp = p.narrow(0, 0, 9).view({3, 3}), Rt = t.narrow(0, 0, 9).view({3, 3});
-  const double cosine = std::clamp((torch::trace(torch::matmul(Rp.t(), Rt)).item<double>() - 1) / 2,
-                                   -1.0, 1.0);
+  const double cosine =
+      std::clamp((torch::trace(torch::matmul(Rp.t(), Rt)).item<double>() - 1) / 2, -1.0, 1.0);
   return {{"trans_err", (p.narrow(0, 9, 3) - t.narrow(0, 9, 3)).norm().item<double>()},
           {"rot_err", std::acos(cosine) * 180.0 / M_PI}};
 }
@@ -183,8 +184,8 @@ Image8 flowColours(const ImageF& flow) {
   for (int s = 0; s < 6; ++s)
     for (int i = 0; i < steps[s]; ++i) {
       const double f = double(i) / steps[s];
-      const std::array<double, 3> c[6] = {{1, f, 0}, {1 - f, 1, 0}, {0, 1, f},
-                                          {0, 1 - f, 1}, {f, 0, 1}, {1, 0, 1 - f}};
+      const std::array<double, 3> c[6] = {{1, f, 0},     {1 - f, 1, 0}, {0, 1, f},
+                                          {0, 1 - f, 1}, {f, 0, 1},     {1, 0, 1 - f}};
       wheel.push_back(c[s]);
     }
   const int n = static_cast<int>(wheel.size());

@@ -87,13 +87,13 @@ nlohmann::json heldOutReport(DownstreamNet& net, const TruthPairs& eval, size_t 
 // A fine-tuning run as a task of the shared loop.
 class FinetuneTask : public TrainingTask {
  public:
-  explicit FinetuneTask(const FinetuneConfig& c)
-      : c_(c), data_(TruthPairs::fromShards(c.data)) {
+  explicit FinetuneTask(const FinetuneConfig& c) : c_(c), data_(TruthPairs::fromShards(c.data)) {
     if (data_.side() < c.model.croco.img_size)
       throw Error(c.data[0], "pairs of " + std::to_string(data_.side()) +
                                  " pixels are smaller than the training size " +
                                  std::to_string(c.model.croco.img_size) + " (--img-size)");
-    if (!c.evalData.empty()) eval_ = std::make_unique<TruthPairs>(TruthPairs::fromShards(c.evalData));
+    if (!c.evalData.empty())
+      eval_ = std::make_unique<TruthPairs>(TruthPairs::fromShards(c.evalData));
     augment_.size = c.model.croco.img_size;
     augment_.colorJitter = c.colorJitter;
     augment_.swap = c.model.task == "pose";
@@ -103,7 +103,8 @@ class FinetuneTask : public TrainingTask {
 
   std::shared_ptr<torch::nn::Module> buildModel() override {
     net_ = DownstreamNet(c_.model);
-    if (c_.init != "random") initialised_ = net_->initFromPretrained(loadCheckpoint(c_.init), c_.init);
+    if (c_.init != "random")
+      initialised_ = net_->initFromPretrained(loadCheckpoint(c_.init), c_.init);
     return net_.ptr();
   }
 
@@ -148,9 +149,8 @@ class FinetuneTask : public TrainingTask {
   void restore(const Checkpoint& ck, const std::string& path) override {
     const DownstreamConfig theirs = downstreamConfigOf(ck, path);
     if (theirs.task != c_.model.task || theirs.head != c_.model.head)
-      throw Error(path, "checkpoint of task " + theirs.task + " (head " + theirs.head +
-                            "), not " + c_.model.task + " (head " + c_.model.head +
-                            "); use another --out");
+      throw Error(path, "checkpoint of task " + theirs.task + " (head " + theirs.head + "), not " +
+                            c_.model.task + " (head " + c_.model.head + "); use another --out");
     if (configToJson(theirs.croco) != configToJson(c_.model.croco))
       throw Error(path, "checkpoint of another model (" + configToJson(theirs.croco).dump() +
                             "); use the --preset and --img-size it was trained with");
@@ -164,8 +164,7 @@ class FinetuneTask : public TrainingTask {
     s["initialised"] = initialised_;
     if (c_.model.head == "dpt") s["hooks"] = net_->hooks();
     if (!eval_ || rank_ != 0 || s.value("interrupted", false)) return;
-    nlohmann::json report =
-        heldOutReport(net_, *eval_, c_.evalPairs, medianDepth(data_), device_);
+    nlohmann::json report = heldOutReport(net_, *eval_, c_.evalPairs, medianDepth(data_), device_);
     writeFileAtomic((fs::path(c_.train.out) / "heldout.json").string(), report.dump(1) + "\n");
     report.erase("per_pair");
     s["heldout"] = report;
@@ -209,7 +208,8 @@ DownstreamNet loadFinetuned(const std::string& checkpoint, const torch::Device& 
 
 torch::Device deviceNamed(const std::string& name) {
   if (name == "cpu") return torch::kCPU;
-  if (name != "cuda") throw OptionError("device", "the device must be cpu or cuda, not '" + name + "'");
+  if (name != "cuda")
+    throw OptionError("device", "the device must be cpu or cuda, not '" + name + "'");
   if (!torch::cuda::is_available())
     throw OptionError("device", "device cuda, but this LibTorch has no CUDA device");
   return torch::Device(torch::kCUDA, 0);
@@ -263,14 +263,16 @@ nlohmann::json predictToFile(const std::string& checkpoint, const std::string& i
     std::vector<std::vector<double>> R(3, std::vector<double>(3));
     for (int r = 0; r < 3; ++r)
       for (int k = 0; k < 3; ++k) R[r][k] = v[r * 3 + k].item<double>();
-    const nlohmann::json pose = {{"R", R},
-                                 {"t", {v[9].item<double>(), v[10].item<double>(), v[11].item<double>()}},
-                                 {"frame", "view 2's camera in view 1's (OpenCV axes)"}};
+    const nlohmann::json pose = {
+        {"R", R},
+        {"t", {v[9].item<double>(), v[10].item<double>(), v[11].item<double>()}},
+        {"frame", "view 2's camera in view 1's (OpenCV axes)"}};
     writeFileAtomic(out, pose.dump(1) + "\n");
     return wrote;
   }
-  const torch::Tensor maps =
-      (task == "depth" ? torch::exp(pred[0]) : pred[0].narrow(0, 0, 2)).permute({1, 2, 0}).contiguous();
+  const torch::Tensor maps = (task == "depth" ? torch::exp(pred[0]) : pred[0].narrow(0, 0, 2))
+                                 .permute({1, 2, 0})
+                                 .contiguous();
   ImageF image(a.width, a.height, static_cast<int>(maps.size(2)));
   std::memcpy(image.data.data(), maps.data_ptr<float>(), image.size() * sizeof(float));
   if (task == "depth") {

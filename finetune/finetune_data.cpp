@@ -140,15 +140,15 @@ torch::Tensor normalizedImage(const Image8& rgb) {
 }
 
 TruthBatch makeTruthBatch(const TruthPairs& data, const std::vector<size_t>& pairs,
-                          const TruthAugment& a, uint64_t seed, int64_t step,
-                          size_t firstSlot) {
+                          const TruthAugment& a, uint64_t seed, int64_t step, size_t firstSlot) {
   const int S = a.size, side = data.side();
   if (S > side)
     throw Error("the training size " + std::to_string(S) + " is larger than the pairs' " +
                 std::to_string(side) + " pixels");
   std::vector<torch::Tensor> i1, i2, fl, dp, ps;
   for (size_t slot = 0; slot < pairs.size(); ++slot) {
-    Rng rng(mixSeed(seed, "finetune-batch", static_cast<uint64_t>(step) * 65536 + firstSlot + slot));
+    Rng rng(
+        mixSeed(seed, "finetune-batch", static_cast<uint64_t>(step) * 65536 + firstSlot + slot));
     const TruthPair p = data.load(pairs[slot]);
     const int top = static_cast<int>(rng.below(side - S + 1));
     const int left = static_cast<int>(rng.below(side - S + 1));

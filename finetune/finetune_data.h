@@ -59,9 +59,9 @@ struct TruthBatch {
 };
 
 struct TruthAugment {
-  int size = 224;          // the crop, drawn once per pair at the same place in both views
-  bool colorJitter = true; // CroCo's factors in [0.6, 1.4], drawn per image
-  bool swap = false;       // pose: the views swapped with probability 1/2 (and the pose inverted)
+  int size = 224;           // the crop, drawn once per pair at the same place in both views
+  bool colorJitter = true;  // CroCo's factors in [0.6, 1.4], drawn per image
+  bool swap = false;        // pose: the views swapped with probability 1/2 (and the pose inverted)
 };
 
 // The batch of `pairs` (pair indices) at slots firstSlot, firstSlot + 1, ... of step `step`, each

@@ -13,7 +13,8 @@ bool startsWith(const std::string& s, const std::string& prefix) {
 
 // The keys of a CroCo state_dict that belong to the encoder or the decoder.
 bool encoderKey(const std::string& k) {
-  return startsWith(k, "patch_embed.") || startsWith(k, "enc_blocks.") || startsWith(k, "enc_norm.");
+  return startsWith(k, "patch_embed.") || startsWith(k, "enc_blocks.") ||
+         startsWith(k, "enc_norm.");
 }
 bool decoderKey(const std::string& k) {
   return startsWith(k, "decoder_embed.") || startsWith(k, "dec_blocks.") ||
@@ -41,9 +42,10 @@ void DownstreamConfig::validate() const {
     throw OptionError("task", "the task must be flow, depth or pose, not '" + task + "'");
   const bool ok = task == "pose" ? head == "pose" : (head == "dpt" || head == "linear");
   if (!ok)
-    throw OptionError("head", "--task " + task + " takes --head " +
-                                  (task == "pose" ? std::string("pose") : std::string("dpt or linear")) +
-                                  ", not '" + head + "'");
+    throw OptionError("head",
+                      "--task " + task + " takes --head " +
+                          (task == "pose" ? std::string("pose") : std::string("dpt or linear")) +
+                          ", not '" + head + "'");
   if (croco.decoder != "cross")
     throw OptionError("decoder", "fine-tuning takes the cross decoder (naver/croco's), not '" +
                                      croco.decoder + "'");
@@ -107,7 +109,8 @@ DownstreamNetImpl::DownstreamNetImpl(const DownstreamConfig& c) : config_(c) {
     DptOptions o;
     o.hooks = c.hooks.empty() ? defaultDptHooks(E, D) : c.hooks;
     o.layerDims = c.layerDims;
-    for (int h : o.hooks) o.tokenDims.push_back(h < E ? c.croco.enc_embed_dim : c.croco.dec_embed_dim);
+    for (int h : o.hooks)
+      o.tokenDims.push_back(h < E ? c.croco.enc_embed_dim : c.croco.dec_embed_dim);
     o.numChannels = c.channels();
     hooks_ = o.hooks;
     dpt_head = register_module("head", PixelwiseDpt(o));
@@ -147,7 +150,8 @@ std::vector<torch::Tensor> DownstreamNetImpl::decodeBlocks(const torch::Tensor& 
     f2 = f2 + dec_pos_embed;
   }
   torch::Tensor pos;
-  if (config_.croco.rope()) pos = positions_.to(f1.device()).unsqueeze(0).expand({f1.size(0), -1, 2});
+  if (config_.croco.rope())
+    pos = positions_.to(f1.device()).unsqueeze(0).expand({f1.size(0), -1, 2});
   std::vector<torch::Tensor> out;
   for (auto& blk : *dec_blocks) {
     f1 = blk->as<DecoderBlock>()->forward(f1, f2, pos, pos);
@@ -183,8 +187,7 @@ torch::Tensor DownstreamNetImpl::forward(const torch::Tensor& img1, const torch:
     enc1.insert(enc1.end(), dec.begin(), dec.end());
     return dpt_head->forward(enc1, S, S);
   }
-  if (config_.head == "linear")
-    return unpatchify(prediction_head(dec.back()), p, 2);
+  if (config_.head == "linear") return unpatchify(prediction_head(dec.back()), p, 2);
   return pose_head(dec.back());
 }
 

@@ -29,7 +29,8 @@ torch::nn::Sequential reassemble(int k, int tokens, int dim) {
   s->push_back(conv(tokens, dim, 1));
   if (k == 0 || k == 1) {
     const int f = k == 0 ? 4 : 2;
-    s->push_back(torch::nn::ConvTranspose2d(torch::nn::ConvTranspose2dOptions(dim, dim, f).stride(f)));
+    s->push_back(
+        torch::nn::ConvTranspose2d(torch::nn::ConvTranspose2dOptions(dim, dim, f).stride(f)));
   } else if (k == 3) {
     s->push_back(conv(dim, dim, 3, 2, 1));
   }

@@ -18,11 +18,11 @@
 namespace paircast {
 
 struct DptOptions {
-  std::vector<int> hooks;                     // the 4 block indices (encoder blocks, then decoder's)
+  std::vector<int> hooks;  // the 4 block indices (encoder blocks, then decoder's)
   std::vector<int> layerDims{96, 192, 384, 768};
-  std::vector<int> tokenDims;                 // width of each hooked block's tokens
+  std::vector<int> tokenDims;  // width of each hooked block's tokens
   int numChannels = 1;
-  int featureDim = 256;                       // DPTOutputAdapter's defaults
+  int featureDim = 256;  // DPTOutputAdapter's defaults
   int lastDim = 32;
 };
 

@@ -17,7 +17,8 @@ namespace paircast {
 namespace {
 
 // A camera at `eye` with rotation `R` (cam2world), hfov 60 on 64 x 48 pixels.
-Camera cameraAt(const Eigen::Vector3d& eye, const Eigen::Matrix3d& R = Eigen::Matrix3d::Identity()) {
+Camera cameraAt(const Eigen::Vector3d& eye,
+                const Eigen::Matrix3d& R = Eigen::Matrix3d::Identity()) {
   Camera c = Camera::fromHfov(64, 48, 60.0);
   c.R_cam2world = R;
   c.t_cam2world = eye;
@@ -72,10 +73,10 @@ TEST(OpticalFlow, NoDepthOrBehindTheOtherCameraIsInfinity) {
   // Camera 2 stands 5 m ahead looking the same way: points nearer than 5 m are behind it.
   const Camera c2 = cameraAt({0, 0, 5});
   ImageF depth = constantDepth(c1, 8.0f);
-  depth.data[3] = 0.0f;                                          // a miss
-  depth.data[4] = std::numeric_limits<float>::quiet_NaN();       // not a depth
-  depth.data[5] = 2.0f;                                          // behind camera 2
-  depth.data[6] = 5.0f;                                          // on its image plane
+  depth.data[3] = 0.0f;                                     // a miss
+  depth.data[4] = std::numeric_limits<float>::quiet_NaN();  // not a depth
+  depth.data[5] = 2.0f;                                     // behind camera 2
+  depth.data[6] = 5.0f;                                     // on its image plane
   const ImageF flow = opticalFlow(c1, depth, c2);
   for (int i : {3, 4, 5, 6}) {
     EXPECT_TRUE(std::isinf(flow.data[2 * i]) && flow.data[2 * i] > 0) << i;
@@ -93,7 +94,8 @@ TEST(OpticalFlow, DepthOfTheWrongSizeIsRefused) {
 TEST(RelativePose, MapsTheSecondCamerasCoordinatesIntoTheFirsts) {
   Rng rng(9);
   const Eigen::Matrix3d R1 = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).matrix();
-  const Eigen::Matrix3d R2 = Eigen::AngleAxisd(-0.4, Eigen::Vector3d(3, 1, 0).normalized()).matrix();
+  const Eigen::Matrix3d R2 =
+      Eigen::AngleAxisd(-0.4, Eigen::Vector3d(3, 1, 0).normalized()).matrix();
   const Camera a = cameraAt({1, 2, 3}, R1), b = cameraAt({-2, 0.5, 4}, R2);
   const Eigen::Isometry3d T = relativePose(a, b);
   for (int i = 0; i < 5; ++i) {

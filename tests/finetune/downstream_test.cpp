@@ -36,11 +36,11 @@ TEST(DptHead, StateDictHasNaverCrocosNamesAndShapes) {
   torch::manual_seed(0);
   DownstreamNet net(tinyConfig("flow", "dpt", 128));
   const auto sd = net->state();
-  for (const char* k : {"head.dpt.scratch.layer1_rn.weight", "head.dpt.scratch.layer_rn.0.weight",
-                        "head.dpt.act_1_postprocess.1.weight", "head.dpt.act_postprocess.0.1.weight",
-                        "head.dpt.scratch.refinenet4.resConfUnit2.conv2.bias",
-                        "head.dpt.head.4.weight", "enc_pos_embed", "dec_pos_embed",
-                        "decoder_embed.weight", "dec_blocks.1.norm_y.weight"})
+  for (const char* k :
+       {"head.dpt.scratch.layer1_rn.weight", "head.dpt.scratch.layer_rn.0.weight",
+        "head.dpt.act_1_postprocess.1.weight", "head.dpt.act_postprocess.0.1.weight",
+        "head.dpt.scratch.refinenet4.resConfUnit2.conv2.bias", "head.dpt.head.4.weight",
+        "enc_pos_embed", "dec_pos_embed", "decoder_embed.weight", "dec_blocks.1.norm_y.weight"})
     EXPECT_TRUE(sd.count(k)) << k;
   EXPECT_FALSE(sd.count("mask_token"));
   EXPECT_FALSE(sd.count("prediction_head.weight"));
@@ -55,7 +55,7 @@ TEST(DptHead, StateDictHasNaverCrocosNamesAndShapes) {
   EXPECT_EQ(sd.at("head.dpt.act_2_postprocess.0.weight").sizes(),
             (std::vector<int64_t>{192, 192, 1, 1}));  // hook 5 again
   EXPECT_EQ(sd.at("head.dpt.act_3_postprocess.0.weight").sizes(),
-            (std::vector<int64_t>{384, 128, 1, 1}));  // a decoder block
+            (std::vector<int64_t>{384, 128, 1, 1}));      // a decoder block
   EXPECT_EQ(sd.at("head.dpt.head.4.weight").size(0), 3);  // flow and confidence
   const auto unique = net->uniqueParameters();
   // Listed twice: layer_rn (4 weights) and act_postprocess (7 convs, weight and bias).
@@ -81,7 +81,8 @@ TEST(DptHead, RefusesSizesItCannotTake) {
   patch8.croco.patch_size = 8;
   EXPECT_ERROR_CONTAINS(DownstreamNet{patch8}, "16-pixel patches");
   EXPECT_NO_THROW(DownstreamNet(tinyConfig("flow", "linear", 112)));
-  EXPECT_ERROR_CONTAINS(DownstreamNet(tinyConfig("pose", "dpt", 64)), "--task pose takes --head pose");
+  EXPECT_ERROR_CONTAINS(DownstreamNet(tinyConfig("pose", "dpt", 64)),
+                        "--task pose takes --head pose");
   auto hooks = tinyConfig("depth", "dpt", 64);
   hooks.hooks = {0, 1, 2, 6};  // the encoder has blocks 0-5
   EXPECT_ERROR_CONTAINS(DownstreamNet{hooks}, "DPT hook 6 is not a block");
@@ -102,8 +103,9 @@ TEST(Downstream, OutputsHaveTheirShapes) {
   const auto R = pose.narrow(1, 0, 9).view({2, 3, 3});
   EXPECT_LT((torch::matmul(R, R.transpose(1, 2)) - torch::eye(3)).abs().max().item<double>(), 1e-5);
   EXPECT_NEAR(torch::det(R)[0].item<double>(), 1.0, 1e-5);
-  EXPECT_ERROR_CONTAINS(DownstreamNet(tinyConfig("flow", "dpt", 64))->forward(a, torch::randn({2, 3, 32, 32})),
-                        "image 2 must be [B, 3, 64, 64]");
+  EXPECT_ERROR_CONTAINS(
+      DownstreamNet(tinyConfig("flow", "dpt", 64))->forward(a, torch::randn({2, 3, 32, 32})),
+      "image 2 must be [B, 3, 64, 64]");
 }
 
 TEST(Downstream, MatchesAnIndependentPythonForwardThroughTorchLoad) {
@@ -147,7 +149,7 @@ TEST(FinetuneLoss, LaplacianLossBoundedOverKnownFlowOnly) {
   gt[0][0][0][2] = std::numeric_limits<float>::infinity();
   gt[0][1][0][2] = std::numeric_limits<float>::infinity();
   auto out = torch::zeros({1, 3, 1, 3});
-  out[0][1][0][0] = 1.0f;  // v error 1 at pixel 0
+  out[0][1][0][0] = 1.0f;                 // v error 1 at pixel 0
   const double conf = 3.75 * 0.5 + 0.25;  // sigmoid(0) = 1/2
   const double expected = ((1.0 / conf + std::log(conf)) + (2.0 / conf + std::log(conf))) / 2;
   const auto none = torch::Tensor();
@@ -156,9 +158,11 @@ TEST(FinetuneLoss, LaplacianLossBoundedOverKnownFlowOnly) {
   EXPECT_NEAR(finetuneLoss("flow", "linear", out.narrow(1, 0, 2), gt, none, none).item<double>(),
               0.5, 1e-6);
   auto depth = torch::tensor({0.f, std::exp(1.f), 1.f}).view({1, 1, 1, 3});
-  EXPECT_NEAR(finetuneLoss("depth", "dpt", torch::zeros({1, 1, 1, 3}), none, depth, none).item<double>(),
-              0.5, 1e-6);
-  auto pose = torch::tensor({1.f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.1f, 0.f, 0.f}).view({1, 12});
+  EXPECT_NEAR(
+      finetuneLoss("depth", "dpt", torch::zeros({1, 1, 1, 3}), none, depth, none).item<double>(),
+      0.5, 1e-6);
+  auto pose =
+      torch::tensor({1.f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.1f, 0.f, 0.f}).view({1, 12});
   auto pred = pose.clone();
   pred[0][0] = 0.f;
   pred[0][9] = 0.f;
@@ -185,7 +189,8 @@ TEST(HeldOutMetrics, KnownValues) {
   EXPECT_NEAR(d["absrel"].get<double>(), 0.5, 1e-9);
   EXPECT_NEAR(d["rmse"].get<double>(), std::sqrt(0.5), 1e-9);
   // 90 degrees about z, and 2 m off.
-  const auto truthPose = torch::tensor({0.f, -1.f, 0.f, 1.f, 0.f, 0.f, 0.f, 0.f, 1.f, 2.f, 0.f, 0.f});
+  const auto truthPose =
+      torch::tensor({0.f, -1.f, 0.f, 1.f, 0.f, 0.f, 0.f, 0.f, 1.f, 2.f, 0.f, 0.f});
   const auto identity = torch::tensor({1.f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f});
   const auto p = poseMetrics(identity, truthPose);
   EXPECT_NEAR(p["rot_err"].get<double>(), 90.0, 1e-4);

@@ -34,8 +34,8 @@ std::string truthShards(const std::string& scene, int shard) {
   if (!fs::exists(out + "/summary.json")) {
     const int status = testing::runProcess(
         {tool("generate_pairs"), "--scenes", testing::sourceDir() + "/scenes/" + scene, "--out",
-         out, "--pairs-per-scene", "80", "--shard-size", "64", "--resolution", "64",
-         "--save-flow", "--save-depth", "--seed", "3", "--quiet", "--jobs", "2"});
+         out, "--pairs-per-scene", "80", "--shard-size", "64", "--resolution", "64", "--save-flow",
+         "--save-depth", "--seed", "3", "--quiet", "--jobs", "2"});
     EXPECT_EQ(status, 0) << "generate_pairs on " << scene;
   }
   return out + "/pairs-00000" + std::to_string(shard) + ".tar";
@@ -95,10 +95,9 @@ TEST(FinetuneData, ShardsHoldTheFlowThatTheDepthAndCamerasGive) {
 
 TEST(FinetuneData, ShardsWithoutFlowAreRefusedNamingThem) {
   const std::string out = testing::scratchDir("noflow");
-  ASSERT_EQ(testing::runProcess({tool("generate_pairs"), "--scenes",
-                                 testing::sourceDir() + "/scenes/room", "--out", out,
-                                 "--pairs-per-scene", "2", "--resolution", "32", "--save-depth",
-                                 "--quiet"}),
+  ASSERT_EQ(testing::runProcess(
+                {tool("generate_pairs"), "--scenes", testing::sourceDir() + "/scenes/room", "--out",
+                 out, "--pairs-per-scene", "2", "--resolution", "32", "--save-depth", "--quiet"}),
             0);
   EXPECT_ERROR_CONTAINS(TruthPairs::fromShards({out + "/pairs-*.tar"}), "pairs-000000.tar",
                         "has no flow (generate_pairs --save-flow)");
@@ -216,11 +215,15 @@ TEST(FinetuneRun, MaeInitKeepsTheSeedsRandomDecoderAndCrossViewCopiesIt) {
   EXPECT_EQ(cross->initFromPretrained(loadCheckpoint(dir + "/croco.pth"), "croco.pth"),
             "encoder+decoder");
   const auto f = fresh->state(), m = mae->state(), x = cross->state(), p = stateDict(pre);
-  EXPECT_TRUE(torch::equal(m.at("dec_blocks.1.mlp.fc2.weight"), f.at("dec_blocks.1.mlp.fc2.weight")));
+  EXPECT_TRUE(
+      torch::equal(m.at("dec_blocks.1.mlp.fc2.weight"), f.at("dec_blocks.1.mlp.fc2.weight")));
   EXPECT_TRUE(torch::equal(m.at("decoder_embed.weight"), f.at("decoder_embed.weight")));
-  EXPECT_TRUE(torch::equal(m.at("enc_blocks.3.attn.qkv.weight"), p.at("enc_blocks.3.attn.qkv.weight")));
-  EXPECT_TRUE(torch::equal(x.at("dec_blocks.1.mlp.fc2.weight"), p.at("dec_blocks.1.mlp.fc2.weight")));
-  EXPECT_FALSE(torch::equal(f.at("dec_blocks.1.mlp.fc2.weight"), p.at("dec_blocks.1.mlp.fc2.weight")));
+  EXPECT_TRUE(
+      torch::equal(m.at("enc_blocks.3.attn.qkv.weight"), p.at("enc_blocks.3.attn.qkv.weight")));
+  EXPECT_TRUE(
+      torch::equal(x.at("dec_blocks.1.mlp.fc2.weight"), p.at("dec_blocks.1.mlp.fc2.weight")));
+  EXPECT_FALSE(
+      torch::equal(f.at("dec_blocks.1.mlp.fc2.weight"), p.at("dec_blocks.1.mlp.fc2.weight")));
 }
 
 int runTool(const std::vector<std::string>& args, std::string* err) {
