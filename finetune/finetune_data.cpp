@@ -115,17 +115,6 @@ torch::Tensor unitImage(const Image8& rgb) {
          255.0;
 }
 
-// [3, S, S] in [0, 1] -> jittered (CroCo's colour jitter) and normalised.
-torch::Tensor finishImage(torch::Tensor x, bool jitter, Rng& rng) {
-  if (jitter) {
-    int order[3] = {0, 1, 2};
-    for (int i = 2; i > 0; --i) std::swap(order[i], order[rng.below(i + 1)]);
-    const double b = rng.uniform(0.6, 1.4), c = rng.uniform(0.6, 1.4), s = rng.uniform(0.6, 1.4);
-    x = colorJitter(x, b, c, s, order);
-  }
-  return imagenetNormalize(x.unsqueeze(0)).squeeze(0);
-}
-
 // The inverse of a [12] pose: R^T, -R^T t.
 torch::Tensor invertPose(const torch::Tensor& pose) {
   auto R = pose.narrow(0, 0, 9).view({3, 3}), t = pose.narrow(0, 9, 3);
@@ -145,6 +134,9 @@ TruthBatch makeTruthBatch(const TruthPairs& data, const std::vector<size_t>& pai
   if (S > side)
     throw Error("the training size " + std::to_string(S) + " is larger than the pairs' " +
                 std::to_string(side) + " pixels");
+  AugmentOptions jitter;  // CroCo's factors in [0.6, 1.4]
+  jitter.size = S;
+  jitter.colorJitter = a.colorJitter;
   std::vector<torch::Tensor> i1, i2, fl, dp, ps;
   for (size_t slot = 0; slot < pairs.size(); ++slot) {
     Rng rng(
@@ -156,8 +148,8 @@ TruthBatch makeTruthBatch(const TruthPairs& data, const std::vector<size_t>& pai
       return cropPlanes(t.unsqueeze(0), top, left, S).squeeze(0);
     };
     // One crop box for both views: the flow keeps its values.
-    torch::Tensor x1 = finishImage(crop(unitImage(p.rgb1)), a.colorJitter, rng);
-    torch::Tensor x2 = finishImage(crop(unitImage(p.rgb2)), a.colorJitter, rng);
+    torch::Tensor x1 = jitterAndNormalize(crop(unitImage(p.rgb1)), jitter, rng);
+    torch::Tensor x2 = jitterAndNormalize(crop(unitImage(p.rgb2)), jitter, rng);
     torch::Tensor pose = poseVector(p.camera1, p.camera2);
     if (a.swap && rng.uniform() < 0.5) {
       std::swap(x1, x2);

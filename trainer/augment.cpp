@@ -75,7 +75,8 @@ Jitter drawJitter(const AugmentOptions& o, Rng& rng) {
   return j;
 }
 
-// The colour jitter (when on) and the normalisation of one cropped image, [3, S, S] in [0, 1].
+}  // namespace
+
 torch::Tensor jitterAndNormalize(torch::Tensor x, const AugmentOptions& o, Rng& rng) {
   if (o.colorJitter) {
     const Jitter j = drawJitter(o, rng);
@@ -83,6 +84,8 @@ torch::Tensor jitterAndNormalize(torch::Tensor x, const AugmentOptions& o, Rng& 
   }
   return imagenetNormalize(x.unsqueeze(0)).squeeze(0).contiguous();
 }
+
+namespace {
 
 bool isJpeg(const EncodedImage& e) {
   return e.bytes.size() >= 3 && e.bytes[0] == 0xff && e.bytes[1] == 0xd8 && e.bytes[2] == 0xff;

@@ -65,6 +65,10 @@ void cropEncodedPairInto(const EncodedImage& a, const EncodedImage& b, const Aug
 // rounding.
 torch::Tensor jitterAndNormalizeBatch(const torch::Tensor& crops, const torch::Tensor& jitter);
 
+// The colour jitter (when o.colorJitter; its order and factors drawn from rng) and the ImageNet
+// normalisation of one cropped image, [3, S, S] in [0, 1].
+torch::Tensor jitterAndNormalize(torch::Tensor x, const AugmentOptions& o, Rng& rng);
+
 // One image: crop (x0, y0) of size S and the colour jitter, exposed for the tests.
 torch::Tensor colorJitter(const torch::Tensor& rgb01, double brightness, double contrast,
                           double saturation, const int order[3]);
