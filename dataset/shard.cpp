@@ -47,19 +47,28 @@ nlohmann::json sampleRecord(const PairSample& s) {
   return recordToJson(sampleRecordOf(s));
 }
 
+std::vector<ImageF> viewFlows(const PairSample& s) {
+  std::vector<ImageF> flows;
+  for (int k = 0; k < s.views(); ++k) {
+    PAIRCAST_CHECK_MSG(!s.depth[k].data.empty(), "flow requested but depth not kept");
+    flows.push_back(opticalFlow(s.camera[k], s.depth[k], s.camera[flowTarget(k)]));
+  }
+  return flows;
+}
+
 EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality, bool withFlow) {
   EncodedPair e;
   e.key = sampleKey(s.scene, s.index);
   for (int k = 0; k < s.views(); ++k) {
     e.jpeg.push_back(encodeImage(s.rgb[k], "jpg", jpegQuality));
-    if (withDepth || withFlow)
-      PAIRCAST_CHECK_MSG(!s.depth[k].data.empty(), "depth or flow requested but depth not kept");
-    if (withDepth) e.depthExr.push_back(encodeExr(s.depth[k]));
+    if (withDepth) {
+      PAIRCAST_CHECK_MSG(!s.depth[k].data.empty(), "depth requested but not kept");
+      e.depthExr.push_back(encodeExr(s.depth[k]));
+    }
     if (!s.covisMask.empty()) e.covisPng.push_back(encodeImage(s.covisMask[k], "png", 0));
-    if (withFlow)
-      e.flowFlo.push_back(
-          encodeFlo(opticalFlow(s.camera[k], s.depth[k], s.camera[flowTarget(k)])));
   }
+  if (withFlow)
+    for (const ImageF& flow : viewFlows(s)) e.flowFlo.push_back(encodeFlo(flow));
   e.record = sampleRecord(s);
   return e;
 }

@@ -31,7 +31,10 @@ struct EncodedPair {
   std::vector<Bytes> flowFlo;   // [views] .flo (into view flowTarget(k)), or empty without flow
   nlohmann::json record;
 };
-// withFlow: each view's optical flow (covis/flow.h) into view flowTarget(k), from its depth.
+// Each view's optical flow (covis/flow.h) into view flowTarget(k), from its depth (kept).
+std::vector<ImageF> viewFlows(const PairSample& s);
+
+// withFlow: the views' flows (viewFlows), as .flo.
 EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality,
                        bool withFlow = false);
 

@@ -21,7 +21,6 @@
 #include <thread>
 
 #include "covis/covisibility.h"
-#include "covis/flow.h"
 #include "dataset/pair_stream.h"
 #include "dataset/shard.h"
 #include "render/ray_caster.h"
@@ -302,8 +301,7 @@ class PyPairStream {
     std::vector<ImageF> flows;
     if (flow_) {
       py::gil_scoped_release release;
-      for (int k = 0; k < s->views(); ++k)
-        flows.push_back(opticalFlow(s->camera[k], s->depth[k], s->camera[flowTarget(k)]));
+      flows = viewFlows(*s);
     }
     return sampleToDict(*s, flows);
   }
