@@ -580,7 +580,9 @@ class PyShardSet {
 // them, kept alive here).
 class PyShardBatches {
  public:
-  // buffers: [(view1, view2)] numpy arrays, each C-contiguous [B, 3, H, W], float32 or uint8.
+  // buffers: [(view1, view2)] numpy arrays, each C-contiguous [B, 3, H, W], float32 or uint8;
+  // or [(view1, view2, flow1, valid1, pose)] with the ground truth ([B, 2, H, W] float32,
+  // [B, H, W] bool, [B, 4, 4] float64).
   PyShardBatches(py::object shards, py::list buffers, std::vector<size_t> order, uint64_t seed,
                  uint64_t epoch, int threads, int prefetch, int keep, bool dropLast)
       : shards_(std::move(shards)), arrays_(buffers) {
@@ -592,10 +594,14 @@ class PyShardBatches {
     o.seed = seed;
     o.epoch = epoch;
     std::vector<std::array<void*, 2>> pointers;
+    std::vector<TruthBuffers> truth;
     bool first = true, isFloat = false;
     for (py::handle pair : buffers) {
       const auto views = pair.cast<py::tuple>();
-      if (views.size() != 2) throw py::value_error("each buffer is a (view1, view2) pair");
+      if (views.size() != 2 && views.size() != 5)
+        throw py::value_error(
+            "each buffer is (view1, view2), or (view1, view2, flow1, valid1, pose)");
+      o.flow = views.size() == 5;
       std::array<void*, 2> p{};
       for (int k = 0; k < 2; ++k) {
         auto a = views[k].cast<py::array>();
@@ -618,10 +624,12 @@ class PyShardBatches {
         p[k] = a.mutable_data();
       }
       pointers.push_back(p);
+      if (o.flow) truth.push_back(truthBuffers(views, o));
     }
     o.layout = isFloat ? PixelLayout::kNormalizedFloatCHW : PixelLayout::kUint8CHW;
     const ShardSet& set = shards_.cast<const PyShardSet&>().set();
-    batches_ = std::make_unique<ShardBatches>(set, std::move(order), o, std::move(pointers));
+    batches_ = std::make_unique<ShardBatches>(set, std::move(order), o, std::move(pointers),
+                                              std::move(truth));
   }
 
   // (buffer, size, [messages of the pairs skipped]), or None after the last batch.
@@ -635,6 +643,27 @@ class PyShardBatches {
     if (!b) return py::none();
     return py::make_tuple(b->buffer, b->size, b->skipped);
   }
+  // The ground-truth arrays of a buffer (views[2:5]), checked against the images' shape.
+  static TruthBuffers truthBuffers(const py::tuple& views, const ShardBatches::Options& o) {
+    auto array = [&](int k, const std::vector<py::ssize_t>& shape, const char* what) {
+      auto a = views[k].cast<py::array>();
+      bool ok = a.ndim() == static_cast<py::ssize_t>(shape.size()) && a.writeable() &&
+                (a.flags() & py::array::c_style);
+      for (size_t d = 0; ok && d < shape.size(); ++d) ok = a.shape(d) == shape[d];
+      if (!ok) throw py::value_error(std::string("the ground-truth buffers must be writable ") + what);
+      return a;
+    };
+    const py::ssize_t B = o.batchSize, H = o.height, W = o.width;
+    auto flow = array(2, {B, 2, H, W}, "C-contiguous [B, 2, H, W] float32 flows");
+    auto valid = array(3, {B, H, W}, "C-contiguous [B, H, W] bool masks");
+    auto pose = array(4, {B, 4, 4}, "C-contiguous [B, 4, 4] float64 poses");
+    if (!py::isinstance<py::array_t<float>>(flow) || !py::isinstance<py::array_t<bool>>(valid) ||
+        !py::isinstance<py::array_t<double>>(pose))
+      throw py::value_error("the ground-truth buffers are float32, bool and float64");
+    return {static_cast<float*>(flow.mutable_data()), static_cast<uint8_t*>(valid.mutable_data()),
+            static_cast<double*>(pose.mutable_data())};
+  }
+
   // Stops the threads (the loader's buffers may then go).
   void close() {
     py::gil_scoped_release release;

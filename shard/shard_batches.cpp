@@ -3,6 +3,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "util/error.h"
 #include "util/numpy_random.h"
@@ -10,7 +11,7 @@
 namespace paircast {
 
 PairPlan drawPair(const ShardSet& set, size_t sample, uint64_t seed, uint64_t epoch, int height,
-                  int width) {
+                  int width, bool flow) {
   const IndexedSample& s = set[sample];
   const std::string& scene = s.record.scene;
   const uLong crc =
@@ -24,7 +25,7 @@ PairPlan drawPair(const ShardSet& set, size_t sample, uint64_t seed, uint64_t ep
     p.view = 0;
     return p;
   }
-  p.view = views == 2 ? 1 : static_cast<int>(rng.integers(1, views));
+  p.view = views == 2 || flow ? 1 : static_cast<int>(rng.integers(1, views));
   const int imageHeight = s.record.camera[0].height, imageWidth = s.record.camera[0].width;
   if (height > imageHeight || width > imageWidth)
     throw Error(s.key, "crop (" + std::to_string(height) + ", " + std::to_string(width) +
@@ -39,9 +40,39 @@ PairPlan drawPair(const ShardSet& set, size_t sample, uint64_t seed, uint64_t ep
   return p;
 }
 
+void cropFlow(const ImageF& flow, const CropBox& from, const CropBox& to, float* out,
+              uint8_t* valid) {
+  const size_t plane = static_cast<size_t>(from.height) * from.width;
+  const float shift[2] = {static_cast<float>(from.left - to.left),
+                          static_cast<float>(from.top - to.top)};
+  for (int y = 0; y < from.height; ++y)
+    for (int x = 0; x < from.width; ++x) {
+      const float* f =
+          &flow.data[(static_cast<size_t>(from.top + y) * flow.width + from.left + x) * 2];
+      const size_t i = static_cast<size_t>(y) * from.width + x;
+      out[i] = f[0] + shift[0];
+      out[plane + i] = f[1] + shift[1];
+      valid[i] = std::isfinite(out[i]) && std::isfinite(out[plane + i]);
+    }
+}
+
+void relativePose(const Camera& camera1, const Camera& camera2, double* out) {
+  const Eigen::Matrix3d R = camera1.R_cam2world.transpose() * camera2.R_cam2world;
+  const Eigen::Vector3d t =
+      camera1.R_cam2world.transpose() * (camera2.t_cam2world - camera1.t_cam2world);
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c)
+      out[r * 4 + c] = r == 3 ? (c == 3 ? 1.0 : 0.0) : c == 3 ? t(r) : R(r, c);
+}
+
 ShardBatches::ShardBatches(const ShardSet& set, std::vector<size_t> order, const Options& o,
-                           std::vector<std::array<void*, 2>> buffers)
-    : set_(set), order_(std::move(order)), o_(o), buffers_(std::move(buffers)) {
+                           std::vector<std::array<void*, 2>> buffers,
+                           std::vector<TruthBuffers> truth)
+    : set_(set),
+      order_(std::move(order)),
+      o_(o),
+      buffers_(std::move(buffers)),
+      truth_(std::move(truth)) {
   if (o.batchSize < 1 || o.height < 1 || o.width < 1 || o.threads < 1 || o.prefetch < 1 ||
       o.keep < 0)
     throw Error("ShardBatches: batch size, crop, threads and prefetch must be positive");
@@ -50,6 +81,9 @@ ShardBatches::ShardBatches(const ShardSet& set, std::vector<size_t> order, const
   if (static_cast<int>(buffers_.size()) != depthOf(o))
     throw Error("ShardBatches: " + std::to_string(depthOf(o)) + " buffers needed, " +
                 std::to_string(buffers_.size()) + " given");
+  if (o.flow && static_cast<int>(truth_.size()) != depthOf(o))
+    throw Error("ShardBatches: " + std::to_string(depthOf(o)) + " ground-truth buffers needed, " +
+                std::to_string(truth_.size()) + " given");
   for (size_t i : order_)
     if (i >= set_.size())
       throw Error("ShardBatches: sample " + std::to_string(i) + " of " +
@@ -72,8 +106,12 @@ ShardBatches::~ShardBatches() {
 bool ShardBatches::fill(int64_t item, int slot, int buffer) {
   const size_t sample = order_[static_cast<size_t>(item)];
   // A crop larger than the images is the caller's error: it stops the loader.
-  const PairPlan p = drawPair(set_, sample, o_.seed, o_.epoch, o_.height, o_.width);
+  const PairPlan p = drawPair(set_, sample, o_.seed, o_.epoch, o_.height, o_.width, o_.flow);
   if (p.view == 0) return drop(item, set_[sample].key + ": one view, no pair");
+  // Shards without flow are the caller's error too.
+  if (o_.flow && set_[sample].flow.empty())
+    throw Error(set_.shard(sample),
+                "sample " + set_[sample].key + " has no flow (generate_pairs --save-flow)");
   const size_t element = o_.layout == PixelLayout::kUint8CHW ? 1 : sizeof(float);
   const size_t offset = size_t{3} * o_.height * o_.width * element * slot;
   try {
@@ -81,6 +119,14 @@ bool ShardBatches::fill(int64_t item, int slot, int buffer) {
                     static_cast<char*>(buffers_[buffer][0]) + offset);
     set_.decodeView(sample, p.view, p.second, o_.layout,
                     static_cast<char*>(buffers_[buffer][1]) + offset);
+    if (o_.flow) {
+      const TruthBuffers& t = truth_[buffer];
+      const size_t plane = static_cast<size_t>(o_.height) * o_.width;
+      cropFlow(set_.decodeFlow(sample, 0), p.first, p.second, t.flow + 2 * plane * slot,
+               t.valid + plane * slot);
+      relativePose(set_[sample].record.camera[0], set_[sample].record.camera[1],
+                   t.pose + 16 * slot);
+    }
     return true;
   } catch (const Error& e) {
     return drop(item, e.what());

@@ -5,7 +5,9 @@
 // when the sample has more than two, then the top and left of view 1's crop, then of the other's.
 // A pair that cannot be used (one view, a JPEG that does not decode) is dropped with its message
 // and its batch redone with the pairs after it, so that the batches are those of a reader that
-// skips it in order.
+// skips it in order. With Options::flow each pair also gets its exact ground truth, as
+// ShardPairs(flow=True) gives it: view 1's flow cut to its crop and moved into view 2's crop,
+// where it is known, and view 2's pose in view 1's camera (the pair is then always views 1, 2).
 //
 // Legend: B pairs per batch, H, W the crop.
 #pragma once
@@ -20,6 +22,8 @@
 
 #include "shard/shard_set.h"
 #include "util/batch_ring.h"
+#include "util/camera.h"
+#include "util/image.h"
 
 namespace paircast {
 
@@ -31,9 +35,26 @@ struct PairPlan {
 };
 
 // ShardPairs' draws for sample `sample` of `set` (throws paircast::Error, naming the sample,
-// when the crop is larger than its images). A sample of one view gives view 0 and no draws.
+// when the crop is larger than its images). A sample of one view gives view 0 and no draws;
+// with `flow` the other view is view 1, without a draw.
 PairPlan drawPair(const ShardSet& set, size_t sample, uint64_t seed, uint64_t epoch, int height,
-                  int width);
+                  int width, bool flow = false);
+
+// The ground truth of a pair (Options::flow), where the caller wants it: a view's flow
+// [B, 2, H, W] (pixels, +inf unknown), where it is known [B, H, W] (1 or 0), and the relative
+// pose [B, 4, 4] (float64).
+struct TruthBuffers {
+  float* flow = nullptr;
+  uint8_t* valid = nullptr;
+  double* pose = nullptr;
+};
+
+// View `from`'s flow cut to its crop and moved into the frame of the other view's crop `to`
+// (paircast.torch.crop_flow): [2, H, W] and its validity [H, W].
+void cropFlow(const ImageF& flow, const CropBox& from, const CropBox& to, float* out,
+              uint8_t* valid);
+// Camera 2's pose in camera 1's frame, [4, 4] row-major (paircast.torch.relative_pose).
+void relativePose(const Camera& camera1, const Camera& camera2, double* out);
 
 class ShardBatches {
  public:
@@ -41,6 +62,7 @@ class ShardBatches {
     int batchSize = 64, height = 224, width = 224;
     int threads = 2, prefetch = 2, keep = 1;
     bool dropLast = false;
+    bool flow = false;  // also each pair's ground truth, into `truth`
     PixelLayout layout = PixelLayout::kNormalizedFloatCHW;  // kUint8CHW or kNormalizedFloatCHW
     uint64_t seed = 0, epoch = 0;
   };
@@ -48,9 +70,10 @@ class ShardBatches {
   static int depthOf(const Options& o) { return o.keep + o.prefetch; }
 
   // Batches of the samples `order` (indices into `set`), in that order. `set` and the buffers
-  // must outlive this. Throws paircast::Error on a bad option or sample.
+  // must outlive this. With o.flow, `truth` holds a TruthBuffers per buffer. Throws
+  // paircast::Error on a bad option or sample.
   ShardBatches(const ShardSet& set, std::vector<size_t> order, const Options& o,
-               std::vector<std::array<void*, 2>> buffers);
+               std::vector<std::array<void*, 2>> buffers, std::vector<TruthBuffers> truth = {});
   ~ShardBatches();
 
   struct Batch {
@@ -68,6 +91,7 @@ class ShardBatches {
   std::vector<size_t> order_;
   const Options o_;
   std::vector<std::array<void*, 2>> buffers_;
+  std::vector<TruthBuffers> truth_;
   std::mutex errorsMu_;
   std::map<int64_t, std::string> errors_;  // by item
   std::unique_ptr<BatchRing> ring_;

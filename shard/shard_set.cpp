@@ -1,6 +1,7 @@
 #include "shard/shard_set.h"
 
 #include "util/error.h"
+#include "util/flo_io.h"
 
 namespace paircast {
 
@@ -50,6 +51,23 @@ void ShardSet::decodeView(size_t i, int view, const CropBox& box, PixelLayout la
                           " but its camera is " + std::to_string(camera.width) + "x" +
                           std::to_string(camera.height));
   decodeJpegCrop(bytes.data(), bytes.size(), name, box, layout, out);
+}
+
+ImageF ShardSet::decodeFlow(size_t i, int view) const {
+  const Where& w = where_.at(i);
+  const ShardIndex& index = shards_[w.shard];
+  const IndexedSample& s = index[w.sample];
+  if (view < 0 || view >= static_cast<int>(s.flow.size()))
+    throw Error(index.path(), "sample " + s.key + " has no flow (generate_pairs --save-flow)");
+  const std::string name = index.describe(w.sample, MemberKind::kFlow, view + 1);
+  const Bytes bytes = index.read(s.flow[view]);
+  ImageF flow = decodeFlo(bytes.data(), bytes.size(), name);
+  const Camera& camera = s.record.camera[view];
+  if (flow.width != camera.width || flow.height != camera.height)
+    throw Error(name, "is " + std::to_string(flow.width) + "x" + std::to_string(flow.height) +
+                          " but its camera is " + std::to_string(camera.width) + "x" +
+                          std::to_string(camera.height));
+  return flow;
 }
 
 }  // namespace paircast

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "shard/shard_index.h"
+#include "util/image.h"
 #include "util/jpeg_decoder.h"
 
 namespace paircast {
@@ -34,6 +35,10 @@ class ShardSet {
   // Throws paircast::Error naming the shard and member when the JPEG does not decode, its size
   // differs from its camera's, or the box is outside it.
   void decodeView(size_t i, int view, const CropBox& box, PixelLayout layout, void* out) const;
+  // View `view`'s flow of sample i ([H, W, 2] pixels, +inf where unknown; into view
+  // flowTarget(view)). Throws paircast::Error naming the shard and sample when it has none
+  // (generate_pairs --save-flow), and naming the member when it does not decode.
+  ImageF decodeFlow(size_t i, int view) const;
 
  private:
   struct Where {

@@ -411,11 +411,18 @@ class ShardLoader:
     bytes), to be normalised on the GPU with paircast.torch.normalize; pin_memory=True makes the
     buffers pinned host memory, for copies to CUDA with non_blocking=True. prefetch: batches
     decoded ahead of the one taken.
+
+    flow=True (shards written with generate_pairs --save-flow) yields (view1, view2, flow1,
+    valid1, pose) batches: view 1's flow cut to its crop and moved into view 2's crop ([B, 2, h, w]
+    float32, pixels), where it is known ([B, h, w] bool), and view 2's pose in view 1's camera
+    ([B, 4, 4] float64). They are those of DataLoader(ShardPairs(pattern, crop=crop,
+    flow=True), batch_size=batch_size) with the same seed and epoch; the pair is always views 1
+    and 2.
     """
 
     def __init__(self, pattern, batch_size=64, crop=224, threads=2, dtype="float32",
                  pin_memory=False, shuffle=False, seed=0, rank=None, world_size=None,
-                 drop_last=False, normalize=True, keep=1, prefetch=2):
+                 drop_last=False, normalize=True, keep=1, prefetch=2, flow=False):
         if int(threads) < 1 or int(prefetch) < 1 or int(keep) < 1:
             raise ValueError(f"threads, prefetch and keep must be positive, not {threads}, "
                              f"{prefetch}, {keep}")
@@ -425,6 +432,7 @@ class ShardLoader:
         self.batch_size = self._pairs.batch_size
         self.threads, self.keep, self.prefetch = int(threads), int(keep), int(prefetch)
         self.pin_memory = bool(pin_memory)
+        self.flow = bool(flow)
         if self.pin_memory and not torch.cuda.is_available():
             raise ValueError("pin_memory=True needs CUDA, and this torch sees no CUDA device")
         self._buffers = None  # made on the first iteration, kept for the loader's life
@@ -449,11 +457,20 @@ class ShardLoader:
                 return torch.empty(shape, dtype=dtype, pin_memory=self.pin_memory)
 
             depth = self.keep + self.prefetch
-            decoded = [(tensor(raw), tensor(raw)) for _ in range(depth)]
+
+            def truth():
+                if not self.flow:
+                    return ()
+                b = self.batch_size
+                return (torch.empty((b, 2, h, w), dtype=torch.float32, pin_memory=self.pin_memory),
+                        torch.empty((b, h, w), dtype=torch.bool, pin_memory=self.pin_memory),
+                        torch.empty((b, 4, 4), dtype=torch.float64, pin_memory=self.pin_memory))
+
+            decoded = [(tensor(raw), tensor(raw)) + truth() for _ in range(depth)]
             outputs = decoded
             if self._pairs.dtype == "float32" and not self._pairs.normalize:
-                outputs = [(tensor(torch.float32), tensor(torch.float32))
-                           for _ in range(depth)]
+                outputs = [(tensor(torch.float32), tensor(torch.float32)) + d[2:]
+                           for d in decoded]
             self._buffers = decoded, outputs
         return self._buffers
 
@@ -465,7 +482,7 @@ class ShardLoader:
         pairs = self._pairs
         shards, _ = pairs._index()
         decoded, outputs = self._ring()
-        core = ShardBatches(shards, [(a.numpy(), b.numpy()) for a, b in decoded],
+        core = ShardBatches(shards, [tuple(t.numpy() for t in d) for d in decoded],
                             self._order(), seed=pairs.seed,
                             epoch=pairs.epoch, threads=self.threads, prefetch=self.prefetch,
                             keep=self.keep, drop_last=pairs.drop_last)
@@ -480,10 +497,9 @@ class ShardLoader:
 
     def _output(self, decoded, output, size):
         if output is not decoded:  # normalize=False: uint8 divided into float32 in [0, 1]
-            for src, dst in zip(decoded, output):
+            for src, dst in zip(decoded[:2], output[:2]):
                 torch.div(src[:size], 255.0, out=dst[:size])
-        a, b = output
-        return (a, b) if size == len(a) else (a[:size], b[:size])
+        return tuple(output) if size == len(output[0]) else tuple(t[:size] for t in output)
 
     def __len__(self):
         """Batches per epoch (pairs with one view, which have no pair, counted as pairs)."""

@@ -9,7 +9,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 import paircast  # noqa: E402
-from paircast.torch import LivePairs, ShardPairs, crop_flow, relative_pose  # noqa: E402
+from paircast.torch import (LivePairs, ShardLoader, ShardPairs, crop_flow,  # noqa: E402
+                             relative_pose)
 from conftest import RESOLUTION, ROOM  # noqa: E402
 
 
@@ -114,6 +115,34 @@ def test_live_pairs_give_the_same_flow_as_the_shards_of_the_same_pairs(flow_shar
 def test_flow_from_shards_without_it_is_an_error(croco_pairs):
     with pytest.raises(paircast.Error, match="no flow"):
         next(iter(ShardPairs(str(croco_pairs / "pairs-*.tar"), flow=True)))
+
+
+@pytest.mark.parametrize("normalize", [True, False])
+def test_shard_loader_flow_batches_are_those_of_shard_pairs(flow_shards, normalize):
+    pattern = str(flow_shards / "pairs-*.tar")
+    pairs = ShardPairs(pattern, crop=48, flow=True, seed=5, normalize=normalize)
+    pairs.set_epoch(2)
+    expected = list(pairs)
+    loader = ShardLoader(pattern, batch_size=2, crop=48, flow=True, seed=5, threads=2,
+                         normalize=normalize, keep=2)
+    loader.set_epoch(2)
+    batches = [tuple(t.clone() for t in batch) for batch in loader]
+    assert [len(b[0]) for b in batches] == [2, 1]
+    got = [tuple(b[k][j] for k in range(5)) for b in batches for j in range(len(b[0]))]
+    assert len(got) == len(expected) == 3
+    for (i1, i2, f1, v1, pose), (e1, e2, g1, w1, epose) in zip(got, expected):
+        assert torch.equal(i1, e1) and torch.equal(i2, e2)
+        assert torch.equal(v1, w1) and v1.any() and v1.dtype == torch.bool
+        assert torch.equal(f1[:, v1], g1[:, w1])  # bit for bit where known
+        assert torch.isinf(f1[:, ~v1]).all()
+        torch.testing.assert_close(pose, epose, rtol=0, atol=1e-12)
+        assert pose.dtype == torch.float64
+
+
+def test_shard_loader_flow_from_shards_without_it_is_an_error(croco_pairs):
+    loader = ShardLoader(str(croco_pairs / "pairs-*.tar"), batch_size=2, crop=32, flow=True)
+    with pytest.raises(paircast.Error, match="no flow"):
+        next(iter(loader))
 
 
 def test_relative_pose_of_a_camera_with_itself_is_the_identity():
