@@ -102,9 +102,7 @@ class FinetuneTask : public TrainingTask {
   std::string tool() const override { return "finetune"; }
 
   std::shared_ptr<torch::nn::Module> buildModel() override {
-    net_ = DownstreamNet(c_.model);
-    if (c_.init != "random")
-      initialised_ = net_->initFromPretrained(loadCheckpoint(c_.init), c_.init);
+    net_ = initialNet(c_, &initialised_);
     return net_.ptr();
   }
 
@@ -216,6 +214,16 @@ torch::Device deviceNamed(const std::string& name) {
 }
 
 }  // namespace
+
+DownstreamNet initialNet(const FinetuneConfig& c, std::string* initialised) {
+  torch::manual_seed(c.train.seed);
+  DownstreamNet net(c.model);
+  if (c.init != "random") {
+    const std::string loaded = net->initFromPretrained(loadCheckpoint(c.init), c.init);
+    if (initialised) *initialised = loaded;
+  }
+  return net;
+}
 
 nlohmann::json runFinetune(const FinetuneConfig& c, Distributed* dist) {
   c.validate();

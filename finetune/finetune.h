@@ -31,6 +31,11 @@ struct FinetuneConfig {
   bool colorJitter = true;
 };
 
+// The model a fine-tune starts from: the seed's random weights (torch::manual_seed(train.seed),
+// as for a pre-training run of that seed), with `init`'s encoder, and decoder when it has one
+// (initFromPretrained), loaded over them. `initialised` receives what was loaded.
+DownstreamNet initialNet(const FinetuneConfig& config, std::string* initialised = nullptr);
+
 // Trains and evaluates; returns the summary (also <out>/summary.json), with "heldout" (model and
 // baseline figures, also <out>/heldout.json with each pair's). Data-parallel when WORLD_SIZE > 1.
 nlohmann::json runFinetune(const FinetuneConfig& config);

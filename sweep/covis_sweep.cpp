@@ -12,6 +12,7 @@
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
 #include "sweep/heldout_eval.h"
+#include "sweep/sweep_downstream.h"
 #include "sweep/sweep_pool.h"
 #include "sweep/sweep_report.h"
 #include "sweep/sweep_scene.h"
@@ -86,14 +87,60 @@ void trainRun(const SweepConfig& c, const CroCoConfig& mc, const SweepRun& run, 
     throw Error(run.dir.string(), "interrupted; run covis_sweep again to resume");
 }
 
+// What the fine-tunes are made with (results.json's config, and what the ranks agree on).
+nlohmann::json downstreamSettings(const SweepConfig& c) {
+  if (c.downstream.empty()) return nullptr;
+  return {{"tasks", c.downstream},
+          {"steps", c.finetuneSteps},
+          {"pairs", c.finetunePairs},
+          {"eval_pairs", c.finetuneEvalPairs},
+          {"batch", c.finetuneBatch},
+          {"blr", c.finetuneBlr},
+          {"head", "linear"},
+          {"eval_covis", {0.1, 1.0}},
+          {"band", {kDownstreamBandLo, kDownstreamBandHi}}};
+}
+
 // What every rank must agree on before training: the sets, and how they are trained.
 nlohmann::json rankSettings(const SweepConfig& c) {
-  return {{"scenes", c.scenes},         {"heldout", c.heldout},   {"modes", c.modes},
-          {"centers", c.centers},       {"pairs", c.pairsPerSet}, {"steps", c.steps},
-          {"preset", c.preset},         {"img_size", c.imgSize},  {"patch_size", c.patchSize},
-          {"batch", c.batchSize},       {"blr", c.blr},           {"seed", c.seed},
-          {"resolution", c.resolution}, {"device", c.device},     {"seeds", c.seeds},
-          {"baselines", c.baselines},   {"sets", c.sets}};
+  return {{"scenes", c.scenes},
+          {"heldout", c.heldout},
+          {"modes", c.modes},
+          {"centers", c.centers},
+          {"pairs", c.pairsPerSet},
+          {"steps", c.steps},
+          {"preset", c.preset},
+          {"img_size", c.imgSize},
+          {"patch_size", c.patchSize},
+          {"batch", c.batchSize},
+          {"blr", c.blr},
+          {"seed", c.seed},
+          {"resolution", c.resolution},
+          {"device", c.device},
+          {"seeds", c.seeds},
+          {"baselines", c.baselines},
+          {"sets", c.sets},
+          {"downstream", downstreamSettings(c)}};
+}
+
+// The scene files, expanded from the lists; no held-out scene is a training scene.
+struct SceneFiles {
+  std::vector<std::string> train, heldout;
+};
+
+SceneFiles sceneFiles(const SweepConfig& c) {
+  SceneFiles f{expandSceneList(c.scenes), expandSceneList(c.heldout)};
+  // Held-out scenes never appear in training: by file and by scene name.
+  std::set<std::string> trainIds;
+  for (const auto& t : f.train) {
+    trainIds.insert(fs::weakly_canonical(t).string());
+    trainIds.insert("name:" + sanitizeName(fs::path(t).stem().string()));
+  }
+  for (const auto& h : f.heldout)
+    if (trainIds.count(fs::weakly_canonical(h).string()) ||
+        trainIds.count("name:" + sanitizeName(fs::path(h).stem().string())))
+      throw Error(h, "is both a training and a held-out scene");
+  return f;
 }
 
 // Ranks other than 0 wait for rank 0 to write `ready.json` (the pool, the sets and the held-out
@@ -125,30 +172,16 @@ nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
   }
   const auto dist = Distributed::fromEnvironment(c.device);
   for (const auto& run : runs) trainRun(c, mc, run, dist.get());
+  if (!c.downstream.empty()) {
+    const SceneFiles scenes = sceneFiles(c);
+    const DownstreamData data = prepareDownstreamData(c, scenes.train, scenes.heldout);
+    for (const FinetuneJob& job : planFinetunes(c, runs))
+      runFinetuneJob(c, mc, data, job, dist.get());
+  }
   return {{"rank", rank}, {"runs_trained", runs.size()}};
 }
 
 // ---- the stages of runCovisSweep, in order ----
-
-// The scene files, expanded from the lists; no held-out scene is a training scene.
-struct SceneFiles {
-  std::vector<std::string> train, heldout;
-};
-
-SceneFiles sceneFiles(const SweepConfig& c) {
-  SceneFiles f{expandSceneList(c.scenes), expandSceneList(c.heldout)};
-  // Held-out scenes never appear in training: by file and by scene name.
-  std::set<std::string> trainIds;
-  for (const auto& t : f.train) {
-    trainIds.insert(fs::weakly_canonical(t).string());
-    trainIds.insert("name:" + sanitizeName(fs::path(t).stem().string()));
-  }
-  for (const auto& h : f.heldout)
-    if (trainIds.count(fs::weakly_canonical(h).string()) ||
-        trainIds.count("name:" + sanitizeName(fs::path(h).stem().string())))
-      throw Error(h, "is both a training and a held-out scene");
-  return f;
-}
 
 // A check on the pool as sampled: none of its pairs comes from a held-out scene.
 void checkPoolExcludes(const Pool& pool, const std::vector<std::string>& heldout) {
@@ -266,12 +299,13 @@ nlohmann::json runRow(const std::vector<SweepSet>& sets, const SweepRun& run,
 nlohmann::json collectResults(const SweepConfig& c, const std::vector<SweepSet>& sets,
                               const SceneFiles& scenes, const Pool& pool, const HeldOut& h,
                               const nlohmann::json& runs, const nlohmann::json& randomRuns,
-                              const nlohmann::json& constant) {
+                              const nlohmann::json& constant, const nlohmann::json& trivial) {
   nlohmann::json results = {{"rows", aggregateRuns(runs)},
                             {"runs", runs},
                             {"random_encoder", aggregateRuns(randomRuns).at(0)},
                             {"random_runs", randomRuns},
                             {"constant_depth", constant},
+                            {"finetune_baselines", trivial},
                             {"config",
                              {{"scenes", scenes.train},
                               {"heldout", scenes.heldout},
@@ -290,11 +324,27 @@ nlohmann::json collectResults(const SweepConfig& c, const std::vector<SweepSet>&
                               {"eval_pairs", h.img1.size(0)},
                               {"probe_views", c.probeViews},
                               {"mechanism_pairs", h.mechanism.size()},
-                              {"mechanism_covis", {c.mechanismMinCovis, c.mechanismMaxCovis}}}},
+                              {"mechanism_covis", {c.mechanismMinCovis, c.mechanismMaxCovis}},
+                              {"downstream", downstreamSettings(c)}}},
                             {"pool_pairs", pool.keys.size()},
                             {"reference_set", referenceSet(sets)}};
   results["verdicts"] = sweepVerdicts(results);
   return results;
+}
+
+// Fine-tunes every run and each seed's random weights (all ranks, in the same order), then adds
+// each one's downstream figures to its row. Returns the trivial baselines' figures (zero flow,
+// constant depth), the same for every fine-tune.
+nlohmann::json fineTuneAll(const SweepConfig& c, const CroCoConfig& mc,
+                           const std::vector<SweepRun>& runs, const DownstreamData& data,
+                           Distributed* dist, nlohmann::json& rows, nlohmann::json& randomRuns) {
+  const std::vector<FinetuneJob> jobs = planFinetunes(c, runs);
+  for (const FinetuneJob& job : jobs) runFinetuneJob(c, mc, data, job, dist);
+  for (size_t i = 0; i < runs.size(); ++i) rows[i].update(downstreamFigures(c, data, runs[i].dir));
+  for (int k = 0; k < c.seeds; ++k)
+    randomRuns[k].update(
+        downstreamFigures(c, data, fs::path(c.out) / "runs" / "random" / seedFolder(k)));
+  return downstreamFigures(c, data, jobs.front().dir.parent_path(), true);
 }
 
 }  // namespace
@@ -393,8 +443,13 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   const HeldOut h = loadHeldOut(c, mc, scenes.heldout);
   const nlohmann::json constant = constantDepthBaseline(h);
 
+  std::unique_ptr<DownstreamData> downstream;
+  if (!c.downstream.empty())
+    downstream =
+        std::make_unique<DownstreamData>(prepareDownstreamData(c, scenes.train, scenes.heldout));
+
   // 3. The random-encoder baseline, once per seed.
-  const nlohmann::json randomRuns = randomEncoderRuns(c, mc, h);
+  nlohmann::json randomRuns = randomEncoderRuns(c, mc, h);
 
   // 4. Train and evaluate every run (each set and baseline with each seed), with the other ranks.
   releaseOtherRanks(c);
@@ -407,9 +462,14 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
                     ", probe delta1 " + std::to_string(numberOrNan(ev, "probe_delta1")));
   }
 
-  // 5. Results: results.csv (a row per set, with intervals), results_runs.csv, results.json,
+  // 5. With --downstream, every run and each seed's random weights fine-tuned, and measured.
+  nlohmann::json trivial = nullptr;
+  if (downstream) trivial = fineTuneAll(c, mc, runs, *downstream, dist.get(), rows, randomRuns);
+
+  // 6. Results: results.csv (a row per set, with intervals), results_runs.csv, results.json,
   //    the plots and summary.html.
-  nlohmann::json results = collectResults(c, sets, scenes, pool, h, rows, randomRuns, constant);
+  nlohmann::json results =
+      collectResults(c, sets, scenes, pool, h, rows, randomRuns, constant, trivial);
   writeSweepReport(c, results);
   results["seconds_this_run"] = secondsSince(start);
   return results;
@@ -474,6 +534,27 @@ void SweepConfig::validate() const {
   if (evalPairs < 1) throw OptionError("eval_pairs", "held-out pairs must be >= 1");
   if (probeViews < 4) throw OptionError("probe_views", "the depth probe needs at least 4 views");
   if (seeds < 1 || seeds > 1000) throw OptionError("seeds", "seeds must be in 1..1000");
+  for (size_t i = 0; i < downstream.size(); ++i) {
+    if (downstream[i] == "pose")
+      throw OptionError("downstream",
+                        "pose is not fine-tuned by the sweep: at this scale it does not beat the "
+                        "identity pose (docs/finetune.md); use flow, depth or flow,depth");
+    if (downstream[i] != "flow" && downstream[i] != "depth")
+      throw OptionError("downstream", "unknown downstream task '" + downstream[i] +
+                                          "' (use flow, depth or flow,depth)");
+    if (std::find(downstream.begin(), downstream.begin() + i, downstream[i]) !=
+        downstream.begin() + i)
+      throw OptionError("downstream", "task '" + downstream[i] + "' is given twice");
+  }
+  if (!downstream.empty()) {
+    if (finetuneSteps < 1) throw OptionError("finetune_steps", "fine-tuning steps must be >= 1");
+    if (finetuneBatch < 1) throw OptionError("finetune_batch", "the batch must be >= 1");
+    if (finetunePairs < finetuneBatch)
+      throw OptionError("finetune_pairs", "fine-tuning pairs must be at least one batch (" +
+                                              std::to_string(finetuneBatch) + ")");
+    if (finetuneEvalPairs < 1)
+      throw OptionError("finetune_eval_pairs", "held-out pairs must be >= 1");
+  }
   for (size_t i = 0; i < baselines.size(); ++i) {
     if (baselines[i] != "mae")
       throw OptionError("baseline", "unknown baseline '" + baselines[i] + "' (use mae)");

@@ -4,8 +4,10 @@
 // from the pool with the same size. The same model is pre-trained on each set with the same
 // steps, once per seed (and so is any baseline, such as mae), then evaluated on held-out
 // scenes: the completion loss on pairs at covis about 0.5, and a monocular depth probe on the
-// frozen encoder, against a randomly initialised encoder of each seed. Every stage is kept on
-// disk and reused, so a killed sweep resumes run by run.
+// frozen encoder, against a randomly initialised encoder of each seed. With --downstream, every
+// run (and each seed's random weights) is also fine-tuned for flow and depth and measured on
+// held-out pairs (sweep_downstream.h). Every stage is kept on disk and reused, so a killed sweep
+// resumes run by run and fine-tune by fine-tune.
 #pragma once
 
 #include <filesystem>
@@ -81,7 +83,15 @@ struct SweepConfig {
   int mechanismPairs = 48;
   double mechanismMinCovis = 0.3, mechanismMaxCovis = 0.7;
   double minWalkScale = 0.05;  // the pool's second views walk log-uniformly from this scale up
-  bool reports = true;         // a dataset report per set
+  // Fine-tuning of every run and of each seed's random weights (sweep_downstream.h): tasks
+  // "flow" and "depth"; empty: none. Added to a finished sweep, only the fine-tunes run.
+  std::vector<std::string> downstream;
+  int64_t finetuneSteps = 300;  // per fine-tune, of finetuneBatch pairs
+  int finetunePairs = 512;      // fine-tuning pairs from the training scenes (covis >= 0.5)
+  int finetuneEvalPairs = 256;  // held-out pairs from the held-out scenes (covis 0.1-1)
+  int finetuneBatch = 8;
+  double finetuneBlr = 1e-2;
+  bool reports = true;  // a dataset report per set
   bool progress = true;
 };
 

@@ -36,11 +36,28 @@ const Metric kEvaluated[] = {
     {"ref_gain_hidden", true, "reference use on hidden patches (about 0 expected)", false, true},
     {"xattn_pck1", true, "cross-attention correspondence PCK@1 patch", true, true},
     {"xattn_epe", false, "cross-attention correspondence error (patches)", true, true},
-    {"enc_pck1", true, "encoder-feature correspondence PCK@1 patch", true, false}};
+    {"enc_pck1", true, "encoder-feature correspondence PCK@1 patch", true, false},
+    // After fine-tuning (--downstream), on held-out pairs at covis 0.3-0.7 unless said.
+    {"ft_flow_aepe", false, "fine-tuned flow AEPE (px)", true, false},
+    {"ft_flow_aepe_covisible", false, "fine-tuned flow AEPE on covisible pixels (px)", true, false},
+    {"ft_flow_px3", false, "fine-tuned flow 3 px outlier share", true, false},
+    {"ft_flow_aepe_all", false, "fine-tuned flow AEPE, held-out covis 0.1-1 (px)", false, false},
+    {"ft_depth_delta1", true, "fine-tuned depth delta1", true, false},
+    {"ft_depth_absrel", false, "fine-tuned depth AbsRel", true, false}};
+
+// Whether a metric is measured after fine-tuning: its random baseline is then random weights
+// fine-tuned like every run (from scratch on the fine-tuning data alone).
+bool fineTuned(const Metric& m) {
+  return std::string(m.key).rfind("ft_", 0) == 0;
+}
+const char* randomName(const Metric& m) {
+  return fineTuned(m) ? "random weights (fine-tuned from scratch)" : "random encoder";
+}
 
 // The probes each claim is judged on, one verdict each.
-const char* const kClaimProbes[] = {"xv_loss", "ref_gain_covisible", "xattn_pck1", "enc_pck1",
-                                    "probe_delta1"};
+const char* const kClaimProbes[] = {
+    "xv_loss",      "ref_gain_covisible",     "xattn_pck1",      "enc_pck1",       "probe_delta1",
+    "ft_flow_aepe", "ft_flow_aepe_covisible", "ft_depth_delta1", "ft_depth_absrel"};
 
 const Metric& metric(const std::string& key) {
   for (const Metric& m : kEvaluated)
@@ -213,7 +230,7 @@ std::vector<std::string> metricVerdicts(const Metric& m, const RunValues& v,
   return {std::string(m.label) + ": the best is " + best + ", " +
               withInterval(b.mean, b.halfWidth) + ". Behind it by more than the interval: " +
               listOf(beyond) + ". Within the interval of it: " + listOf(within) + ".",
-          std::string(m.label) + ": better than the random encoder (" +
+          std::string(m.label) + ": better than " + randomName(m) + " (" +
               withInterval(rnd.mean, rnd.halfWidth) +
               ") by more than the interval: " + listOf(beats) + ". Not: " + listOf(notBeats) + "."};
 }
@@ -267,8 +284,16 @@ std::vector<std::string> binSets(const nlohmann::json& runs) {
   return names;
 }
 
+// Whether any run of `set` has a figure of the probe (the fine-tuned ones need --downstream).
+bool hasFigures(const RunValues& v, const std::string& set) {
+  const auto it = v.values.find(set);
+  return it != v.values.end() && std::any_of(it->second.begin(), it->second.end(),
+                                             [](double x) { return std::isfinite(x); });
+}
+
 // The paper's claims about the reference set (the bin set nearest 0.5, which mae trains on),
-// where the sweep has the runs they need: a verdict on each probe of kClaimProbes.
+// where the sweep has the runs they need: a verdict on each probe of kClaimProbes that has
+// figures. `values` holds the runs and each seed's random weights ("random_encoder").
 std::vector<std::string> claimVerdicts(const nlohmann::json& runs, const std::string& reference,
                                        const std::map<std::string, RunValues>& values) {
   const RunValues& any = values.begin()->second;
@@ -287,11 +312,79 @@ std::vector<std::string> claimVerdicts(const nlohmann::json& runs, const std::st
   }
   if (any.values.count("mae"))
     claims.push_back({"Claim 2, cross-view completion beats auto-completion (MAE)", {"mae"}});
+  // After fine-tuning, also against random weights fine-tuned alike (the paper's first row).
+  const bool random = any.values.count("random_encoder") > 0;
   std::vector<std::string> out;
   for (const auto& [claim, others] : claims)
     for (const char* probe : kClaimProbes)
-      out.push_back(claimVerdict(claim, reference, others, metric(probe), values.at(probe)));
+      if (!fineTuned(metric(probe)) || hasFigures(values.at(probe), reference))
+        out.push_back(claimVerdict(claim + (fineTuned(metric(probe)) && others[0] == "mae"
+                                                ? ", its encoder with a random decoder"
+                                                : ""),
+                                   reference, others, metric(probe), values.at(probe)));
+  for (const char* probe : kClaimProbes)
+    if (random && fineTuned(metric(probe)) && hasFigures(values.at(probe), reference))
+      out.push_back(claimVerdict("Claim 2, cross-view pre-training beats random weights", reference,
+                                 {"random_encoder"}, metric(probe), values.at(probe)));
   return out;
+}
+
+// Whether a fine-tuned flow error can decide between two sets: the largest 95 % half-width of
+// the paired difference between two training sets, against a quarter of the gap between random
+// weights and the best pre-trained run. Empty without fine-tuned figures.
+std::string instrumentVerdict(const Metric& m, const RunValues& runs, const RunValues& withRandom) {
+  if (!hasFigures(withRandom, "random_encoder")) return "";
+  std::vector<std::string> sets;
+  for (const auto& s : runs.sets)
+    if (runs.task.at(s) == "croco" && hasFigures(runs, s)) sets.push_back(s);
+  double widest = NAN, best = INFINITY;
+  std::string widestPair, bestSet;
+  for (const auto& s : runs.sets) {
+    const double m = interval95(runs.values.at(s)).mean;
+    if (std::isfinite(m) && m < best) best = m, bestSet = s;
+  }
+  for (size_t i = 0; i < sets.size(); ++i)
+    for (size_t j = i + 1; j < sets.size(); ++j) {
+      const Interval d =
+          pairedDifferenceInterval95(runs.values.at(sets[i]), runs.values.at(sets[j]));
+      if (std::isfinite(d.halfWidth) && !(d.halfWidth <= widest))
+        widest = d.halfWidth, widestPair = sets[i] + " and " + sets[j];
+    }
+  const double random = interval95(withRandom.values.at("random_encoder")).mean;
+  const double gap = random - best;
+  if (!std::isfinite(widest) || bestSet.empty())
+    return std::string("Instrument, ") + m.label +
+           ": with fewer than two sets of 2 seeds or more, the paired intervals are not known "
+           "(use --seeds 3).";
+  char b[512];
+  const double quarter = gap / 4;
+  if (gap > 0 && widest <= quarter) {
+    std::snprintf(b, sizeof b,
+                  "Instrument, %s: decides. The widest paired 95 %% half-width between two sets "
+                  "(%s) is %.3f, at most a quarter of the gap between random weights (%.3f) and "
+                  "the best pre-trained run (%s, %.3f): %.3f / 4 = %.3f.",
+                  m.label, widestPair.c_str(), widest, random, bestSet.c_str(), best, gap, quarter);
+    return b;
+  }
+  if (!(gap > 0)) {
+    std::snprintf(b, sizeof b,
+                  "Instrument, %s: does not decide. No pre-trained run beats random weights "
+                  "(%.3f; the best run, %s, %.3f), so there is no gap to resolve; the widest "
+                  "paired 95 %% half-width between two sets (%s) is %.3f.",
+                  m.label, random, bestSet.c_str(), best, widestPair.c_str(), widest);
+    return b;
+  }
+  const size_t seeds = runs.values.at(sets[0]).size();
+  const double ratio = widest / quarter;
+  std::snprintf(b, sizeof b,
+                "Instrument, %s: does not decide. The widest paired 95 %% half-width between "
+                "two sets (%s) is %.3f, %.1fx a quarter of the gap between random weights "
+                "(%.3f) and the best pre-trained run (%s, %.3f): %.3f / 4 = %.3f. ",
+                m.label, widestPair.c_str(), widest, ratio, random, bestSet.c_str(), best, gap,
+                quarter);
+  return b + std::string("With the half-width falling as 1/sqrt(seeds), about ") +
+         std::to_string(static_cast<long>(std::ceil(seeds * ratio * ratio))) +
+         " seeds would decide at this budget, or a budget that widens the gap.";
 }
 
 // ---- the plots and the page ----
@@ -347,11 +440,18 @@ bool offTheScale(const std::vector<plot::Series>& series, double y) {
   return lo <= hi && (y < lo - 3 * (hi - lo) || y > hi + 3 * (hi - lo));
 }
 
+// Whether a metric has a plot: some set has a figure of it (fine-tuned ones need --downstream).
+bool plotted(const nlohmann::json& rows, const Metric& m) {
+  for (const auto& r : rows)
+    if (std::isfinite(numberOrNan(r, std::string(m.key) + "_mean"))) return true;
+  return false;
+}
+
 // plot_<metric>.svg: the modes, mae (not in the completion loss's: its task is another) and the
 // random encoder, which goes in the title instead when it is off the scale.
 void writePlots(const SweepConfig& c, const nlohmann::json& rows, const nlohmann::json& random) {
   for (const Metric& m : kEvaluated) {
-    if (!m.judged) continue;
+    if (!m.judged || !plotted(rows, m)) continue;
     std::vector<plot::Series> series = modeSeries(rows, m);
     for (const auto& r : rows)
       if (r["task"] != "croco" && comparable(m, r["task"], "croco"))
@@ -374,17 +474,41 @@ std::string cell(const nlohmann::json& r, const std::string& metric) {
   return std::isfinite(mean) ? withInterval(mean, numberOrNan(r, metric + "_ci95")) : "";
 }
 
-// The table's probe columns, after the set's seeds, mean covis and train loss.
+// The table's probe columns, after the set's seeds, mean covis and train loss; then, with
+// --downstream, the fine-tuned ones.
 const char* const kTableMetrics[] = {"xv_loss",         "probe_delta1", "probe_absrel",
                                      "probe_rmse",      "ref_gain",     "ref_gain_covisible",
                                      "ref_gain_hidden", "xattn_pck1",   "xattn_epe",
                                      "enc_pck1"};
+const char* const kTableFineTuned[] = {"ft_flow_aepe",    "ft_flow_aepe_covisible",
+                                       "ft_flow_px3",     "ft_flow_aepe_all",
+                                       "ft_depth_delta1", "ft_depth_absrel"};
+
+// What the fine-tunes were, for the page.
+std::string downstreamParagraph(const SweepConfig& c) {
+  std::string tasks;
+  for (const auto& t : c.downstream) tasks += (tasks.empty() ? "" : " and ") + t;
+  return html::paragraph(
+      "Fine-tuned (columns ft_*): every run, and each seed's random weights (fine-tuned from "
+      "scratch on the fine-tuning data alone), for " +
+      tasks + " with the linear heads, " + std::to_string(c.finetuneSteps) + " steps of " +
+      std::to_string(c.finetuneBatch) + " on " + std::to_string(c.finetunePairs) +
+      " pairs of the training scenes (covis >= 0.5), the same data order, crops and jitter for "
+      "every run of a seed; mae keeps its encoder and the seed's random decoder. Measured on "
+      "held-out pairs at covis 0.3-0.7 (ft_flow_aepe_all: 0.1-1); the floor row is zero flow and "
+      "a constant depth.");
+}
 
 // summary.html: what was trained, the verdicts, the plots, and the table of sets and baselines.
 std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
   const nlohmann::json& rows = results.at("rows");
   const nlohmann::json& random = results.at("random_encoder");
   const nlohmann::json& constant = results.at("constant_depth");
+  const nlohmann::json trivial = results.value("finetune_baselines", nlohmann::json());
+  const bool downstream = trivial.is_object() && !trivial.empty();
+  std::vector<std::string> metrics(std::begin(kTableMetrics), std::end(kTableMetrics));
+  if (downstream)
+    metrics.insert(metrics.end(), std::begin(kTableFineTuned), std::end(kTableFineTuned));
   std::string page =
       html::pageStart("covis_sweep results", html::style(1500)) +
       html::heading(1, "Co-visibility sweep") +
@@ -401,20 +525,27 @@ std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
                       html::link("results_runs.csv", "results_runs.csv") + " (per run), " +
                       html::link("probe_by_covis.csv", "probe_by_covis.csv") +
                       " (correspondence by the held-out pair's covis), " +
+                      (trivial.contains("ft_flow_by_covis")
+                           ? html::link("downstream_by_covis.csv", "downstream_by_covis.csv") +
+                                 " (fine-tuned flow error by the held-out pair's covis), "
+                           : std::string()) +
                       html::link("results.json", "results.json") + ".") +
-      html::heading(2, "Verdicts");
+      (downstream ? downstreamParagraph(c) : std::string()) + html::heading(2, "Verdicts");
   for (const auto& v : results.at("verdicts")) page += html::paragraph(plot::escape(v));
   for (const Metric& m : kEvaluated)
-    if (m.judged) page += html::image("plot_" + std::string(m.key) + ".svg", m.key) + "\n";
+    if (m.judged && plotted(rows, m))
+      page += html::image("plot_" + std::string(m.key) + ".svg", m.key) + "\n";
   page += html::image("plot_probe_by_covis.svg", "probe_by_covis") + "\n";
+  if (downstream && trivial.contains("ft_flow_by_covis"))
+    page += html::image("plot_downstream_by_covis.svg", "downstream_by_covis") + "\n";
   std::vector<std::string> head = {"set", "seeds", "mean covis", "train loss"};
-  head.insert(head.end(), std::begin(kTableMetrics), std::end(kTableMetrics));
+  head.insert(head.end(), metrics.begin(), metrics.end());
   head.push_back("dataset");
   page += html::tableStart(head);
   auto cells = [&](const nlohmann::json& r, const std::string& seeds, const std::string& covis,
                    const std::string& trainLoss, const std::string& report) {
     std::vector<std::string> out = {seeds, covis, trainLoss};
-    for (const char* m : kTableMetrics) out.push_back(cell(r, m));
+    for (const auto& m : metrics) out.push_back(cell(r, m));
     out.push_back(report);
     return out;
   };
@@ -426,23 +557,29 @@ std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
               c.reports ? html::link("sets/" + text(r, "trained_on") + "/report.html", "report")
                         : "-"));
   }
-  page += html::labelledRow("random encoder",
-                            cells(random, std::to_string(random.value("seeds", 0)), "", "", ""));
-  std::vector<std::string> floor(std::size(kTableMetrics) + 4, "");
-  floor[4] = num(constant, "probe_delta1");
-  floor[5] = num(constant, "probe_absrel");
-  floor[6] = num(constant, "probe_rmse");
-  page += html::labelledRow("constant depth (no encoder)", floor);
+  page +=
+      html::labelledRow(downstream ? "random encoder (fine-tuned: from scratch)" : "random encoder",
+                        cells(random, std::to_string(random.value("seeds", 0)), "", "", ""));
+  std::vector<std::string> floor = {"", "", ""};
+  for (const auto& m : metrics)
+    floor.push_back(m.rfind("probe_", 0) == 0 ? num(constant, m)
+                    : m.rfind("ft_", 0) == 0  ? num(trivial, m)
+                                              : "");
+  floor.push_back("");
+  page += html::labelledRow(
+      downstream ? "constant depth (no encoder); zero flow" : "constant depth (no encoder)", floor);
   return page + html::tableEnd() + html::pageEnd();
 }
 
 // ---- probe_by_covis.csv and its plot ----
 
-const char* const kByCovisMetrics[] = {"xattn_pck1", "xattn_epe", "enc_pck1"};
+const std::vector<std::string> kByCovisMetrics = {"xattn_pck1", "xattn_epe", "enc_pck1"};
+const std::vector<std::string> kDownstreamByCovis = {"ft_flow_aepe", "ft_flow_aepe_covisible"};
 
 // A row per set (and the random encoder) and covis bin of the held-out pairs: the mean over the
-// seeds of each correspondence figure, with its 95 % interval.
-nlohmann::json probeByCovis(const nlohmann::json& runs, const nlohmann::json& randomRuns) {
+// seeds of each figure of the runs' `field` (a list of bins), with its 95 % interval.
+nlohmann::json byCovis(const nlohmann::json& runs, const nlohmann::json& randomRuns,
+                       const std::string& field, const std::vector<std::string>& metrics) {
   std::vector<std::string> order;
   std::map<std::pair<std::string, double>, std::vector<nlohmann::json>> cells;
   std::map<std::string, std::string> task;
@@ -450,7 +587,7 @@ nlohmann::json probeByCovis(const nlohmann::json& runs, const nlohmann::json& ra
     for (const auto& r : *list) {
       const std::string set = r.at("set");
       if (!task.count(set)) order.push_back(set), task[set] = text(r, "task");
-      for (const auto& bin : r.value("probe_by_covis", nlohmann::json::array()))
+      for (const auto& bin : r.value(field, nlohmann::json::array()))
         cells[{set, bin.at("covis_lo").get<double>()}].push_back(bin);
     }
   nlohmann::json out = nlohmann::json::array();
@@ -463,28 +600,27 @@ nlohmann::json probeByCovis(const nlohmann::json& runs, const nlohmann::json& ra
                             {"covis_hi", bins.front().at("covis_hi")},
                             {"pairs", bins.front().at("pairs")},
                             {"seeds", bins.size()}};
-      for (const char* m : kByCovisMetrics) {
+      for (const auto& m : metrics) {
         std::vector<double> v;
         for (const auto& b : bins) v.push_back(numberOrNan(b, m));
         const Interval i = interval95(v);
-        row[std::string(m) + "_mean"] = i.mean;
-        row[std::string(m) + "_ci95"] = i.halfWidth;
+        row[m + "_mean"] = i.mean;
+        row[m + "_ci95"] = i.halfWidth;
       }
       out.push_back(row);
     }
   return out;
 }
 
-std::string probeByCovisCsv(const nlohmann::json& rows) {
+std::string byCovisCsv(const nlohmann::json& rows, const std::vector<std::string>& metrics) {
   std::string csv = "set,task,covis_lo,covis_hi,pairs,seeds";
-  for (const char* m : kByCovisMetrics) csv += std::string(",") + m + "_mean," + m + "_ci95";
+  for (const auto& m : metrics) csv += "," + m + "_mean," + m + "_ci95";
   csv += "\n";
   for (const auto& r : rows) {
     csv += text(r, "set") + "," + text(r, "task") + "," + num(r, "covis_lo") + "," +
            num(r, "covis_hi") + "," + std::to_string(r.value("pairs", 0)) + "," +
            std::to_string(r.value("seeds", 0));
-    for (const char* m : kByCovisMetrics)
-      csv += "," + num(r, std::string(m) + "_mean") + "," + num(r, std::string(m) + "_ci95");
+    for (const auto& m : metrics) csv += "," + num(r, m + "_mean") + "," + num(r, m + "_ci95");
     csv += "\n";
   }
   return csv;
@@ -516,6 +652,33 @@ std::string probeByCovisPlot(const nlohmann::json& rows) {
     }
   return plot::lines(series, {"correspondence PCK@1 patch by the held-out pair's covis",
                               "covis of the held-out pair (bins of 0.1)", "PCK@1", 720, 400});
+}
+
+// Fine-tuned flow AEPE against the held-out pair's covis: a line per set, random weights and
+// zero flow (dashed).
+std::string downstreamByCovisPlot(const nlohmann::json& rows) {
+  const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728", "#7f7f7f"};
+  std::vector<std::string> sets;
+  for (const auto& r : rows)
+    if (std::find(sets.begin(), sets.end(), text(r, "set")) == sets.end())
+      sets.push_back(text(r, "set"));
+  std::vector<plot::Series> series;
+  for (size_t k = 0; k < sets.size(); ++k) {
+    plot::Series s;
+    s.label = sets[k];
+    s.color = colors[k % 6];
+    s.dashed = sets[k] == "zero_flow" || sets[k] == "random_encoder";
+    for (const auto& r : rows) {
+      const double y = numberOrNan(r, "ft_flow_aepe_mean");
+      if (text(r, "set") != sets[k] || !std::isfinite(y)) continue;
+      s.x.push_back(numberOrNan(r, "covis_lo") + 0.05);
+      s.y.push_back(y);
+      s.yErr.push_back(numberOrNan(r, "ft_flow_aepe_ci95"));
+    }
+    if (!s.x.empty()) series.push_back(s);
+  }
+  return plot::lines(series, {"fine-tuned flow AEPE by the held-out pair's covis, lower is better",
+                              "covis of the held-out pair (bins of 0.1)", "AEPE (px)", 720, 400});
 }
 
 }  // namespace
@@ -561,10 +724,13 @@ nlohmann::json aggregateRuns(const nlohmann::json& runs) {
 
 std::vector<std::string> sweepVerdicts(const nlohmann::json& results) {
   const nlohmann::json& runs = results.at("runs");
-  std::map<std::string, RunValues> values;
+  nlohmann::json withRandom = runs;
+  for (const auto& r : results.at("random_runs")) withRandom.push_back(r);
+  std::map<std::string, RunValues> values, claimValues;
   std::vector<std::string> out;
   for (const Metric& m : kEvaluated) {
     values[m.key] = byset(runs, m.key);
+    claimValues[m.key] = byset(withRandom, m.key);
     const RunValues randomValues = byset(results.at("random_runs"), m.key);
     if (!m.judged || !randomValues.values.count("random_encoder")) continue;
     for (auto& line : metricVerdicts(m, values[m.key], of(randomValues, "random_encoder")))
@@ -572,8 +738,13 @@ std::vector<std::string> sweepVerdicts(const nlohmann::json& results) {
   }
   // The claims come first.
   std::vector<std::string> claims =
-      claimVerdicts(runs, results.value("reference_set", std::string()), values);
+      claimVerdicts(runs, results.value("reference_set", std::string()), claimValues);
   out.insert(out.begin(), claims.begin(), claims.end());
+  for (const char* key : {"ft_flow_aepe", "ft_flow_aepe_covisible"})
+    if (const std::string line =
+            instrumentVerdict(metric(key), values.at(key), claimValues.at(key));
+        !line.empty())
+      out.push_back(line);
   return out;
 }
 
@@ -585,9 +756,25 @@ void writeSweepReport(const SweepConfig& c, const nlohmann::json& results) {
                   runsCsv(results.at("runs"), results.at("random_runs")));
   writeFileAtomic((out / "results.json").string(), results.dump(1) + "\n");
   writePlots(c, results.at("rows"), results.at("random_encoder"));
-  const nlohmann::json byCovis = probeByCovis(results.at("runs"), results.at("random_runs"));
-  writeFileAtomic((out / "probe_by_covis.csv").string(), probeByCovisCsv(byCovis));
-  writeFileAtomic((out / "plot_probe_by_covis.svg").string(), probeByCovisPlot(byCovis));
+  const nlohmann::json probes =
+      byCovis(results.at("runs"), results.at("random_runs"), "probe_by_covis", kByCovisMetrics);
+  writeFileAtomic((out / "probe_by_covis.csv").string(), byCovisCsv(probes, kByCovisMetrics));
+  writeFileAtomic((out / "plot_probe_by_covis.svg").string(), probeByCovisPlot(probes));
+  const nlohmann::json trivial = results.value("finetune_baselines", nlohmann::json());
+  if (trivial.is_object() && trivial.contains("ft_flow_by_covis")) {
+    nlohmann::json zero = trivial;
+    zero["set"] = "zero_flow";
+    zero["task"] = "none";
+    const nlohmann::json flow = byCovis(results.at("runs"), results.at("random_runs"),
+                                        "ft_flow_by_covis", kDownstreamByCovis);
+    nlohmann::json rows = flow;
+    for (const auto& r : byCovis(nlohmann::json::array({zero}), nlohmann::json::array(),
+                                 "ft_flow_by_covis", kDownstreamByCovis))
+      rows.push_back(r);
+    writeFileAtomic((out / "downstream_by_covis.csv").string(),
+                    byCovisCsv(rows, kDownstreamByCovis));
+    writeFileAtomic((out / "plot_downstream_by_covis.svg").string(), downstreamByCovisPlot(rows));
+  }
   writeFileAtomic((out / "summary.html").string(), summaryPage(c, results));
 }
 

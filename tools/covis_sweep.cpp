@@ -63,6 +63,24 @@ int main(int argc, char** argv) {
                  "Held-out views for the depth probe (two halves, each fits the other's probe)");
   app.add_option("--min-walk-scale", c.minWalkScale,
                  "Smallest walk scale of the pool's second views (metres)");
+  app.add_option("--downstream", c.downstream,
+                 "Also fine-tune every run, and each seed's random weights, for flow, depth or "
+                 "flow,depth (linear heads), and judge the claims on held-out pairs (added to a "
+                 "finished sweep, only the fine-tunes run)")
+      ->delimiter(',');
+  app.add_option("--finetune-steps", c.finetuneSteps, "Steps of every fine-tune")
+      ->check(CLI::Range(int64_t{1}, int64_t{100000000}));
+  app.add_option("--finetune-pairs", c.finetunePairs,
+                 "Fine-tuning pairs from the training scenes (covis >= 0.5), one set for all")
+      ->check(CLI::Range(1, 10000000));
+  app.add_option("--finetune-eval-pairs", c.finetuneEvalPairs,
+                 "Held-out pairs from the held-out scenes (covis 0.1-1) the fine-tunes are "
+                 "measured on")
+      ->check(CLI::Range(1, 10000000));
+  app.add_option("--finetune-batch", c.finetuneBatch, "Pairs per fine-tuning step and process")
+      ->check(CLI::Range(1, 65536));
+  app.add_option("--finetune-blr", c.finetuneBlr,
+                 "Fine-tuning base learning rate (lr = blr * batch / 256)");
   bool noReports = false, quiet = false;
   app.add_flag("--no-reports", noReports, "No dataset report per set");
   app.add_flag("--quiet", quiet, "No progress lines");

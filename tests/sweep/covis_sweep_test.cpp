@@ -6,10 +6,14 @@
 #include <fstream>
 #include <map>
 #include <regex>
+#include <set>
 #include <sstream>
+#include <tuple>
 
 #include "model/checkpoint.h"
+#include "shard/shard_index.h"
 #include "sweep/depth_probe.h"
+#include "sweep/sweep_downstream.h"
 #include "sweep/sweep_report.h"
 #include "sweep/sweep_stats.h"
 #include "test_checkpoints.h"
@@ -18,6 +22,7 @@
 #include "test_process.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/plot.h"
 
 namespace paircast {
 namespace {
@@ -365,6 +370,54 @@ void expectSetsAggregateTheirRuns(const nlohmann::json& r, const std::string& ou
   }
 }
 
+// Every run's checkpoint and when it was written.
+std::map<std::string, fs::file_time_type> checkpointTimes(const std::string& out) {
+  std::map<std::string, fs::file_time_type> times;
+  for (const auto& e : fs::recursive_directory_iterator(out + "/runs"))
+    if (e.path().filename() == "checkpoint-last.pth")
+      times[e.path().string()] = fs::last_write_time(e.path());
+  return times;
+}
+
+// A finished sweep run again reuses everything; with one seed's run gone, only that run trains
+// again, to the same results.
+void expectResumesRunByRun(const std::string& out) {
+  const std::string csv = readFile(out + "/results.csv");
+  const auto before = checkpointTimes(out);
+  ASSERT_EQ(before.size(), 10u);
+  // A rerun reuses everything: no checkpoint is rewritten.
+  runCovisSweep(seededSweep(out));
+  EXPECT_EQ(checkpointTimes(out), before);
+  EXPECT_EQ(readFile(out + "/results.csv"), csv);
+  // With one seed's run gone, only that run trains again, to the same result.
+  const std::string gone = runDir(out, "uniform_0.75", 1);
+  fs::remove_all(gone);
+  runCovisSweep(seededSweep(out));
+  auto after = checkpointTimes(out);
+  ASSERT_EQ(after.size(), 10u);
+  EXPECT_TRUE(after.count(gone + "/checkpoint-last.pth"));
+  after.erase(gone + "/checkpoint-last.pth");
+  auto others = before;
+  others.erase(gone + "/checkpoint-last.pth");
+  EXPECT_EQ(after, others);
+  EXPECT_EQ(readFile(out + "/results.csv"), csv);
+}
+
+// The real command, SIGKILLed at growing delays and restarted, gives `clean`'s results.
+void expectKilledSweepEndsAsThisDid(const std::string& clean) {
+  const std::string killed = clean + "-killed";
+  int kills = 0;
+  for (int delayMs = 300; delayMs < 60000 && !fs::exists(killed + "/results.csv"); delayMs *= 2) {
+    const int rc = testing::runProcess(seededArgs(killed), delayMs);
+    if (rc == -SIGKILL) ++kills;
+  }
+  EXPECT_GE(kills, 1);
+  ASSERT_EQ(testing::runProcess(seededArgs(killed)), 0);
+  EXPECT_EQ(readFile(killed + "/results.csv"), readFile(clean + "/results.csv"));
+  EXPECT_EQ(readFile(killed + "/results_runs.csv"), readFile(clean + "/results_runs.csv"));
+}
+
+// Also: it resumes run by run, and after kills (the two functions above).
 TEST(CovisSweep, SeedsAndMaeEndToEnd) {
   const std::string clean = testing::scratchDir("e2e");
   // Through the library: 4 sets and mae, each with 2 seeds.
@@ -393,7 +446,10 @@ TEST(CovisSweep, SeedsAndMaeEndToEnd) {
             "probe_absrel_mean,probe_absrel_ci95,probe_rmse_mean,probe_rmse_ci95,ref_gain_mean,"
             "ref_gain_ci95,ref_gain_covisible_mean,ref_gain_covisible_ci95,ref_gain_hidden_mean,"
             "ref_gain_hidden_ci95,xattn_pck1_mean,xattn_pck1_ci95,xattn_epe_mean,xattn_epe_ci95,"
-            "enc_pck1_mean,enc_pck1_ci95");
+            "enc_pck1_mean,enc_pck1_ci95,ft_flow_aepe_mean,ft_flow_aepe_ci95,"
+            "ft_flow_aepe_covisible_mean,ft_flow_aepe_covisible_ci95,ft_flow_px3_mean,"
+            "ft_flow_px3_ci95,ft_flow_aepe_all_mean,ft_flow_aepe_all_ci95,ft_depth_delta1_mean,"
+            "ft_depth_delta1_ci95,ft_depth_absrel_mean,ft_depth_absrel_ci95");
   // The mechanism probes: every cross-view run and random encoder has them, mae only enc_pck1.
   for (const auto& row : r["rows"]) {
     const bool mae = row["task"] == "mae";
@@ -435,55 +491,8 @@ TEST(CovisSweep, SeedsAndMaeEndToEnd) {
   EXPECT_EQ(s1.extra["seed"], 1);
   EXPECT_EQ(r["runs"][5]["set"], "bin_0.45");
   EXPECT_NE(r["runs"][0]["train_loss"], r["runs"][5]["train_loss"]);  // its seeds 0 and 1
-}
-
-// Every run's checkpoint and when it was written.
-std::map<std::string, fs::file_time_type> checkpointTimes(const std::string& out) {
-  std::map<std::string, fs::file_time_type> times;
-  for (const auto& e : fs::recursive_directory_iterator(out + "/runs"))
-    if (e.path().filename() == "checkpoint-last.pth")
-      times[e.path().string()] = fs::last_write_time(e.path());
-  return times;
-}
-
-TEST(CovisSweep, ResumesRunByRun) {
-  const std::string out = testing::scratchDir("per_run");
-  runCovisSweep(seededSweep(out));
-  const std::string csv = readFile(out + "/results.csv");
-  const auto before = checkpointTimes(out);
-  ASSERT_EQ(before.size(), 10u);
-  // A rerun reuses everything: no checkpoint is rewritten.
-  runCovisSweep(seededSweep(out));
-  EXPECT_EQ(checkpointTimes(out), before);
-  EXPECT_EQ(readFile(out + "/results.csv"), csv);
-  // With one seed's run gone, only that run trains again, to the same result.
-  const std::string gone = runDir(out, "uniform_0.75", 1);
-  fs::remove_all(gone);
-  runCovisSweep(seededSweep(out));
-  auto after = checkpointTimes(out);
-  ASSERT_EQ(after.size(), 10u);
-  EXPECT_TRUE(after.count(gone + "/checkpoint-last.pth"));
-  after.erase(gone + "/checkpoint-last.pth");
-  auto others = before;
-  others.erase(gone + "/checkpoint-last.pth");
-  EXPECT_EQ(after, others);
-  EXPECT_EQ(readFile(out + "/results.csv"), csv);
-}
-
-TEST(CovisSweep, ResumesAfterKills) {
-  const std::string dir = testing::scratchDir("kills");
-  runCovisSweep(seededSweep(dir + "/clean"));
-  // The real command, SIGKILLed at growing delays and restarted, gives the same results.
-  const std::string killed = dir + "/killed";
-  int kills = 0;
-  for (int delayMs = 300; delayMs < 60000 && !fs::exists(killed + "/results.csv"); delayMs *= 2) {
-    const int rc = testing::runProcess(seededArgs(killed), delayMs);
-    if (rc == -SIGKILL) ++kills;
-  }
-  EXPECT_GE(kills, 1);
-  ASSERT_EQ(testing::runProcess(seededArgs(killed)), 0);
-  EXPECT_EQ(readFile(killed + "/results.csv"), readFile(dir + "/clean/results.csv"));
-  EXPECT_EQ(readFile(killed + "/results_runs.csv"), readFile(dir + "/clean/results_runs.csv"));
+  expectResumesRunByRun(clean);
+  expectKilledSweepEndsAsThisDid(clean);
 }
 
 TEST(CovisSweep, BadSeedsAndBaselinesAreRefused) {
@@ -533,6 +542,274 @@ TEST(CovisSweep, RunsGoSeedBySeedAndMaeTrainsOnTheSetNearestHalf) {
   EXPECT_EQ(runs[7].label(), "uniform_0.15 seed 1");
   EXPECT_EQ(runs[7].seed, 11u);
   EXPECT_EQ(runs[20].dir, fs::path("/tmp/out/runs/mae/seed-2"));
+}
+
+// ---- --downstream ----
+
+// A sweep small enough to fine-tune every run: bins 0.45 and 0.75 and mae, with 2 seeds, and
+// fine-tunes of 4 steps.
+SweepConfig downstreamSweep(const std::string& out) {
+  SweepConfig c = miniSweep(out);
+  c.sets = {"bin_0.45", "bin_0.75"};
+  c.seeds = 2;
+  c.baselines = {"mae"};
+  c.reports = false;
+  c.finetuneSteps = 4;
+  c.finetunePairs = 16;
+  c.finetuneEvalPairs = 24;
+  return c;
+}
+
+std::vector<std::string> downstreamArgs(const std::string& out) {
+  std::vector<std::string> a = miniArgs(out);
+  a.insert(a.end(), {"--sets", "bin_0.45,bin_0.75", "--seeds", "2", "--baseline", "mae",
+                     "--no-reports", "--downstream", "flow,depth", "--finetune-steps", "4",
+                     "--finetune-pairs", "16", "--finetune-eval-pairs", "24"});
+  return a;
+}
+
+// The checkpoints of the fine-tunes (finetune-<task>/) or of the pre-training runs, with when
+// each was written.
+std::map<std::string, fs::file_time_type> times(const std::string& out, bool fineTunes) {
+  auto all = checkpointTimes(out);
+  for (auto it = all.begin(); it != all.end();)
+    it = (it->first.find("/finetune-") != std::string::npos) == fineTunes ? std::next(it)
+                                                                          : all.erase(it);
+  return all;
+}
+
+// The covis of each held-out fine-tuning pair, read from its shards.
+std::map<std::string, double> heldoutCovis(const std::string& out) {
+  std::map<std::string, double> covis;
+  for (const auto& e : fs::directory_iterator(out + "/ds/heldout"))
+    if (e.path().extension() == ".tar") {
+      const ShardIndex index = ShardIndex::open(e.path().string());
+      for (size_t i = 0; i < index.size(); ++i) covis[index[i].key] = index[i].record.covis;
+    }
+  return covis;
+}
+
+// A run's column is the mean of its fine-tune's per-pair figures over the held-out pairs at
+// covis 0.3-0.7, and its by-covis bins count every held-out pair once.
+void expectColumnsFromThePairs(const nlohmann::json& row, const std::string& out,
+                               const std::string& runDir) {
+  const auto covis = heldoutCovis(out);
+  for (const auto& [task, figure, column] :
+       {std::tuple{"flow", "aepe", "ft_flow_aepe"},
+        std::tuple{"depth", "delta1", "ft_depth_delta1"},
+        std::tuple{"flow", "aepe_covisible", "ft_flow_aepe_covisible"}}) {
+    const auto h = nlohmann::json::parse(readFile(runDir + "/finetune-" + task + "/heldout.json"));
+    double sum = 0;
+    int n = 0, all = 0;
+    for (const auto& p : h["per_pair"]["model"]) {
+      const double c = covis.at(p["key"].get<std::string>());
+      ++all;
+      if (c >= 0.3 && c < 0.7 && p[figure].is_number()) sum += p[figure].get<double>(), ++n;
+    }
+    EXPECT_EQ(all, static_cast<int>(covis.size())) << "every held-out pair is measured";
+    ASSERT_GT(n, 0) << "no held-out pair in the band";
+    EXPECT_NEAR(row[column].get<double>(), sum / n, 1e-9 * std::max(1.0, sum / n)) << column;
+  }
+  int binned = 0;
+  for (const auto& bin : row["ft_flow_by_covis"]) binned += bin["pairs"].get<int>();
+  EXPECT_EQ(binned, static_cast<int>(covis.size()));
+}
+
+// The real command, started from `clean`'s pre-training alone and SIGKILLed at growing delays
+// (so that kills land between and inside its fine-tunes, and in making their data), then run to
+// the end, gives `clean`'s results.
+void expectKilledFineTunesEndAsTheseDid(const std::string& clean) {
+  const std::string killed = clean + "-killed";
+  fs::copy(clean, killed, fs::copy_options::recursive);
+  fs::remove_all(killed + "/ds");
+  for (const auto& [path, time] : times(killed, true)) fs::remove_all(fs::path(path).parent_path());
+  for (const char* f : {"results.csv", "results_runs.csv", "results.json", "summary.html",
+                        "downstream_by_covis.csv"})
+    fs::remove(killed + "/" + f);
+  int kills = 0, midway = 0;
+  for (int delayMs = 200; delayMs < 60000 && !fs::exists(killed + "/results.csv"); delayMs *= 2) {
+    if (testing::runProcess(downstreamArgs(killed), delayMs) != -SIGKILL) continue;
+    ++kills;
+    int done = 0;
+    for (const auto& [path, time] : times(killed, true))
+      done += fs::exists(fs::path(path).parent_path() / "heldout.json");
+    midway += done > 0 && done < 16;
+  }
+  EXPECT_GE(kills, 2);
+  EXPECT_GE(midway, 1) << "no kill fell between two fine-tunes";
+  ASSERT_EQ(testing::runProcess(downstreamArgs(killed)), 0);
+  for (const char* f : {"results.csv", "results_runs.csv", "downstream_by_covis.csv"})
+    EXPECT_EQ(readFile(killed + "/" + f), readFile(clean + "/" + f)) << f;
+}
+
+// Also: a killed sweep resumes fine-tune by fine-tune (expectKilledFineTunesEndAsTheseDid).
+TEST(CovisSweep, DownstreamAddedToAFinishedSweepFineTunesOnlyWhatIsMissing) {
+  const std::string out = testing::scratchDir("ds_added");
+  SweepConfig c = downstreamSweep(out);
+  runCovisSweep(c);
+  const auto pretrained = times(out, false);
+  ASSERT_EQ(pretrained.size(), 6u);
+  EXPECT_FALSE(fs::exists(out + "/ds"));
+  EXPECT_FALSE(fs::exists(out + "/downstream_by_covis.csv"));
+
+  c.downstream = {"flow", "depth"};
+  const nlohmann::json r = runCovisSweep(c);
+  EXPECT_EQ(times(out, false), pretrained);  // no run trained again
+  const auto tuned = times(out, true);
+  ASSERT_EQ(tuned.size(), 16u);  // (6 runs + 2 random) x 2 tasks
+  for (const auto& [path, time] : tuned) {
+    const std::string dir = fs::path(path).parent_path().string();
+    EXPECT_TRUE(fs::exists(dir + "/heldout.json")) << dir;
+    EXPECT_EQ(nlohmann::json::parse(readFile(dir + "/summary.json"))["steps"], 4) << dir;
+  }
+  // The new columns, for every set, mae and random weights, with intervals over the 2 seeds.
+  for (const char* m : {"ft_flow_aepe", "ft_flow_aepe_covisible", "ft_flow_px3", "ft_flow_aepe_all",
+                        "ft_depth_delta1", "ft_depth_absrel"}) {
+    expectSetsAggregateTheirRuns(r, out, m, 0, 1e6);
+    for (const auto& row : r["rows"])
+      EXPECT_TRUE(std::isfinite(numberOrNan(row, std::string(m) + "_ci95"))) << row["set"] << m;
+    EXPECT_TRUE(std::isfinite(numberOrNan(r["random_encoder"], std::string(m) + "_mean"))) << m;
+    EXPECT_TRUE(std::isfinite(numberOrNan(r["finetune_baselines"], m))) << m;
+  }
+  expectColumnsFromThePairs(r["runs"][4], out, runDir(out, "bin_0.75", 1));
+  expectColumnsFromThePairs(r["random_runs"][0], out, out + "/runs/random/seed-0");
+  EXPECT_EQ(r["runs"][4]["set"], "bin_0.75");
+  EXPECT_EQ(r["runs"][4]["seed_index"], 1);
+
+  // The by-covis breakdown: bins of 0.1 per set, random weights and zero flow.
+  const auto byCovis = readCsvRows(out + "/downstream_by_covis.csv");
+  std::set<std::string> sets;
+  for (const auto& row : byCovis) {
+    sets.insert(row.at("set"));
+    EXPECT_NEAR(std::stod(row.at("covis_hi")) - std::stod(row.at("covis_lo")), 0.1, 1e-9);
+    EXPECT_EQ(row.at("seeds"), row.at("set") == "zero_flow" ? "1" : "2");
+  }
+  EXPECT_EQ(sets,
+            (std::set<std::string>{"bin_0.45", "bin_0.75", "mae", "random_encoder", "zero_flow"}));
+  const std::string csv = readFile(out + "/downstream_by_covis.csv");
+  EXPECT_EQ(csv.substr(0, csv.find('\n')),
+            "set,task,covis_lo,covis_hi,pairs,seeds,ft_flow_aepe_mean,ft_flow_aepe_ci95,"
+            "ft_flow_aepe_covisible_mean,ft_flow_aepe_covisible_ci95");
+
+  // The verdicts of both claims on each fine-tuned probe, and of the instrument, on the page.
+  const std::string html = readFile(out + "/summary.html");
+  for (const std::string line :
+       {"Claim 1, covis near 0.5 beats high covis, on the fine-tuned flow AEPE (px): ",
+        "Claim 1, covis near 0.5 beats high covis, on the fine-tuned depth delta1: ",
+        "Claim 2, cross-view completion beats auto-completion (MAE), its encoder with a random "
+        "decoder, on the fine-tuned flow AEPE (px): ",
+        "Claim 2, cross-view completion beats auto-completion (MAE), its encoder with a random "
+        "decoder, on the fine-tuned depth delta1: ",
+        "Claim 2, cross-view pre-training beats random weights, on the fine-tuned flow AEPE "
+        "(px): ",
+        "Claim 2, cross-view pre-training beats random weights, on the fine-tuned depth "
+        "AbsRel: ",
+        "Instrument, fine-tuned flow AEPE (px): "})
+    EXPECT_NE(html.find(plot::escape(line)), std::string::npos) << line;
+  const std::regex ref("(src|href)='([^']+)'");
+  for (auto it = std::sregex_iterator(html.begin(), html.end(), ref); it != std::sregex_iterator();
+       ++it)
+    EXPECT_TRUE(fs::exists(out + "/" + (*it)[2].str())) << (*it)[2].str();
+  EXPECT_TRUE(fs::exists(out + "/plot_downstream_by_covis.svg"));
+
+  // Run again: nothing is fine-tuned again. One fine-tune removed: only it runs, to the same
+  // figures.
+  const std::string results = readFile(out + "/results.csv");
+  runCovisSweep(c);
+  EXPECT_EQ(times(out, true), tuned);
+  const std::string gone = runDir(out, "mae", 0) + "/finetune-flow";
+  fs::remove_all(gone);
+  runCovisSweep(c);
+  auto after = times(out, true);
+  ASSERT_TRUE(after.count(gone + "/checkpoint-last.pth"));
+  after.erase(gone + "/checkpoint-last.pth");
+  auto others = tuned;
+  others.erase(gone + "/checkpoint-last.pth");
+  EXPECT_EQ(after, others);
+  EXPECT_EQ(readFile(out + "/results.csv"), results);
+  expectKilledFineTunesEndAsTheseDid(out);
+
+  // Another budget makes the fine-tunes it changes again, and only those.
+  const auto before = times(out, true);
+  c.downstream = {"depth"};
+  c.finetuneSteps = 5;
+  runCovisSweep(c);
+  for (const auto& [path, time] : times(out, true)) {
+    const bool depth = path.find("/finetune-depth/") != std::string::npos;
+    EXPECT_EQ(time != before.at(path), depth) << path;
+    EXPECT_EQ(
+        nlohmann::json::parse(readFile(fs::path(path).parent_path() / "summary.json"))["steps"],
+        depth ? 5 : 4)
+        << path;
+  }
+}
+
+TEST(CovisSweep, FineTunesStartFromTheSeedsRandomWeightsAndMaeKeepsItsRandomDecoder) {
+  SweepConfig c = downstreamSweep(testing::scratchDir("ds_init"));
+  c.downstream = {"flow", "depth"};
+  const std::vector<FinetuneJob> jobs = planFinetunes(c, planRuns(c, planSets(c)));
+  ASSERT_EQ(jobs.size(), 16u);  // seed by seed: random weights, then each run; flow, then depth
+  EXPECT_EQ(jobs[0].label, "random seed 0 flow");
+  EXPECT_EQ(jobs[0].init, "random");
+  EXPECT_EQ(jobs[1].label, "random seed 0 depth");
+  EXPECT_EQ(jobs[1].dir, fs::path(c.out) / "runs/random/seed-0/finetune-depth");
+  EXPECT_EQ(jobs[2].label, "bin_0.45 seed 0 flow");
+  EXPECT_EQ(jobs[2].init, runDir(c.out, "bin_0.45", 0) + "/checkpoint-last.pth");
+  const FinetuneJob& mae = jobs[14];
+  EXPECT_EQ(mae.label, "mae seed 1 flow");
+  for (size_t i = 0; i < jobs.size(); ++i)
+    EXPECT_EQ(jobs[i].seed, runSeed(c, i < 8 ? 0 : 1)) << jobs[i].label;
+
+  CroCoConfig mc = presetConfig(c.preset);
+  mc.img_size = c.imgSize;
+  mc.patch_size = c.patchSize;
+  torch::manual_seed(1234);
+  CroCoNet pretrained(mc);
+  fs::create_directories(fs::path(mae.init).parent_path());
+  saveCheckpoint(mae.init, pretrained, 0, {{"task", "mae"}});
+  DownstreamData data;
+  data.trainPairs = 16;
+  torch::manual_seed(runSeed(c, 1));
+  CroCoNet random(mc);
+  const auto p = stateDict(pretrained), w = stateDict(random);
+  const auto fromMae = initialNet(finetuneConfig(c, mc, data, mae, 1))->state();
+  const auto fromScratch = initialNet(finetuneConfig(c, mc, data, jobs[8], 1))->state();
+  int decoder = 0, encoder = 0;
+  for (const auto& [name, tensor] : fromMae) {
+    if (!w.count(name) || !w.at(name).sizes().equals(tensor.sizes())) continue;  // the head
+    const bool dec = name.rfind("dec_", 0) == 0 || name.rfind("decoder_embed", 0) == 0;
+    const bool enc = name.rfind("enc_", 0) == 0 || name.rfind("patch_embed", 0) == 0;
+    if (dec) {
+      ++decoder;
+      EXPECT_TRUE(torch::equal(tensor, w.at(name))) << name;
+    }
+    if (enc) {
+      ++encoder;
+      EXPECT_TRUE(torch::equal(tensor, p.at(name))) << name;
+    }
+    EXPECT_TRUE(torch::equal(fromScratch.at(name), w.at(name))) << name;
+  }
+  EXPECT_GT(decoder, 10);
+  EXPECT_GT(encoder, 10);
+}
+
+TEST(CovisSweep, BadDownstreamOptionsAreRefused) {
+  SweepConfig c = downstreamSweep(testing::scratchDir("ds_bad"));
+  c.downstream = {"pose"};
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "pose is not fine-tuned by the sweep");
+  c.downstream = {"segmentation"};
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c),
+                        "unknown downstream task 'segmentation' (use flow, depth or flow,depth)");
+  c.downstream = {"flow", "flow"};
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "task 'flow' is given twice");
+  c.downstream = {"flow"};
+  c.finetunePairs = 4;
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "fine-tuning pairs must be at least one batch (8)");
+  for (const auto& [option, value] :
+       {std::pair{"--downstream", "pose"}, std::pair{"--finetune-steps", "0"},
+        std::pair{"--finetune-pairs", "x"}})
+    EXPECT_EQ(testing::runProcess(withOption(downstreamArgs(c.out), option, value)), 2) << option;
+  EXPECT_FALSE(fs::exists(c.out + "/pool"));
 }
 
 }  // namespace

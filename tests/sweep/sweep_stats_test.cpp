@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <map>
 
 #include "sweep/sweep_report.h"
 
@@ -187,6 +188,87 @@ TEST(SweepReport, VerdictsSayWhichDifferencesAreBeyondTheirIntervals) {
   // A gap the other way is a claim that does not hold.
   const std::string worse = joined(sweepVerdicts(syntheticResults(-0.1)));
   EXPECT_NE(worse.find(claim2 + "depth probe delta1: does not hold"), std::string::npos) << worse;
+}
+
+// Fine-tuned figures of three bins, mae and random weights over three seeds (e: a seed's
+// noise): bin 0.55 has the lowest flow error, beyond every interval; random weights have the best
+// depth; `randomFlow` is random weights' flow error (plus e).
+nlohmann::json fineTunedResults(double randomFlow) {
+  nlohmann::json r = syntheticResults(0.0);
+  const double noise[] = {-0.01, 0.0, 0.01};
+  const std::map<std::string, std::pair<double, double>> flow = {
+      {"bin_0.15", {9.5, 1}}, {"bin_0.55", {9.0, 2}}, {"bin_0.95", {9.4, -1}}, {"mae", {9.6, 1}}};
+  for (auto& run : r["runs"]) {
+    const auto [base, scale] = flow.at(run["set"]);
+    const double e = noise[run["seed_index"].get<int>()];
+    run["ft_flow_aepe"] = base + scale * e;
+    run["ft_depth_delta1"] = 0.4 + e;
+  }
+  for (auto& run : r["random_runs"]) {
+    const double e = noise[run["seed_index"].get<int>()];
+    run["ft_flow_aepe"] = randomFlow + e;
+    run["ft_depth_delta1"] = 0.6 + e;
+  }
+  return r;
+}
+
+TEST(SweepReport, FineTunedVerdictsJudgeBothClaimsAndTheInstrument) {
+  const std::string v = joined(sweepVerdicts(fineTunedResults(10.0)));
+  const std::string flow = "on the fine-tuned flow AEPE (px): ";
+  EXPECT_NE(v.find("Claim 1, covis near 0.5 beats low and high covis, " + flow +
+                   "holds (bin_0.55's gain, positive when it is better, with the paired 95 % "
+                   "interval over the seeds: vs bin_0.15 +0.500 \u00b1 0.025; vs bin_0.95 "
+                   "+0.400 \u00b1 0.075)"),
+            std::string::npos)
+      << v;
+  EXPECT_NE(v.find("Claim 2, cross-view completion beats auto-completion (MAE), its encoder with "
+                   "a random decoder, " +
+                   flow +
+                   "holds (bin_0.55's gain, positive when it is "
+                   "better, with the paired 95 % interval over the seeds: vs mae +0.600 \u00b1 "
+                   "0.025)"),
+            std::string::npos)
+      << v;
+  EXPECT_NE(v.find("Claim 2, cross-view pre-training beats random weights, " + flow + "holds"),
+            std::string::npos)
+      << v;
+  // Random weights fine-tuned to a better depth: the claim does not hold there.
+  EXPECT_NE(v.find("Claim 2, cross-view pre-training beats random weights, on the fine-tuned "
+                   "depth delta1: does not hold (bin_0.55's gain, positive when it is better, "
+                   "with the paired 95 % interval over the seeds: vs random_encoder -0.200 "
+                   "\u00b1 0.000)"),
+            std::string::npos)
+      << v;
+  EXPECT_NE(v.find("fine-tuned depth delta1: better than random weights (fine-tuned from "
+                   "scratch) (0.600 \u00b1 0.025) by more than the interval: none."),
+            std::string::npos)
+      << v;
+  // The widest paired half-width between two sets is bin_0.55 against bin_0.95's (3e: 0.075),
+  // against a quarter of the gap 10.0 - 9.0.
+  EXPECT_NE(v.find("Instrument, fine-tuned flow AEPE (px): decides. The widest paired 95 % "
+                   "half-width between two sets (bin_0.55 and bin_0.95) is 0.075, at most a "
+                   "quarter of the gap between random weights (10.000) and the best pre-trained "
+                   "run (bin_0.55, 9.000): 1.000 / 4 = 0.250."),
+            std::string::npos)
+      << v;
+  // A gap of 0.05: 0.0745 / 0.0125 = 5.96 times too wide, about 3 * 5.96^2 = 107 seeds.
+  const std::string narrow = joined(sweepVerdicts(fineTunedResults(9.05)));
+  EXPECT_NE(narrow.find("Instrument, fine-tuned flow AEPE (px): does not decide. The widest "
+                        "paired 95 % half-width between two sets (bin_0.55 and bin_0.95) is "
+                        "0.075, 6.0x a quarter of the gap between random weights (9.050) and the "
+                        "best pre-trained run (bin_0.55, 9.000): 0.050 / 4 = 0.013. With the "
+                        "half-width falling as 1/sqrt(seeds), about 107 seeds would decide"),
+            std::string::npos)
+      << narrow;
+  const std::string none = joined(sweepVerdicts(fineTunedResults(8.0)));
+  EXPECT_NE(none.find("Instrument, fine-tuned flow AEPE (px): does not decide. No pre-trained run "
+                      "beats random weights (8.000; the best run, bin_0.55, 9.000)"),
+            std::string::npos)
+      << none;
+  // Without fine-tuned figures there are no such lines.
+  const std::string plain = joined(sweepVerdicts(syntheticResults(0.1)));
+  EXPECT_EQ(plain.find("fine-tuned"), std::string::npos) << plain;
+  EXPECT_EQ(plain.find("Instrument"), std::string::npos) << plain;
 }
 
 }  // namespace

@@ -1,0 +1,230 @@
+#include "sweep/sweep_downstream.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "dataset/generate_job.h"
+#include "shard/shard_index.h"
+#include "sweep/sweep_report.h"
+#include "sweep/sweep_scene.h"
+#include "trainer/distributed.h"
+#include "trainer/pair_dataset.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace fs = std::filesystem;
+
+namespace {
+
+// What the fine-tuning data is made with: ds/ is made again when it changes.
+nlohmann::json dataSettings(const SweepConfig& c) {
+  return {{"pairs", c.finetunePairs},
+          {"eval_pairs", c.finetuneEvalPairs},
+          {"resolution", c.resolution},
+          {"seed", c.seed}};
+}
+
+// What a fine-tune is made with: one made otherwise is made again.
+nlohmann::json jobSettings(const SweepConfig& c, const FinetuneJob& job) {
+  return {{"data", dataSettings(c)},  {"task", job.task},         {"init", job.init},
+          {"seed", job.seed},         {"steps", c.finetuneSteps}, {"batch", c.finetuneBatch},
+          {"blr", c.finetuneBlr},     {"preset", c.preset},       {"img_size", c.imgSize},
+          {"patch_size", c.patchSize}};
+}
+
+// Removes `dir` when its settings.json differs from `settings` (made with other settings), and
+// says so; then writes `settings` there.
+void keepOnlyIfMadeWith(const SweepConfig& c, const fs::path& dir, const nlohmann::json& settings) {
+  const nlohmann::json had = readSweepState((dir / "settings.json").string());
+  if (!had.is_null() && had != settings) {
+    sweepSay(c, dir.string() + " was made with other settings; making it again");
+    fs::remove_all(dir);
+  }
+  makeDirs(dir.string());
+  writeFileAtomic((dir / "settings.json").string(), settings.dump(1) + "\n");
+}
+
+// ds/<part>: pairs of `scenes` with flow and depth, covis in [lo, hi], unless already there.
+std::string generateTruth(const SweepConfig& c, const std::string& part,
+                          const std::vector<std::string>& scenes, int pairs, double lo, double hi,
+                          uint64_t seed) {
+  GenerateConfig g;
+  g.scenes = scenes;
+  g.out = (fs::path(c.out) / "ds" / part).string();
+  const int n = static_cast<int>(scenes.size());
+  g.pairsPerScene = (pairs + n - 1) / n;
+  g.seed = seed;
+  g.jobs = c.jobs;
+  g.load = c.load;
+  g.pair.resolution = c.resolution;
+  g.pair.minCovis = lo;
+  g.pair.maxCovis = hi;
+  g.saveFlow = true;
+  g.saveDepth = true;
+  g.progress = false;
+  if (!fs::exists(fs::path(g.out) / "summary.json")) {
+    sweepSay(c, "downstream data: " + std::to_string(g.pairsPerScene * n) + " " + part +
+                    " pairs with flow and depth");
+    runGenerate(g);
+  }
+  return g.out;
+}
+
+// Each sample's key and covis in the shards of a pattern.
+std::map<std::string, double> covisByKey(const std::string& pattern) {
+  std::map<std::string, double> covis;
+  for (const std::string& file : expandShardPatterns({pattern})) {
+    const ShardIndex index = ShardIndex::open(file);
+    for (size_t i = 0; i < index.size(); ++i) covis[index[i].key] = index[i].record.covis;
+  }
+  return covis;
+}
+
+// The mean of the finite values of `key` over pairs whose covis is in [lo, hi) (hi = 1 closed),
+// with their count.
+std::pair<double, int> meanOver(const nlohmann::json& pairs, const DownstreamData& d,
+                                const std::string& key, double lo, double hi) {
+  double sum = 0;
+  int n = 0;
+  for (const auto& p : pairs) {
+    const auto it = d.heldoutCovis.find(p.value("key", ""));
+    if (it == d.heldoutCovis.end()) continue;
+    const double v = numberOrNan(p, key), covis = it->second;
+    const bool in = covis >= lo - 1e-9 && (covis < hi - 1e-9 || (hi >= 1 && covis <= 1));
+    if (in && std::isfinite(v)) sum += v, ++n;
+  }
+  return {n ? sum / n : NAN, n};
+}
+
+// heldout.json's per-pair figures of a fine-tune (the model's, or the baseline's), or null.
+nlohmann::json perPair(const fs::path& dir, bool baseline) {
+  const nlohmann::json h = readSweepState((dir / "heldout.json").string());
+  if (!h.is_object()) return nullptr;
+  return h.at("per_pair").at(baseline ? "baseline" : "model");
+}
+
+void addFlowFigures(nlohmann::json& out, const nlohmann::json& pairs, const DownstreamData& d) {
+  const double lo = kDownstreamBandLo, hi = kDownstreamBandHi;
+  out["ft_flow_aepe"] = meanOver(pairs, d, "aepe", lo, hi).first;
+  out["ft_flow_aepe_covisible"] = meanOver(pairs, d, "aepe_covisible", lo, hi).first;
+  out["ft_flow_px3"] = meanOver(pairs, d, "px3", lo, hi).first;
+  out["ft_flow_aepe_all"] = meanOver(pairs, d, "aepe", 0, 1).first;
+  nlohmann::json bins = nlohmann::json::array();
+  for (int b = 0; b * kDownstreamBinWidth < 1 - 1e-9; ++b) {
+    const double blo = b * kDownstreamBinWidth, bhi = (b + 1) * kDownstreamBinWidth;
+    const auto [aepe, n] = meanOver(pairs, d, "aepe", blo, bhi);
+    if (n == 0) continue;
+    bins.push_back(
+        {{"covis_lo", blo},
+         {"covis_hi", bhi},
+         {"pairs", n},
+         {"ft_flow_aepe", aepe},
+         {"ft_flow_aepe_covisible", meanOver(pairs, d, "aepe_covisible", blo, bhi).first}});
+  }
+  out["ft_flow_by_covis"] = bins;
+}
+
+}  // namespace
+
+DownstreamData prepareDownstreamData(const SweepConfig& c, const std::vector<std::string>& train,
+                                     const std::vector<std::string>& heldout) {
+  DownstreamData d;
+  keepOnlyIfMadeWith(c, fs::path(c.out) / "ds", dataSettings(c));
+  // Seeds apart from the pool's (c.seed), the held-out xv pairs' (+1) and the probes' (+3).
+  d.trainShards =
+      generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11) + "/pairs-*.tar";
+  d.heldoutShards =
+      generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12) +
+      "/pairs-*.tar";
+  d.trainPairs = covisByKey(d.trainShards).size();
+  d.heldoutCovis = covisByKey(d.heldoutShards);
+  if (d.trainPairs < static_cast<size_t>(c.finetuneBatch))
+    throw Error((fs::path(c.out) / "ds" / "train").string(),
+                "holds " + std::to_string(d.trainPairs) +
+                    " fine-tuning pairs, fewer than one batch (--finetune-batch)");
+  if (d.heldoutCovis.empty())
+    throw Error((fs::path(c.out) / "ds" / "heldout").string(), "holds no held-out pairs");
+  return d;
+}
+
+fs::path finetuneDir(const fs::path& runDir, const std::string& task) {
+  return runDir / ("finetune-" + task);
+}
+
+std::vector<FinetuneJob> planFinetunes(const SweepConfig& c, const std::vector<SweepRun>& runs) {
+  std::vector<FinetuneJob> jobs;
+  const fs::path root = fs::path(c.out) / "runs";
+  for (int k = 0; k < c.seeds; ++k) {
+    auto add = [&](const std::string& name, const std::string& init, const fs::path& runDir) {
+      for (const std::string& task : c.downstream)
+        jobs.push_back({name + " seed " + std::to_string(k) + " " + task, task, init, runSeed(c, k),
+                        finetuneDir(runDir, task)});
+    };
+    add("random", "random", root / "random" / seedFolder(k));
+    for (const SweepRun& run : runs)
+      if (run.seedIndex == k) add(run.name, (run.dir / "checkpoint-last.pth").string(), run.dir);
+  }
+  return jobs;
+}
+
+FinetuneConfig finetuneConfig(const SweepConfig& c, const CroCoConfig& mc,
+                              const DownstreamData& data, const FinetuneJob& job, int world) {
+  FinetuneConfig f;
+  f.model.croco = mc;
+  f.model.task = job.task;
+  f.model.head = "linear";
+  f.data = {data.trainShards};
+  f.evalData = {data.heldoutShards};
+  f.init = job.init;
+  TrainConfig& t = f.train;
+  t.batchSize = c.finetuneBatch;
+  t.device = c.device;
+  const int64_t perEpoch =
+      std::max<int64_t>(1, static_cast<int64_t>(data.trainPairs) / (c.finetuneBatch * world));
+  t.epochs = static_cast<int>((c.finetuneSteps + perEpoch - 1) / perEpoch);
+  t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
+  t.maxSteps = c.finetuneSteps;
+  t.blr = c.finetuneBlr;
+  t.seed = job.seed;
+  t.workers = c.workers;
+  t.saveEvery = std::max<int64_t>(25, c.finetuneSteps / 4);
+  t.out = job.dir.string();
+  t.resume = true;
+  t.progress = false;
+  return f;
+}
+
+void runFinetuneJob(const SweepConfig& c, const CroCoConfig& mc, const DownstreamData& data,
+                    const FinetuneJob& job, Distributed* dist) {
+  if (!dist || dist->rank() == 0) keepOnlyIfMadeWith(c, job.dir, jobSettings(c, job));
+  if (dist) dist->barrier();
+  const nlohmann::json done = readSweepState((job.dir / "summary.json").string());
+  if (done.is_object() && done.value("steps", int64_t{0}) >= c.finetuneSteps &&
+      !done.value("interrupted", false) && fs::exists(job.dir / "heldout.json"))
+    return;
+  sweepSay(c, "fine-tuning " + job.label + " (" + std::to_string(c.finetuneSteps) + " steps)");
+  const int world = dist ? dist->worldSize() : 1;
+  const nlohmann::json r = runFinetune(finetuneConfig(c, mc, data, job, world), dist);
+  if (r.value("interrupted", false))
+    throw Error(job.dir.string(), "interrupted; run covis_sweep again to resume");
+}
+
+nlohmann::json downstreamFigures(const SweepConfig& c, const DownstreamData& d,
+                                 const fs::path& runDir, bool baseline) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const std::string& task : c.downstream) {
+    const nlohmann::json pairs = perPair(finetuneDir(runDir, task), baseline);
+    if (pairs.is_null()) continue;
+    if (task == "flow") addFlowFigures(out, pairs, d);
+    if (task == "depth") {
+      out["ft_depth_delta1"] =
+          meanOver(pairs, d, "delta1", kDownstreamBandLo, kDownstreamBandHi).first;
+      out["ft_depth_absrel"] =
+          meanOver(pairs, d, "absrel", kDownstreamBandLo, kDownstreamBandHi).first;
+    }
+  }
+  return out;
+}
+
+}  // namespace paircast
