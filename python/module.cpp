@@ -598,9 +598,10 @@ class PyShardBatches {
     bool first = true, isFloat = false;
     for (py::handle pair : buffers) {
       const auto views = pair.cast<py::tuple>();
-      if (views.size() != 2 && views.size() != 5)
+      if ((views.size() != 2 && views.size() != 5) ||
+          (!first && (views.size() == 5) != o.flow))
         throw py::value_error(
-            "each buffer is (view1, view2), or (view1, view2, flow1, valid1, pose)");
+            "the buffers are all (view1, view2), or all (view1, view2, flow1, valid1, pose)");
       o.flow = views.size() == 5;
       std::array<void*, 2> p{};
       for (int k = 0; k < 2; ++k) {

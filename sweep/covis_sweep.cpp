@@ -173,8 +173,7 @@ nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
   const auto dist = Distributed::fromEnvironment(c.device);
   for (const auto& run : runs) trainRun(c, mc, run, dist.get());
   if (!c.downstream.empty()) {
-    const SceneFiles scenes = sceneFiles(c);
-    const DownstreamData data = prepareDownstreamData(c, scenes.train, scenes.heldout);
+    const DownstreamData data = openDownstreamData(c);  // rank 0 made it before ready.json
     for (const FinetuneJob& job : planFinetunes(c, runs))
       runFinetuneJob(c, mc, data, job, dist.get());
   }

@@ -19,27 +19,40 @@ namespace {
 
 // What the fine-tuning data is made with: ds/ is made again when it changes.
 nlohmann::json dataSettings(const SweepConfig& c) {
-  return {{"pairs", c.finetunePairs},
+  return {{"scenes", c.scenes},
+          {"heldout", c.heldout},
+          {"up", static_cast<int>(c.load.up)},
+          {"scale", c.load.scale},
+          {"pairs", c.finetunePairs},
           {"eval_pairs", c.finetuneEvalPairs},
           {"resolution", c.resolution},
           {"seed", c.seed}};
 }
 
-// What a fine-tune is made with: one made otherwise is made again.
-nlohmann::json jobSettings(const SweepConfig& c, const FinetuneJob& job) {
-  return {{"data", dataSettings(c)},  {"task", job.task},         {"init", job.init},
-          {"seed", job.seed},         {"steps", c.finetuneSteps}, {"batch", c.finetuneBatch},
-          {"blr", c.finetuneBlr},     {"preset", c.preset},       {"img_size", c.imgSize},
-          {"patch_size", c.patchSize}};
+// What a fine-tune is made with: one made otherwise is made again. The world size sets the
+// epochs' length, and so the data order and the schedule.
+nlohmann::json jobSettings(const SweepConfig& c, const FinetuneJob& job, int world) {
+  return {{"data", dataSettings(c)},   {"task", job.task},         {"run", job.run},
+          {"seed", job.seed},          {"steps", c.finetuneSteps}, {"batch", c.finetuneBatch},
+          {"blr", c.finetuneBlr},      {"preset", c.preset},       {"img_size", c.imgSize},
+          {"patch_size", c.patchSize}, {"world_size", world}};
 }
 
-// Removes `dir` when its settings.json differs from `settings` (made with other settings), and
-// says so; then writes `settings` there.
+// Removes `dir` when it was made with other settings than `settings` (its settings.json differs,
+// or it has files but no settings.json: a removal cut short), and says so; then writes
+// `settings` there, before anything else goes in. The folder is renamed before it is removed, so
+// that a kill during the removal leaves no part of it under its name.
 void keepOnlyIfMadeWith(const SweepConfig& c, const fs::path& dir, const nlohmann::json& settings) {
   const nlohmann::json had = readSweepState((dir / "settings.json").string());
-  if (!had.is_null() && had != settings) {
+  std::error_code ec;
+  const bool stale =
+      had.is_null() ? fs::exists(dir, ec) && !fs::is_empty(dir, ec) : had != settings;
+  if (stale) {
     sweepSay(c, dir.string() + " was made with other settings; making it again");
-    fs::remove_all(dir);
+    const fs::path doomed = dir.string() + ".removing";
+    fs::remove_all(doomed);
+    fs::rename(dir, doomed);
+    fs::remove_all(doomed);
   }
   makeDirs(dir.string());
   writeFileAtomic((dir / "settings.json").string(), settings.dump(1) + "\n");
@@ -71,12 +84,13 @@ std::string generateTruth(const SweepConfig& c, const std::string& part,
   return g.out;
 }
 
-// Each sample's key and covis in the shards of a pattern.
-std::map<std::string, double> covisByKey(const std::string& pattern) {
+// Each sample's key and covis in the shards of a pattern; `samples` counts them.
+std::map<std::string, double> covisByKey(const std::string& pattern, size_t* samples = nullptr) {
   std::map<std::string, double> covis;
   for (const std::string& file : expandShardPatterns({pattern})) {
     const ShardIndex index = ShardIndex::open(file);
     for (size_t i = 0; i < index.size(); ++i) covis[index[i].key] = index[i].record.covis;
+    if (samples) *samples += index.size();
   }
   return covis;
 }
@@ -129,15 +143,18 @@ void addFlowFigures(nlohmann::json& out, const nlohmann::json& pairs, const Down
 
 DownstreamData prepareDownstreamData(const SweepConfig& c, const std::vector<std::string>& train,
                                      const std::vector<std::string>& heldout) {
-  DownstreamData d;
   keepOnlyIfMadeWith(c, fs::path(c.out) / "ds", dataSettings(c));
   // Seeds apart from the pool's (c.seed), the held-out xv pairs' (+1) and the probes' (+3).
-  d.trainShards =
-      generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11) + "/pairs-*.tar";
-  d.heldoutShards =
-      generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12) +
-      "/pairs-*.tar";
-  d.trainPairs = covisByKey(d.trainShards).size();
+  generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11);
+  generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12);
+  return openDownstreamData(c);
+}
+
+DownstreamData openDownstreamData(const SweepConfig& c) {
+  DownstreamData d;
+  d.trainShards = (fs::path(c.out) / "ds" / "train" / "pairs-*.tar").string();
+  d.heldoutShards = (fs::path(c.out) / "ds" / "heldout" / "pairs-*.tar").string();
+  covisByKey(d.trainShards, &d.trainPairs);
   d.heldoutCovis = covisByKey(d.heldoutShards);
   if (d.trainPairs < static_cast<size_t>(c.finetuneBatch))
     throw Error((fs::path(c.out) / "ds" / "train").string(),
@@ -158,8 +175,8 @@ std::vector<FinetuneJob> planFinetunes(const SweepConfig& c, const std::vector<S
   for (int k = 0; k < c.seeds; ++k) {
     auto add = [&](const std::string& name, const std::string& init, const fs::path& runDir) {
       for (const std::string& task : c.downstream)
-        jobs.push_back({name + " seed " + std::to_string(k) + " " + task, task, init, runSeed(c, k),
-                        finetuneDir(runDir, task)});
+        jobs.push_back({name + " seed " + std::to_string(k) + " " + task, name, task, init,
+                        runSeed(c, k), finetuneDir(runDir, task)});
     };
     add("random", "random", root / "random" / seedFolder(k));
     for (const SweepRun& run : runs)
@@ -197,14 +214,14 @@ FinetuneConfig finetuneConfig(const SweepConfig& c, const CroCoConfig& mc,
 
 void runFinetuneJob(const SweepConfig& c, const CroCoConfig& mc, const DownstreamData& data,
                     const FinetuneJob& job, Distributed* dist) {
-  if (!dist || dist->rank() == 0) keepOnlyIfMadeWith(c, job.dir, jobSettings(c, job));
+  const int world = dist ? dist->worldSize() : 1;
+  if (!dist || dist->rank() == 0) keepOnlyIfMadeWith(c, job.dir, jobSettings(c, job, world));
   if (dist) dist->barrier();
   const nlohmann::json done = readSweepState((job.dir / "summary.json").string());
   if (done.is_object() && done.value("steps", int64_t{0}) >= c.finetuneSteps &&
       !done.value("interrupted", false) && fs::exists(job.dir / "heldout.json"))
     return;
   sweepSay(c, "fine-tuning " + job.label + " (" + std::to_string(c.finetuneSteps) + " steps)");
-  const int world = dist ? dist->worldSize() : 1;
   const nlohmann::json r = runFinetune(finetuneConfig(c, mc, data, job, world), dist);
   if (r.value("interrupted", false))
     throw Error(job.dir.string(), "interrupted; run covis_sweep again to resume");

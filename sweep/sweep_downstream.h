@@ -35,14 +35,18 @@ struct DownstreamData {
 
 // Generates ds/train (--finetune-pairs from the training scenes, covis >= 0.5, CroCo's band)
 // and ds/heldout (--finetune-eval-pairs from the held-out scenes, covis in [0.1, 1]), unless a
-// previous sweep did. Throws paircast::Error naming the folder when a part gives no pairs.
+// previous sweep made them with the same settings, and opens them. Throws paircast::Error naming
+// the folder when a part gives too few pairs.
 DownstreamData prepareDownstreamData(const SweepConfig& config,
                                      const std::vector<std::string>& trainScenes,
                                      const std::vector<std::string>& heldoutScenes);
+// Opens the data rank 0 prepared (the other ranks of a multi-process sweep), without writing.
+DownstreamData openDownstreamData(const SweepConfig& config);
 
 // One fine-tune: a task from a run's checkpoint, or from a seed's random weights.
 struct FinetuneJob {
   std::string label;          // "bin_0.55 seed 1 flow"
+  std::string run;            // the run's name ("bin_0.55", "mae"), or "random"
   std::string task;           // flow or depth
   std::string init;           // the run's checkpoint, or "random"
   uint64_t seed = 0;          // the run's: its random weights, jitter, crops and data order
@@ -63,7 +67,8 @@ FinetuneConfig finetuneConfig(const SweepConfig& config, const CroCoConfig& mode
                               const DownstreamData& data, const FinetuneJob& job, int worldSize);
 
 // Fine-tunes (or resumes) a job unless it is complete. Every rank of a multi-process sweep calls
-// it for every job, in the same order.
+// it for every job, in the same order; rank 0 alone removes a fine-tune made with other
+// settings (then all wait for it).
 void runFinetuneJob(const SweepConfig& config, const CroCoConfig& model, const DownstreamData& data,
                     const FinetuneJob& job, Distributed* dist);
 

@@ -56,8 +56,8 @@ const char* randomName(const Metric& m) {
 
 // The probes each claim is judged on, one verdict each.
 const char* const kClaimProbes[] = {
-    "xv_loss",      "ref_gain_covisible",     "xattn_pck1",      "enc_pck1",       "probe_delta1",
-    "ft_flow_aepe", "ft_flow_aepe_covisible", "ft_depth_delta1", "ft_depth_absrel"};
+    "xv_loss",      "ref_gain_covisible",     "xattn_pck1",  "enc_pck1",        "probe_delta1",
+    "ft_flow_aepe", "ft_flow_aepe_covisible", "ft_flow_px3", "ft_depth_delta1", "ft_depth_absrel"};
 
 const Metric& metric(const std::string& key) {
   for (const Metric& m : kEvaluated)
@@ -329,62 +329,78 @@ std::vector<std::string> claimVerdicts(const nlohmann::json& runs, const std::st
   return out;
 }
 
-// Whether a fine-tuned flow error can decide between two sets: the largest 95 % half-width of
-// the paired difference between two training sets, against a quarter of the gap between random
+// The widest 95 % half-width of the difference between two of `sets` (paired by seed where
+// their seeds match, else Welch's), with the pair's names and its count of values.
+struct Widest {
+  Interval d{NAN, NAN, 0};
+  std::string pair;
+};
+Widest widestDifference(const RunValues& v, const std::vector<std::string>& sets) {
+  Widest w;
+  for (size_t i = 0; i < sets.size(); ++i)
+    for (size_t j = i + 1; j < sets.size(); ++j) {
+      const SetValues a = of(v, sets[i]), b = of(v, sets[j]);
+      const Interval d = paired(a, b) ? pairedDifferenceInterval95(a.values, b.values)
+                                      : differenceInterval95(a.values, b.values);
+      if (std::isfinite(d.halfWidth) && !(d.halfWidth <= w.d.halfWidth))
+        w = {d, sets[i] + " and " + sets[j]};
+    }
+  return w;
+}
+
+// The fewest seeds at which a half-width of `halfWidth` over `seeds` shrinks to `target`: the
+// spread of the differences is halfWidth sqrt(seeds) / t(seeds - 1), and the half-width at n
+// seeds t(n - 1) spread / sqrt(n). 0 when not within 100,000.
+long seedsToDecide(double halfWidth, int seeds, double target) {
+  const double spread = halfWidth * std::sqrt(seeds) / tQuantile95(seeds - 1);
+  for (long n = 2; n <= 100000; ++n)
+    if (tQuantile95(n - 1) * spread / std::sqrt(n) <= target) return n;
+  return 0;
+}
+
+// Whether a fine-tuned flow error can decide between two sets: the widest paired 95 % half-width
+// of the difference between two training sets, against a quarter of the gap between random
 // weights and the best pre-trained run. Empty without fine-tuned figures.
 std::string instrumentVerdict(const Metric& m, const RunValues& runs, const RunValues& withRandom) {
   if (!hasFigures(withRandom, "random_encoder")) return "";
   std::vector<std::string> sets;
-  for (const auto& s : runs.sets)
-    if (runs.task.at(s) == "croco" && hasFigures(runs, s)) sets.push_back(s);
-  double widest = NAN, best = INFINITY;
-  std::string widestPair, bestSet;
+  double best = INFINITY;  // lower is better for the flow errors
+  std::string bestSet;
   for (const auto& s : runs.sets) {
-    const double m = interval95(runs.values.at(s)).mean;
-    if (std::isfinite(m) && m < best) best = m, bestSet = s;
+    if (runs.task.at(s) == "croco" && hasFigures(runs, s)) sets.push_back(s);
+    const double mean = interval95(runs.values.at(s)).mean;
+    if (std::isfinite(mean) && mean < best) best = mean, bestSet = s;
   }
-  for (size_t i = 0; i < sets.size(); ++i)
-    for (size_t j = i + 1; j < sets.size(); ++j) {
-      const Interval d =
-          pairedDifferenceInterval95(runs.values.at(sets[i]), runs.values.at(sets[j]));
-      if (std::isfinite(d.halfWidth) && !(d.halfWidth <= widest))
-        widest = d.halfWidth, widestPair = sets[i] + " and " + sets[j];
-    }
+  const Widest w = widestDifference(runs, sets);
+  const std::string head = std::string("Instrument, ") + m.label + ": ";
+  if (!std::isfinite(w.d.halfWidth) || bestSet.empty())
+    return head +
+           "with fewer than two sets of 2 seeds or more, the intervals are not known (use "
+           "--seeds 3).";
   const double random = interval95(withRandom.values.at("random_encoder")).mean;
-  const double gap = random - best;
-  if (!std::isfinite(widest) || bestSet.empty())
-    return std::string("Instrument, ") + m.label +
-           ": with fewer than two sets of 2 seeds or more, the paired intervals are not known "
-           "(use --seeds 3).";
+  const double gap = random - best, quarter = gap / 4;
   char b[512];
-  const double quarter = gap / 4;
-  if (gap > 0 && widest <= quarter) {
-    std::snprintf(b, sizeof b,
-                  "Instrument, %s: decides. The widest paired 95 %% half-width between two sets "
-                  "(%s) is %.3f, at most a quarter of the gap between random weights (%.3f) and "
-                  "the best pre-trained run (%s, %.3f): %.3f / 4 = %.3f.",
-                  m.label, widestPair.c_str(), widest, random, bestSet.c_str(), best, gap, quarter);
-    return b;
-  }
   if (!(gap > 0)) {
     std::snprintf(b, sizeof b,
-                  "Instrument, %s: does not decide. No pre-trained run beats random weights "
-                  "(%.3f; the best run, %s, %.3f), so there is no gap to resolve; the widest "
-                  "paired 95 %% half-width between two sets (%s) is %.3f.",
-                  m.label, random, bestSet.c_str(), best, widestPair.c_str(), widest);
-    return b;
+                  "does not decide. No pre-trained run beats random weights (%.3f; the best "
+                  "run, %s, %.3f), so there is no gap to resolve; the widest 95 %% half-width "
+                  "between two sets (%s) is %.3f.",
+                  random, bestSet.c_str(), best, w.pair.c_str(), w.d.halfWidth);
+    return head + b;
   }
-  const size_t seeds = runs.values.at(sets[0]).size();
-  const double ratio = widest / quarter;
+  const bool decides = w.d.halfWidth <= quarter;
   std::snprintf(b, sizeof b,
-                "Instrument, %s: does not decide. The widest paired 95 %% half-width between "
-                "two sets (%s) is %.3f, %.1fx a quarter of the gap between random weights "
-                "(%.3f) and the best pre-trained run (%s, %.3f): %.3f / 4 = %.3f. ",
-                m.label, widestPair.c_str(), widest, ratio, random, bestSet.c_str(), best, gap,
-                quarter);
-  return b + std::string("With the half-width falling as 1/sqrt(seeds), about ") +
-         std::to_string(static_cast<long>(std::ceil(seeds * ratio * ratio))) +
-         " seeds would decide at this budget, or a budget that widens the gap.";
+                "%s. The widest 95 %% half-width of the difference between two sets (%s) is "
+                "%.3f, %.1fx a quarter of the gap between random weights (%.3f) and the best "
+                "pre-trained run (%s, %.3f): %.3f / 4 = %.3f.",
+                decides ? "decides" : "does not decide", w.pair.c_str(), w.d.halfWidth,
+                w.d.halfWidth / quarter, random, bestSet.c_str(), best, gap, quarter);
+  if (decides) return head + b;
+  const long n = seedsToDecide(w.d.halfWidth, w.d.n, quarter);
+  return head + b + " At this budget about " +
+         (n ? std::to_string(n) : std::string("more than 100000")) +
+         " seeds would decide (the spread of the differences staying as it is), or a budget "
+         "that widens the gap.";
 }
 
 // ---- the plots and the page ----

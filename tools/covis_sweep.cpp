@@ -80,7 +80,8 @@ int main(int argc, char** argv) {
   app.add_option("--finetune-batch", c.finetuneBatch, "Pairs per fine-tuning step and process")
       ->check(CLI::Range(1, 65536));
   app.add_option("--finetune-blr", c.finetuneBlr,
-                 "Fine-tuning base learning rate (lr = blr * batch / 256)");
+                 "Fine-tuning base learning rate (lr = blr * batch / 256)")
+      ->check(CLI::PositiveNumber);
   bool noReports = false, quiet = false;
   app.add_flag("--no-reports", noReports, "No dataset report per set");
   app.add_flag("--quiet", quiet, "No progress lines");

@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 import paircast  # noqa: E402
 from paircast.torch import (LivePairs, ShardLoader, ShardPairs, crop_flow,  # noqa: E402
                              relative_pose)
-from conftest import RESOLUTION, ROOM  # noqa: E402
+from conftest import RESOLUTION, ROOM, run_tool  # noqa: E402
 
 
 def read_flo(path):
@@ -117,9 +117,20 @@ def test_flow_from_shards_without_it_is_an_error(croco_pairs):
         next(iter(ShardPairs(str(croco_pairs / "pairs-*.tar"), flow=True)))
 
 
-@pytest.mark.parametrize("normalize", [True, False])
-def test_shard_loader_flow_batches_are_those_of_shard_pairs(flow_shards, normalize):
-    pattern = str(flow_shards / "pairs-*.tar")
+@pytest.fixture(scope="module")
+def three_view_flow_shards(tmp_path_factory):
+    """Shards of 3 views with flow: a pair with flow is views 1 and 2, with no view drawn."""
+    out = tmp_path_factory.mktemp("flow3")
+    run_tool("generate_pairs", "--scenes", ROOM, "--out", out, "--pairs-per-scene", 3,
+             "--resolution", RESOLUTION, "--seed", 4, "--jobs", 1, "--views", 3,
+             "--save-depth", "--save-flow")
+    return out
+
+
+@pytest.mark.parametrize("normalize,views", [(True, 2), (False, 2), (True, 3)])
+def test_shard_loader_flow_batches_are_those_of_shard_pairs(flow_shards, three_view_flow_shards,
+                                                            normalize, views):
+    pattern = str((flow_shards if views == 2 else three_view_flow_shards) / "pairs-*.tar")
     pairs = ShardPairs(pattern, crop=48, flow=True, seed=5, normalize=normalize)
     pairs.set_epoch(2)
     expected = list(pairs)

@@ -245,19 +245,20 @@ TEST(SweepReport, FineTunedVerdictsJudgeBothClaimsAndTheInstrument) {
       << v;
   // The widest paired half-width between two sets is bin_0.55 against bin_0.95's (3e: 0.075),
   // against a quarter of the gap 10.0 - 9.0.
-  EXPECT_NE(v.find("Instrument, fine-tuned flow AEPE (px): decides. The widest paired 95 % "
-                   "half-width between two sets (bin_0.55 and bin_0.95) is 0.075, at most a "
+  EXPECT_NE(v.find("Instrument, fine-tuned flow AEPE (px): decides. The widest 95 % half-width "
+                   "of the difference between two sets (bin_0.55 and bin_0.95) is 0.075, 0.3x a "
                    "quarter of the gap between random weights (10.000) and the best pre-trained "
                    "run (bin_0.55, 9.000): 1.000 / 4 = 0.250."),
             std::string::npos)
       << v;
-  // A gap of 0.05: 0.0745 / 0.0125 = 5.96 times too wide, about 3 * 5.96^2 = 107 seeds.
+  // A gap of 0.05: 0.0745 is 6.0 times a quarter of it. The differences' spread is 0.03, and
+  // t(n - 1) 0.03 / sqrt(n) <= 0.0125 first at n = 25 (t(24) = 2.064; at 24, t(23) = 2.069).
   const std::string narrow = joined(sweepVerdicts(fineTunedResults(9.05)));
-  EXPECT_NE(narrow.find("Instrument, fine-tuned flow AEPE (px): does not decide. The widest "
-                        "paired 95 % half-width between two sets (bin_0.55 and bin_0.95) is "
-                        "0.075, 6.0x a quarter of the gap between random weights (9.050) and the "
-                        "best pre-trained run (bin_0.55, 9.000): 0.050 / 4 = 0.013. With the "
-                        "half-width falling as 1/sqrt(seeds), about 107 seeds would decide"),
+  EXPECT_NE(narrow.find("Instrument, fine-tuned flow AEPE (px): does not decide. The widest 95 % "
+                        "half-width of the difference between two sets (bin_0.55 and bin_0.95) "
+                        "is 0.075, 6.0x a quarter of the gap between random weights (9.050) and "
+                        "the best pre-trained run (bin_0.55, 9.000): 0.050 / 4 = 0.013. At this "
+                        "budget about 25 seeds would decide"),
             std::string::npos)
       << narrow;
   const std::string none = joined(sweepVerdicts(fineTunedResults(8.0)));
