@@ -5,8 +5,8 @@
 # studio and a seventh random floor plan, so that the reference-use probe has a view 2 from
 # another scene. The tiny model at 64 px with 8 px patches (an 8 x 8 grid), 640 steps of 16 per
 # run: the budget the pilot of docs/covis_ablation.md chose. Then every run, and each seed's
-# random weights, fine-tuned for flow and depth (--downstream; linear heads, 300 steps of 8 on
-# 512 pairs of the training scenes) and measured on 256 held-out pairs. About 80 minutes on
+# random weights, fine-tuned for flow and depth (--downstream; linear heads, 200 steps of 8 on
+# 512 pairs of the training scenes) and measured on 256 held-out pairs. About 90 minutes on
 # 2 cores; fine-tunes that exist are reused, so adding --downstream to a finished study only
 # fine-tunes.
 # Usage: scripts/covis_ablation.sh [OUT] [extra covis_sweep options]   (OUT: runs/ablation)
@@ -33,5 +33,5 @@ exec build/tools/covis_sweep \
   --heldout scenes/studio "$SCENES/heldout/random_99_0" --up auto \
   --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds 3 \
   --img-size 64 --patch-size 8 --resolution 73 --pairs-per-set 1024 --steps 640 \
-  --downstream flow,depth --finetune-steps 300 --finetune-pairs 512 --finetune-eval-pairs 256 \
+  --downstream flow,depth --finetune-steps 200 --finetune-pairs 512 --finetune-eval-pairs 256 \
   --out "$OUT/sweep" "$@"

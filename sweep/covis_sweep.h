@@ -86,7 +86,7 @@ struct SweepConfig {
   // Fine-tuning of every run and of each seed's random weights (sweep_downstream.h): tasks
   // "flow" and "depth"; empty: none. Added to a finished sweep, only the fine-tunes run.
   std::vector<std::string> downstream;
-  int64_t finetuneSteps = 300;  // per fine-tune, of finetuneBatch pairs
+  int64_t finetuneSteps = 200;  // per fine-tune, of finetuneBatch pairs
   int finetunePairs = 512;      // fine-tuning pairs from the training scenes (covis >= 0.5)
   int finetuneEvalPairs = 256;  // held-out pairs from the held-out scenes (covis 0.1-1)
   int finetuneBatch = 8;
