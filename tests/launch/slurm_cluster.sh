@@ -56,6 +56,9 @@ write_conf() {
   local dir=$1 port=$2 auth cred
   read -r auth cred < <(auth_plugins)
   mkdir -p "$dir/state" "$dir/spool"
+  # The machine's cores: nproc alone answers OMP_NUM_THREADS, which ctest sets to 1 per test.
+  local cpus
+  cpus=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)
   if [[ $auth == auth/slurm ]]; then
     # Read from beside slurm.conf; Slurm refuses a key that others can read.
     (umask 077; head -c 1024 /dev/urandom > "$dir/slurm.key")
@@ -90,7 +93,7 @@ MinJobAge=5
 SchedulerParameters=batch_sched_delay=0
 KillWait=2
 FirstJobId=$port
-NodeName=localhost NodeAddr=127.0.0.1 CPUs=$(nproc) State=UNKNOWN
+NodeName=localhost NodeAddr=127.0.0.1 CPUs=$cpus State=UNKNOWN
 PartitionName=test Nodes=localhost Default=YES MaxTime=INFINITE State=UP
 CONF
   # slurmd >= 23 sets up its cgroup plugin even for proctrack/linuxproc and task/none, and stops

@@ -28,7 +28,7 @@ def tool(name):
 
 def run_tool(name, *args):
     result = subprocess.run([tool(name), *map(str, args)], capture_output=True, text=True,
-                            env={**os.environ, "OMP_NUM_THREADS": "2"})
+                            env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert result.returncode == 0, f"{name} failed: {result.stderr}"
     return result
 

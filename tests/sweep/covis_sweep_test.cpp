@@ -406,6 +406,7 @@ void expectResumesRunByRun(const std::string& out) {
 // The real command, SIGKILLed at growing delays and restarted, gives `clean`'s results.
 void expectKilledSweepEndsAsThisDid(const std::string& clean) {
   const std::string killed = clean + "-killed";
+  fs::remove_all(killed);  // a previous run's
   int kills = 0;
   for (int delayMs = 300; delayMs < 60000 && !fs::exists(killed + "/results.csv"); delayMs *= 2) {
     const int rc = testing::runProcess(seededArgs(killed), delayMs);
@@ -620,6 +621,7 @@ void expectColumnsFromThePairs(const nlohmann::json& row, const std::string& out
 // the end, gives `clean`'s results.
 void expectKilledFineTunesEndAsTheseDid(const std::string& clean) {
   const std::string killed = clean + "-killed";
+  fs::remove_all(killed);  // a previous run's
   fs::copy(clean, killed, fs::copy_options::recursive);
   fs::remove_all(killed + "/ds");
   for (const auto& [path, time] : times(killed, true)) fs::remove_all(fs::path(path).parent_path());
