@@ -66,20 +66,13 @@ void trainRun(const SweepConfig& c, const CroCoConfig& mc, const SweepRun& run, 
   t.keysFile = (out / "sets" / (run.keysSet + ".keys")).string();
   t.model = mc;
   t.task = run.task;
-  t.batchSize = c.batchSize;
   t.device = c.device;
   // --batch-size is per process, as in pretrain: epochs count the global batch.
-  const int world = dist ? dist->worldSize() : 1;
-  const int64_t perEpoch = std::max(1, c.pairsPerSet / (c.batchSize * world));
-  t.epochs = static_cast<int>((c.steps + perEpoch - 1) / perEpoch);
-  t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
-  t.maxSteps = c.steps;
+  setSweepSchedule(t, c.steps, c.pairsPerSet, c.batchSize, dist ? dist->worldSize() : 1);
   t.blr = c.blr;
   t.seed = run.seed;
   t.workers = c.workers;
-  t.saveEvery = std::max<int64_t>(25, c.steps / 4);
   t.out = run.dir.string();
-  t.resume = true;
   t.progress = false;
   sweepSay(c, "training " + run.label() + " (" + std::to_string(c.steps) + " steps)");
   const nlohmann::json r = runPretrain(t, dist);

@@ -195,19 +195,13 @@ FinetuneConfig finetuneConfig(const SweepConfig& c, const CroCoConfig& mc,
   f.evalData = {data.heldoutShards};
   f.init = job.init;
   TrainConfig& t = f.train;
-  t.batchSize = c.finetuneBatch;
   t.device = c.device;
-  const int64_t perEpoch =
-      std::max<int64_t>(1, static_cast<int64_t>(data.trainPairs) / (c.finetuneBatch * world));
-  t.epochs = static_cast<int>((c.finetuneSteps + perEpoch - 1) / perEpoch);
-  t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
-  t.maxSteps = c.finetuneSteps;
+  setSweepSchedule(t, c.finetuneSteps, static_cast<int64_t>(data.trainPairs), c.finetuneBatch,
+                   world);
   t.blr = c.finetuneBlr;
   t.seed = job.seed;
   t.workers = c.workers;
-  t.saveEvery = std::max<int64_t>(25, c.finetuneSteps / 4);
   t.out = job.dir.string();
-  t.resume = true;
   t.progress = false;
   return f;
 }

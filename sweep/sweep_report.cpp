@@ -642,28 +642,42 @@ std::string byCovisCsv(const nlohmann::json& rows, const std::vector<std::string
   return csv;
 }
 
-// Cross-attention PCK ("xattn", solid) and encoder PCK ("enc", dashed) against the held-out pair's
-// covis, a colour per set.
-std::string probeByCovisPlot(const nlohmann::json& rows) {
-  const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728", "#7f7f7f"};
+// The sets of by-covis rows, in order of first appearance.
+std::vector<std::string> setsOf(const nlohmann::json& rows) {
   std::vector<std::string> sets;
   for (const auto& r : rows)
     if (std::find(sets.begin(), sets.end(), text(r, "set")) == sets.end())
       sets.push_back(text(r, "set"));
+  return sets;
+}
+
+// One set's line of a by-covis metric: its mean at each bin's centre, with its interval.
+plot::Series byCovisSeries(const nlohmann::json& rows, const std::string& set,
+                           const std::string& metric) {
+  plot::Series s;
+  for (const auto& r : rows) {
+    const double y = numberOrNan(r, metric + "_mean");
+    if (text(r, "set") != set || !std::isfinite(y)) continue;
+    s.x.push_back(numberOrNan(r, "covis_lo") + 0.05);
+    s.y.push_back(y);
+    s.yErr.push_back(numberOrNan(r, metric + "_ci95"));
+  }
+  return s;
+}
+
+const char* const kSetColors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728", "#7f7f7f"};
+
+// Cross-attention PCK ("xattn", solid) and encoder PCK ("enc", dashed) against the held-out pair's
+// covis, a colour per set.
+std::string probeByCovisPlot(const nlohmann::json& rows) {
+  const std::vector<std::string> sets = setsOf(rows);
   std::vector<plot::Series> series;
   for (size_t k = 0; k < sets.size(); ++k)
-    for (const char* m : {"xattn_pck1", "enc_pck1"}) {
-      plot::Series s;
-      s.label = sets[k] + (std::string(m) == "enc_pck1" ? " enc" : " xattn");
-      s.color = colors[k % 6];
-      s.dashed = std::string(m) == "enc_pck1";
-      for (const auto& r : rows) {
-        const double y = numberOrNan(r, std::string(m) + "_mean");
-        if (text(r, "set") != sets[k] || !std::isfinite(y)) continue;
-        s.x.push_back(numberOrNan(r, "covis_lo") + 0.05);
-        s.y.push_back(y);
-        s.yErr.push_back(numberOrNan(r, std::string(m) + "_ci95"));
-      }
+    for (const std::string m : {"xattn_pck1", "enc_pck1"}) {
+      plot::Series s = byCovisSeries(rows, sets[k], m);
+      s.label = sets[k] + (m == "enc_pck1" ? " enc" : " xattn");
+      s.color = kSetColors[k % 6];
+      s.dashed = m == "enc_pck1";
       if (!s.x.empty()) series.push_back(s);
     }
   return plot::lines(series, {"correspondence PCK@1 patch by the held-out pair's covis",
@@ -673,24 +687,13 @@ std::string probeByCovisPlot(const nlohmann::json& rows) {
 // Fine-tuned flow AEPE against the held-out pair's covis: a line per set, random weights and
 // zero flow (dashed).
 std::string downstreamByCovisPlot(const nlohmann::json& rows) {
-  const char* colors[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#9467bd", "#d62728", "#7f7f7f"};
-  std::vector<std::string> sets;
-  for (const auto& r : rows)
-    if (std::find(sets.begin(), sets.end(), text(r, "set")) == sets.end())
-      sets.push_back(text(r, "set"));
+  const std::vector<std::string> sets = setsOf(rows);
   std::vector<plot::Series> series;
   for (size_t k = 0; k < sets.size(); ++k) {
-    plot::Series s;
+    plot::Series s = byCovisSeries(rows, sets[k], "ft_flow_aepe");
     s.label = sets[k];
-    s.color = colors[k % 6];
+    s.color = kSetColors[k % 6];
     s.dashed = sets[k] == "zero_flow" || sets[k] == "random_encoder";
-    for (const auto& r : rows) {
-      const double y = numberOrNan(r, "ft_flow_aepe_mean");
-      if (text(r, "set") != sets[k] || !std::isfinite(y)) continue;
-      s.x.push_back(numberOrNan(r, "covis_lo") + 0.05);
-      s.y.push_back(y);
-      s.yErr.push_back(numberOrNan(r, "ft_flow_aepe_ci95"));
-    }
     if (!s.x.empty()) series.push_back(s);
   }
   return plot::lines(series, {"fine-tuned flow AEPE by the held-out pair's covis, lower is better",

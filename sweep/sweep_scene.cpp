@@ -2,10 +2,12 @@
 
 #include <omp.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 
 #include "dataset/generate_job.h"
+#include "trainer/trainer.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
 
@@ -53,6 +55,16 @@ int sweepThreads(const SweepConfig& c) {
 
 void sweepSay(const SweepConfig& c, const std::string& line) {
   if (c.progress) std::fprintf(stderr, "[covis_sweep] %s\n", line.c_str());
+}
+
+void setSweepSchedule(TrainConfig& t, int64_t steps, int64_t pairs, int batch, int world) {
+  const int64_t perEpoch = std::max<int64_t>(1, pairs / (static_cast<int64_t>(batch) * world));
+  t.batchSize = batch;
+  t.epochs = static_cast<int>((steps + perEpoch - 1) / perEpoch);
+  t.warmupEpochs = std::max(0.1 * t.epochs, 1.0 / perEpoch);
+  t.maxSteps = steps;
+  t.saveEvery = std::max<int64_t>(25, steps / 4);
+  t.resume = true;
 }
 
 }  // namespace paircast

@@ -14,6 +14,8 @@
 
 namespace paircast {
 
+struct TrainConfig;
+
 // A training or held-out scene, loaded once.
 struct SweepScene {
   std::string path, name;
@@ -35,6 +37,11 @@ nlohmann::json readSweepState(const std::string& path);
 
 // The render threads --jobs asks for: all cores at 0.
 int sweepThreads(const SweepConfig& config);
+
+// The schedule every run and fine-tune of a sweep trains with: `steps` of `batch` pairs per
+// process on `world` processes over `pairs` pairs (epochs count the global batch), a tenth of the
+// epochs (at least one step) of warm-up, a checkpoint every quarter (at least 25 steps), resumed.
+void setSweepSchedule(TrainConfig& t, int64_t steps, int64_t pairs, int batch, int world);
 
 // A progress line on stderr, unless the config turns progress off.
 void sweepSay(const SweepConfig& config, const std::string& line);

@@ -379,6 +379,15 @@ std::map<std::string, fs::file_time_type> checkpointTimes(const std::string& out
   return times;
 }
 
+// `after` holds `before`'s checkpoints, unchanged but for `redone`'s, which was written again.
+void expectOnlyRedone(std::map<std::string, fs::file_time_type> after,
+                      std::map<std::string, fs::file_time_type> before, const std::string& redone) {
+  ASSERT_TRUE(after.count(redone)) << redone;
+  after.erase(redone);
+  before.erase(redone);
+  EXPECT_EQ(after, before);
+}
+
 // A finished sweep run again reuses everything; with one seed's run gone, only that run trains
 // again, to the same results.
 void expectResumesRunByRun(const std::string& out) {
@@ -393,13 +402,9 @@ void expectResumesRunByRun(const std::string& out) {
   const std::string gone = runDir(out, "uniform_0.75", 1);
   fs::remove_all(gone);
   runCovisSweep(seededSweep(out));
-  auto after = checkpointTimes(out);
+  const auto after = checkpointTimes(out);
   ASSERT_EQ(after.size(), 10u);
-  EXPECT_TRUE(after.count(gone + "/checkpoint-last.pth"));
-  after.erase(gone + "/checkpoint-last.pth");
-  auto others = before;
-  others.erase(gone + "/checkpoint-last.pth");
-  EXPECT_EQ(after, others);
+  expectOnlyRedone(after, before, gone + "/checkpoint-last.pth");
   EXPECT_EQ(readFile(out + "/results.csv"), csv);
 }
 
@@ -722,12 +727,7 @@ TEST(CovisSweep, DownstreamAddedToAFinishedSweepFineTunesOnlyWhatIsMissing) {
   const std::string gone = runDir(out, "mae", 0) + "/finetune-flow";
   fs::remove_all(gone);
   runCovisSweep(c);
-  auto after = times(out, true);
-  ASSERT_TRUE(after.count(gone + "/checkpoint-last.pth"));
-  after.erase(gone + "/checkpoint-last.pth");
-  auto others = tuned;
-  others.erase(gone + "/checkpoint-last.pth");
-  EXPECT_EQ(after, others);
+  expectOnlyRedone(times(out, true), tuned, gone + "/checkpoint-last.pth");
   EXPECT_EQ(readFile(out + "/results.csv"), results);
   expectKilledFineTunesEndAsTheseDid(out);
 
