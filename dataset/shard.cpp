@@ -127,8 +127,7 @@ void ShardWriter::add(const EncodedPair& p) {
       addFile(memberName(p.key, MemberKind::kCovisMask, view), p.covisPng[k].data(),
               p.covisPng[k].size());
     if (k < p.flowFlo.size())
-      addFile(memberName(p.key, MemberKind::kFlow, view), p.flowFlo[k].data(),
-              p.flowFlo[k].size());
+      addFile(memberName(p.key, MemberKind::kFlow, view), p.flowFlo[k].data(), p.flowFlo[k].size());
   }
   const std::string json = p.record.dump();
   addFile(memberName(p.key, MemberKind::kRecord), json.data(), json.size());

@@ -35,8 +35,7 @@ struct EncodedPair {
 std::vector<ImageF> viewFlows(const PairSample& s);
 
 // withFlow: the views' flows (viewFlows), as .flo.
-EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality,
-                       bool withFlow = false);
+EncodedPair encodePair(const PairSample& s, bool withDepth, int jpegQuality, bool withFlow = false);
 
 // Writes one shard to a temporary name and renames it into place on close(), so a shard
 // under its final name is always whole. Throws paircast::Error naming the shard on failure

@@ -344,10 +344,7 @@ class PyShardReader {
   };
 
   PyShardReader(py::handle path, bool depth, size_t queue, bool flow)
-      : path_(pathFromPy(path)),
-        depth_(depth),
-        flow_(flow),
-        capacity_(std::max<size_t>(1, queue)) {
+      : path_(pathFromPy(path)), depth_(depth), flow_(flow), capacity_(std::max<size_t>(1, queue)) {
     thread_ = std::thread([this] { run(); });
   }
   ~PyShardReader() { close(); }
@@ -598,8 +595,7 @@ class PyShardBatches {
     bool first = true, isFloat = false;
     for (py::handle pair : buffers) {
       const auto views = pair.cast<py::tuple>();
-      if ((views.size() != 2 && views.size() != 5) ||
-          (!first && (views.size() == 5) != o.flow))
+      if ((views.size() != 2 && views.size() != 5) || (!first && (views.size() == 5) != o.flow))
         throw py::value_error(
             "the buffers are all (view1, view2), or all (view1, view2, flow1, valid1, pose)");
       o.flow = views.size() == 5;
@@ -651,7 +647,8 @@ class PyShardBatches {
       bool ok = a.ndim() == static_cast<py::ssize_t>(shape.size()) && a.writeable() &&
                 (a.flags() & py::array::c_style);
       for (size_t d = 0; ok && d < shape.size(); ++d) ok = a.shape(d) == shape[d];
-      if (!ok) throw py::value_error(std::string("the ground-truth buffers must be writable ") + what);
+      if (!ok)
+        throw py::value_error(std::string("the ground-truth buffers must be writable ") + what);
       return a;
     };
     const py::ssize_t B = o.batchSize, H = o.height, W = o.width;
