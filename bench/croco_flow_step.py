@@ -8,6 +8,7 @@ weight decay 0.05 but on biases and 1-D parameters), from a checkout of naver/cr
 Prints one line: SUMMARY croco_flow_step ... train_s=<median seconds per step>.
 """
 import argparse
+import os
 import sys
 import time
 
@@ -35,6 +36,9 @@ def main():
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     sys.path.insert(0, a.croco_dir)
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scripts"))
+    import einops_fallback  # noqa: E402  (naver/croco's DPT block imports einops)
+    einops_fallback.install()
     from models.croco_downstream import CroCoDownstreamBinocular  # noqa: E402
     from models.head_downstream import PixelwiseTaskWithDPT  # noqa: E402
     from stereoflow.criterion import LaplacianLossBounded  # noqa: E402

@@ -225,8 +225,9 @@ std::string DownstreamNetImpl::initFromPretrained(const Checkpoint& ck, const st
   auto differ = [&](const char* name, int a, int b) {
     if (a != b)
       throw Error(source, std::string("checkpoint of another model: ") + name + " " +
-                              std::to_string(a) + ", not " + std::to_string(b) +
-                              " (use the --preset it was trained with)");
+                              std::to_string(a) + ", not " + std::to_string(b) + " (use the " +
+                              (std::string(name) == "patch_size" ? "--patch-size" : "--preset") +
+                              " it was trained with)");
   };
   differ("enc_embed_dim", theirs.enc_embed_dim, ours.enc_embed_dim);
   differ("enc_depth", theirs.enc_depth, ours.enc_depth);

@@ -11,6 +11,7 @@ Prints one JSON line; exit 1 when the load or the comparison (> --tolerance) fai
 """
 import argparse
 import json
+import os
 import sys
 
 import numpy as np
@@ -45,6 +46,9 @@ def main():
     ap.add_argument("--tolerance", type=float, default=1e-4)
     a = ap.parse_args()
     sys.path.insert(0, a.croco_dir)
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import einops_fallback  # noqa: E402
+    einops_fallback.install()
     from models.croco_downstream import (CroCoDownstreamBinocular,  # noqa: E402
                                          CroCoDownstreamMonocularEncoder, croco_args_from_ckpt)
     from models.head_downstream import PixelwiseTaskWithDPT  # noqa: E402

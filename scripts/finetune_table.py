@@ -4,7 +4,10 @@ each initialisation (mean over seeds) and the paired differences between initial
 same seed's runs share data order, crops and the random weights the pre-trained ones leave), with
 95 % t-intervals over seeds.
 
-  finetune_table.py OUT SEEDS     # writes OUT/table.md and OUT/table.json, prints the table
+  finetune_table.py OUT SEEDS [TASK ...]   # writes OUT/table.md and OUT/table.json, prints them
+
+Each initialisation's difference to the task's trivial baseline (zero flow, a constant depth, the
+identity pose) is given too, with its interval: whether fine-tuning beat the baseline.
 """
 import json
 import math
@@ -12,7 +15,8 @@ import statistics
 import sys
 
 METRICS = {"flow": ["aepe", "aepe_covisible", "px1", "px3", "px5"],
-           "depth": ["delta1", "absrel", "rmse"]}
+           "depth": ["delta1", "absrel", "rmse"],
+           "pose": ["median_rot_err", "median_trans_err"]}
 INITS = ["random", "mae", "croco"]
 T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306,
         9: 2.262}
@@ -33,8 +37,10 @@ def fmt(mean, half):
 
 def main():
     out, seeds = sys.argv[1], int(sys.argv[2])
+    tasks = sys.argv[3:] or ["flow", "depth"]
     table, lines = {}, []
-    for task, metrics in METRICS.items():
+    for task in tasks:
+        metrics = METRICS[task]
         runs = {(init, s): json.load(open(f"{out}/finetune/{task}-{init}-{s}/heldout.json"))
                 for init in INITS for s in range(seeds)}
         base = runs[("random", 0)]["baseline"]
@@ -51,6 +57,12 @@ def main():
         lines.append("")
         lines.append("| paired difference | " + " | ".join(metrics) + " |")
         lines.append("| --- |" + " --- |" * len(metrics))
+        for init in INITS:
+            cells = [interval([runs[(init, s)]["model"][m] - base[m] for s in range(seeds)])
+                     for m in metrics]
+            table[task][f"{init}-baseline"] = {m: c for m, c in zip(metrics, cells)}
+            lines.append(f"| {init} - trivial baseline | " + " | ".join(fmt(*c) for c in cells)
+                         + " |")
         for a, b in [("croco", "random"), ("croco", "mae"), ("mae", "random")]:
             cells = [interval([runs[(a, s)]["model"][m] - runs[(b, s)]["model"][m]
                                for s in range(seeds)]) for m in metrics]

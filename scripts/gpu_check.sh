@@ -3,7 +3,9 @@
 # trainer-only build (PAIRCAST_WITH_RENDER=OFF) against the machine's pip torch, the CUDA tests,
 # bench_train (base, 224 x 224, bf16, batch 64) beside the official CroCo train step in the same
 # run, then pretrain from shards for a few hundred steps, whose checkpoint must load strictly
-# into the official CroCoNet; last, the multi-GPU code path on one GPU (an NCCL group of one).
+# into the official CroCoNet; finetune for flow with the DPT head, whose checkpoint must load
+# strictly into naver/croco's CroCoDownstreamBinocular; last, the multi-GPU code path on one GPU
+# (an NCCL group of one).
 #
 #   scripts/gpu_prepare.sh --croco-dir ~/src/croco      # once, on the CPU machine: fills .gpu/
 #   scripts/gpu_check.sh                                # on the GPU machine, with .gpu/ carried
@@ -11,7 +13,8 @@
 #
 # Outputs go to $OUT when it is set (else gpu-check-out/): gpu_check.log (everything),
 # bench_train.json, bench_train_unfused.json (CUDA: LibTorch's own AdamW step),
-# pretrain_summary.json, pretrain_log.jsonl, loss.svg, checkpoint_check.json.
+# pretrain_summary.json, pretrain_log.jsonl, loss.svg, checkpoint_check.json,
+# finetune_check.json (finetune's summary, then check_downstream.py's line).
 # Environment: PYTHON (a python3 with torch; default python3), JOBS (default nproc), STEPS
 # (pretrain steps, default 300), BATCH (default 64).
 set -uo pipefail
@@ -34,11 +37,13 @@ ok() { RESULT[$1]=$2; echo "gpu_check: $1: $2"; }
 if ((DRY)); then
   # This machine's CPU and Debian's LibTorch: the same steps, scaled down.
   DEVICE=cpu PRESET=tiny BATCH=${BATCH:-8} STEPS=${STEPS:-20} BENCH_STEPS=6 WARM=2 WORKERS=2
+  FT_BATCH=4 FT_STEPS=10
   THREADS=${THREADS:-2} BUILD_DIR=build-trainer-only NICE="nice -n 10"
   TORCH_PREFIX="" NCCL_INC="" EXTRA=()
   [[ "$PYTHON" == python3 ]] && PYTHON=/usr/bin/python3
 else
   DEVICE=cuda PRESET=base BATCH=${BATCH:-64} STEPS=${STEPS:-300} BENCH_STEPS=40 WARM=10
+  FT_BATCH=16 FT_STEPS=60
   WORKERS=$(($(nproc) - 1)) THREADS=4 BUILD_DIR=build-gpu NICE=""
   TORCH_PREFIX=$("$PYTHON" -c 'import torch; print(torch.utils.cmake_prefix_path)')
   # pip's torch links NCCL from the nvidia-nccl package, whose header it does not ship.
@@ -70,10 +75,12 @@ cmake -S . -B "$BUILD_DIR" "${GENERATOR[@]}" -DCMAKE_BUILD_TYPE=Release -DPAIRCA
 rc=$?
 grep -E "^-- paircast|Torch|CUDA|Error|error" "$TMPD/configure.txt" | head -20
 if ((rc)); then tail -30 "$TMPD/configure.txt"; ok build "configure failed"; exit 1; fi
-$NICE cmake --build "$BUILD_DIR" -j "$JOBS" --target pretrain model_info bench_train gpu_tests 2>&1 | tail -15
-[[ -x "$BUILD_DIR/tools/pretrain" && -x "$BUILD_DIR/tests/gpu_tests" ]] || { ok build "failed"; exit 1; }
+$NICE cmake --build "$BUILD_DIR" -j "$JOBS" --target pretrain finetune model_info bench_train gpu_tests 2>&1 | tail -15
+[[ -x "$BUILD_DIR/tools/pretrain" && -x "$BUILD_DIR/tools/finetune" && -x "$BUILD_DIR/tests/gpu_tests" ]] || { ok build "failed"; exit 1; }
 ok build "$((SECONDS - t0)) s"
-ldd "$BUILD_DIR/tools/pretrain" | grep -E -i "embree|assimp|OpenImageIO|archive" && ok render_libs "LINKED (should not be)" || ok render_libs "none linked"
+ldd "$BUILD_DIR/tools/pretrain" "$BUILD_DIR/tools/finetune" |
+  grep -E -i "embree|assimp|OpenImageIO|archive" && ok render_libs "LINKED (should not be)" ||
+  ok render_libs "none linked"
 
 stage "tests (gpu_tests: SDPA forward, fused AdamW, train step and resume, NCCL group of one)"
 timeout 300 "$BUILD_DIR/tests/gpu_tests" 2>&1 | grep -E "^\[ *(OK|FAILED|SKIPPED|PASSED|RUN) *\]|Failure|error|skip" | tail -30
@@ -125,6 +132,24 @@ stage "the checkpoint in Python: torch.load, then strictly into the official Cro
   tee "$OUT/checkpoint_check.json"
 ok checkpoint "$(tail -1 "$OUT/checkpoint_check.json")"
 
+stage "finetune: flow, DPT head, 128 x 128, $PRESET from random weights on $DEVICE; then naver/croco's classes"
+FT=$TMPD/gpu_check_ft
+rm -rf "$FT"
+[[ -d "$G/ft-train" ]] || echo "gpu_check: .gpu/ft-train is missing: run scripts/gpu_prepare.sh again"
+timeout 240 "$BUILD_DIR/tools/finetune" --task flow --preset "$PRESET" --img-size 128 \
+  --data "$G/ft-train/*.tar" --eval-data "$G/ft-eval/*.tar" --batch-size "$FT_BATCH" \
+  --max-steps "$FT_STEPS" --epochs 100 --device "$DEVICE" --amp bf16 --out "$FT" --quiet |
+  tail -1 | tee "$OUT/finetune_check.json"
+# --predict on a held-out pair, against naver/croco's model with the same weights and images.
+mkdir -p "$FT/pair" && tar -xf "$G/ft-eval/pairs-000000.tar" -C "$FT/pair"
+one=$(ls "$FT/pair"/*.1.jpg | head -1)
+"$BUILD_DIR/tools/finetune" --predict --checkpoint "$FT/checkpoint-last.pth" --image1 "$one" \
+  --image2 "${one%.1.jpg}.2.jpg" --out "$FT/pair/ours.flo" > /dev/null
+"$PYTHON" scripts/check_downstream.py "$FT/checkpoint-last.pth" --croco-dir "$G/croco" \
+  --image1 "$one" --image2 "${one%.1.jpg}.2.jpg" --ours "$FT/pair/ours.flo" |
+  tee -a "$OUT/finetune_check.json"
+ok finetune "$(tail -1 "$OUT/finetune_check.json")"
+
 stage "the multi-process code path on one device (PAIRCAST_PROCESS_GROUP=1, WORLD_SIZE=1)"
 PAIRCAST_PROCESS_GROUP=1 WORLD_SIZE=1 RANK=0 LOCAL_RANK=0 MASTER_ADDR=127.0.0.1 MASTER_PORT=29517 \
   timeout 120 "$BUILD_DIR/tools/pretrain" --data "$G/shards/*.tar" --preset "$PRESET" \
@@ -133,6 +158,6 @@ PAIRCAST_PROCESS_GROUP=1 WORLD_SIZE=1 RANK=0 LOCAL_RANK=0 MASTER_ADDR=127.0.0.1 
 ok process_group "rc ${PIPESTATUS[0]}"
 
 stage "summary"
-for k in build render_libs tests bench_train bench_unfused pretrain checkpoint process_group; do
+for k in build render_libs tests bench_train bench_unfused pretrain checkpoint finetune process_group; do
   printf '%-14s %s\n' "$k" "${RESULT[$k]:-not run}"
 done

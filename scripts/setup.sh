@@ -24,6 +24,7 @@ PACKAGES=(
   libgtest-dev libtorch-dev libopenblas0-openmp libgloo-dev
   nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev libjpeg-dev zlib1g-dev
   libboost-dev  # Boost.Math: the t quantiles of the sweep's confidence intervals
+  libopenexr-dev  # OpenEXR's C library: EXR depth in the trainer-only build (util/exr_codec.h)
   slurmctld slurmd slurm-client  # the engine tests (tests/launch/) run a one-node Slurm cluster
   # The Python package (python/): pybind11, numpy, and its tests and pip install.
   python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-setuptools

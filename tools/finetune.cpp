@@ -13,7 +13,7 @@ namespace {
 struct Flags {
   FinetuneConfig c;
   std::string preset = "tiny";
-  int imgSize = 224;
+  int imgSize = 224, patchSize = 16;
   bool quiet = false, predict = false, evaluate = false, noJitter = false;
   std::string checkpoint, image1, image2, out;
 };
@@ -42,6 +42,9 @@ void addTrainingFlags(CLI::App& app, Flags& f) {
   app.add_option("--preset", f.preset, "tiny, small or base")
       ->check(CLI::IsMember({"tiny", "small", "base"}));
   app.add_option("--img-size", f.imgSize, "Training crop size; prediction tiles by it");
+  app.add_option("--patch-size", f.patchSize,
+                 "ViT patch size (16; 8 keeps 64 patches at --img-size 64, with --head linear)")
+      ->check(CLI::Range(1, 64));
   addLoopFlags(app, t);
   app.add_flag("--no-jitter", f.noJitter, "No colour jitter");
   app.add_flag("--quiet", f.quiet, "No progress lines");
@@ -66,6 +69,7 @@ int train(Flags& f) {
   c.colorJitter = !f.noJitter;
   c.model.croco = presetConfig(f.preset);
   c.model.croco.img_size = f.imgSize;
+  c.model.croco.patch_size = f.patchSize;
   if (c.model.head.empty()) c.model.head = c.model.task == "pose" ? "pose" : "dpt";
   if (!f.quiet) logLaunch("finetune", launchRole(processEnvironment()).describe());
   std::printf("%s\n", runFinetune(c).dump().c_str());

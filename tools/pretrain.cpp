@@ -25,6 +25,9 @@ int main(int argc, char** argv) {
                  "croco (complete view 1 with view 2) or mae (view 1 alone: no reference)");
   app.add_option("--decoder", decoder, "cross or cat")->check(CLI::IsMember({"cross", "cat"}));
   app.add_option("--img-size", imgSize, "Training crop size (224 as the paper)");
+  int patchSize = 16;
+  app.add_option("--patch-size", patchSize, "ViT patch size (16 as the paper)")
+      ->check(CLI::Range(1, 64));
   addLoopFlags(app, c);
   app.add_option("--accum-iter", c.accumIter, "Iterations per optimizer step")
       ->check(CLI::Range(1, 4096));
@@ -47,6 +50,7 @@ int main(int argc, char** argv) {
     c.model = presetConfig(preset);
     c.model.decoder = decoder;
     c.model.img_size = imgSize;
+    c.model.patch_size = patchSize;
     c.progress = !quiet;
     if (!quiet) logLaunch("pretrain", launchRole(processEnvironment()).describe());
     const nlohmann::json summary = runPretrain(c);

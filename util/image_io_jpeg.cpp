@@ -1,7 +1,8 @@
 // util/image_io.h for the trainer-only build (PAIRCAST_WITH_RENDER=OFF), without OpenImageIO:
 // JPEG through libjpeg-turbo (decoded here, encoded by util/jpeg_encoder.cpp as in the full
-// build), PNG written with stored (uncompressed) deflate blocks, which needs no zlib. EXR and PNG
-// decoding need the full build and say so.
+// build), PNG written with stored (uncompressed) deflate blocks, which needs no zlib, and float
+// maps as EXR through OpenEXR's C library (util/exr_codec.h) where it was found. PNG decoding and
+// half-float EXR need the full build and say so.
 #include <algorithm>
 #include <csetjmp>
 #include <cstdint>
@@ -13,6 +14,9 @@
 
 #include "util/atomic_file.h"
 #include "util/error.h"
+#ifdef PAIRCAST_HAVE_OPENEXR_CORE
+#include "util/exr_codec.h"
+#endif
 #include "util/image_io.h"
 #include "util/jpeg_encoder.h"
 #include "util/jpeg_errors.h"
@@ -24,6 +28,9 @@ namespace fs = std::filesystem;
 
 const char* const kFullBuild =
     "needs the full build (this one was configured with PAIRCAST_WITH_RENDER=OFF)";
+[[maybe_unused]] const char* const kNoOpenExr =
+    "needs OpenEXR (libopenexr-dev) or the full build: this trainer-only build was configured "
+    "without it";
 
 // Decodes into a malloc'd buffer (no C++ object lives across setjmp). Returns an empty string on
 // success, else libjpeg's message.
@@ -145,13 +152,26 @@ std::vector<unsigned char> encodeImage(const Image8& image, std::string_view for
   return encodeJpeg(image, jpegQuality);
 }
 
+#ifdef PAIRCAST_HAVE_OPENEXR_CORE
+std::vector<unsigned char> encodeExr(const ImageF& image, bool half) {
+  if (half) throw Error("image.exr", std::string("half-float EXR ") + kFullBuild);
+  return encodeExrCore(image);
+}
+
+void writeExr(const std::string& path, const ImageF& image, bool half) {
+  const std::vector<unsigned char> bytes = encodeExr(image, half);
+  writeFileAtomic(path,
+                  std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+#else
 std::vector<unsigned char> encodeExr(const ImageF&, bool) {
-  throw Error("image.exr", std::string("EXR ") + kFullBuild);
+  throw Error("image.exr", std::string("EXR ") + kNoOpenExr);
 }
 
 void writeExr(const std::string& path, const ImageF&, bool) {
-  throw Error(path, std::string("EXR ") + kFullBuild);
+  throw Error(path, std::string("EXR ") + kNoOpenExr);
 }
+#endif
 
 Image8 decodeImage8(const void* data, size_t size, const std::string& name, int channels) {
   const auto* p = static_cast<const unsigned char*>(data);
@@ -177,12 +197,27 @@ Image8 readImage8(const std::string& path, int channels) {
   return decodeImage8(bytes.data(), bytes.size(), path, channels);
 }
 
-ImageF decodeImageF(const void*, size_t, const std::string& name) {
-  throw Error(name, std::string("float images (EXR) ") + kFullBuild);
+#ifdef PAIRCAST_HAVE_OPENEXR_CORE
+ImageF decodeImageF(const void* data, size_t size, const std::string& name) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  if (size < 4 || p[0] != 0x76 || p[1] != 0x2f || p[2] != 0x31 || p[3] != 0x01)
+    throw Error(name, std::string("not an EXR; other float formats ") + kFullBuild);
+  return decodeExrCore(data, size, name);
 }
 
 ImageF readImageF(const std::string& path) {
-  throw Error(path, std::string("float images (EXR) ") + kFullBuild);
+  if (!fs::exists(path)) throw Error(path, "no such file");
+  const std::string bytes = readFile(path);
+  return decodeImageF(bytes.data(), bytes.size(), path);
 }
+#else
+ImageF decodeImageF(const void*, size_t, const std::string& name) {
+  throw Error(name, std::string("float images (EXR) ") + kNoOpenExr);
+}
+
+ImageF readImageF(const std::string& path) {
+  throw Error(path, std::string("float images (EXR) ") + kNoOpenExr);
+}
+#endif
 
 }  // namespace paircast

@@ -191,6 +191,20 @@ TEST(FinetuneRun, RefusesCheckpointsOfAnotherTaskOrModel) {
   init.init = pre;
   EXPECT_ERROR_CONTAINS(runFinetune(init), "small.pth",
                         "checkpoint of another model: enc_embed_dim 384, not 192");
+  // A tiny model with 8-pixel patches (pretrain --patch-size 8) needs finetune --patch-size 8.
+  CroCoConfig fine = presetConfig("tiny");
+  fine.img_size = 64;
+  fine.patch_size = 8;
+  const std::string pre8 = testing::scratchDir("pre8") + "/tiny8.pth";
+  CroCoNet net8(fine);
+  saveCheckpoint(pre8, net8, 0);
+  init.init = pre8;
+  EXPECT_ERROR_CONTAINS(runFinetune(init), "tiny8.pth", "patch_size 8, not 16",
+                        "--patch-size it was trained with");
+  init.model.croco.patch_size = 8;
+  init.train.maxSteps = 1;
+  init.evalData.clear();
+  EXPECT_EQ(runFinetune(init)["initialised"], "encoder+decoder");
 }
 
 TEST(FinetuneRun, MaeInitKeepsTheSeedsRandomDecoderAndCrossViewCopiesIt) {
