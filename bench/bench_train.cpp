@@ -6,6 +6,7 @@
 // --finetune times finetune's flow step instead (DPT head, LaplacianLossBounded, data included)
 // beside naver/croco's CroCo-Flow step (CroCoDownstreamBinocular with PixelwiseTaskWithDPT,
 // model only), same preset, size, batch and threads.
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -39,29 +40,37 @@ struct Options {
   double peakTflops = 800.0;
 };
 
-// The train_s= of the SUMMARY line a timing script prints; 0 when it printed none.
-double summarySeconds(const std::string& cmd) {
+// The SUMMARY line a timing script prints ("" when it printed none).
+std::string summaryLine(const std::string& cmd) {
   std::string line;
   if (FILE* p = popen((cmd + " 2>&1 | grep ^SUMMARY").c_str(), "r")) {
     char buf[1024];
     while (fgets(buf, sizeof buf, p)) line += buf;
     pclose(p);
   }
-  const size_t at = line.find("train_s=");
-  return at == std::string::npos ? 0 : std::stod(line.substr(at + 8));
+  return line;
+}
+
+// The number after `key`= in a SUMMARY line; 0 when it has none.
+double summaryValue(const std::string& line, const std::string& key) {
+  const size_t at = line.find(" " + key + "=");
+  return at == std::string::npos ? 0 : std::stod(line.substr(at + key.size() + 2));
+}
+
+double summarySeconds(const std::string& cmd) {
+  return summaryValue(summaryLine(cmd), "train_s");
 }
 
 // The official step's seconds per iteration, timed by tests/model/croco_ref.py on the same
 // device, batch and thread count; 0 when it could not run.
 double officialTrainSeconds(const Options& o, const std::string& preset) {
   if (o.crocoDir.empty()) return 0;
-  const std::string cmd = o.python + " " + std::string(PAIRCAST_SOURCE_DIR) +
-                          "/tests/model/croco_ref.py bench --preset " + preset + " --batch " +
-                          std::to_string(o.batch) + " --threads " + std::to_string(o.threads) +
-                          " --device " + o.device + " --amp " +
-                          (o.device == "cuda" ? o.amp : "none") + " --optimizer --repeat " +
-                          std::to_string(o.device == "cuda" ? 20 : 3) + " --croco-dir '" +
-                          o.crocoDir + "'";
+  const std::string cmd =
+      o.python + " " + std::string(PAIRCAST_SOURCE_DIR) +
+      "/tests/model/croco_ref.py bench --preset " + preset + " --batch " + std::to_string(o.batch) +
+      " --threads " + std::to_string(o.threads) + " --device " + o.device + " --amp " +
+      (o.device == "cuda" ? o.amp : "none") + " --optimizer --repeat " +
+      std::to_string(o.device == "cuda" ? 20 : 3) + " --croco-dir '" + o.crocoDir + "'";
   return summarySeconds(cmd);
 }
 
@@ -84,18 +93,34 @@ std::pair<double, double> steadyRate(const std::string& out, int batch, int skip
   return {n * batch / seconds, wait / seconds};
 }
 
-// Seconds per step of naver/croco's CroCo-Flow model (bench/croco_flow_step.py); 0 when it could
-// not run.
-double officialFlowSeconds(const Options& o, const std::string& preset,
-                           const std::vector<int>& hooks) {
-  if (o.crocoDir.empty()) return 0;
-  std::string cmd = o.python + " " + std::string(PAIRCAST_SOURCE_DIR) +
-                    "/bench/croco_flow_step.py --preset " + preset + " --batch " +
-                    std::to_string(o.batch) + " --threads " + std::to_string(o.threads) +
-                    " --img-size " + std::to_string(o.imgSize) + " --croco-dir '" + o.crocoDir +
-                    "' --hooks";
+// glibc's settings that keep freed memory (util/heap.h), for a Python process.
+const char* const kKeepMemoryTunables =
+    "GLIBC_TUNABLES=glibc.malloc.mmap_max=0:glibc.malloc.trim_threshold=18446744073709551615 ";
+
+struct StepFigures {
+  double seconds = 0;      // per step; 0 when it could not run
+  double minorFaults = 0;  // per step
+};
+
+// naver/croco's CroCo-Flow step (bench/croco_flow_step.py), as Python runs it, or with glibc
+// keeping freed memory as finetune does (`keepMemory`).
+StepFigures officialFlowStep(const Options& o, const std::string& preset,
+                             const std::vector<int>& hooks, bool keepMemory) {
+  if (o.crocoDir.empty()) return {};
+  std::string cmd = (keepMemory ? kKeepMemoryTunables : "") + o.python + " " +
+                    std::string(PAIRCAST_SOURCE_DIR) + "/bench/croco_flow_step.py --preset " +
+                    preset + " --batch " + std::to_string(o.batch) + " --threads " +
+                    std::to_string(o.threads) + " --img-size " + std::to_string(o.imgSize) +
+                    " --croco-dir '" + o.crocoDir + "' --hooks";
   for (int h : hooks) cmd += " " + std::to_string(h);
-  return summarySeconds(cmd);
+  const std::string line = summaryLine(cmd);
+  return {summaryValue(line, "train_s"), summaryValue(line, "minflt_per_step")};
+}
+
+long minorFaults() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_minflt;
 }
 
 #if PAIRCAST_WITH_FINETUNE
@@ -116,18 +141,37 @@ nlohmann::json finetuneRows(const Options& o, const std::vector<std::string>& sh
     c.train.device = o.device;
     c.train.amp = o.amp;
     c.train.progress = false;
+    const long faults0 = minorFaults();
     const nlohmann::json s = runFinetune(c);
+    const double faults = static_cast<double>(minorFaults() - faults0) / o.steps;
     auto [pps, wait] = steadyRate(c.train.out, o.batch, o.warmupSteps);
-    std::printf("%-6s finetune flow (dpt) %8.2f pairs/s  data-wait %5.1f%%\n", preset.c_str(), pps,
-                100 * wait);
-    nlohmann::json row = {{"preset", preset}, {"task", "flow"}, {"head", "dpt"},
-                          {"pairs_per_s", pps}, {"data_wait", wait}};
-    const double off = officialFlowSeconds(o, preset, s["hooks"].get<std::vector<int>>());
-    if (off > 0) {
-      std::printf("%-6s official CroCo-Flow train step (model only): %8.2f pairs/s -> ours %.2fx\n",
-                  preset.c_str(), o.batch / off, pps / (o.batch / off));
-      row["official_pairs_per_s"] = o.batch / off;
-      row["ratio"] = pps / (o.batch / off);
+    std::printf(
+        "%-6s finetune flow (dpt) %8.2f pairs/s  data-wait %5.1f%%  %9.0f minor faults/step\n",
+        preset.c_str(), pps, 100 * wait, faults);
+    nlohmann::json row = {{"preset", preset},  {"task", "flow"},
+                          {"head", "dpt"},     {"pairs_per_s", pps},
+                          {"data_wait", wait}, {"minor_faults_per_step", faults}};
+    const auto hooks = s["hooks"].get<std::vector<int>>();
+    const StepFigures off = officialFlowStep(o, preset, hooks, false);
+    if (off.seconds > 0) {
+      const StepFigures kept = officialFlowStep(o, preset, hooks, true);
+      std::printf(
+          "%-6s official CroCo-Flow train step (model only): %8.2f pairs/s  %9.0f minor "
+          "faults/step -> ours %.2fx\n",
+          preset.c_str(), o.batch / off.seconds, off.minorFaults, pps / (o.batch / off.seconds));
+      row["official_pairs_per_s"] = o.batch / off.seconds;
+      row["official_minor_faults_per_step"] = off.minorFaults;
+      row["ratio"] = pps / (o.batch / off.seconds);
+      if (kept.seconds > 0) {
+        std::printf(
+            "%-6s the same, glibc keeping freed memory as ours: %8.2f pairs/s  %9.0f minor "
+            "faults/step -> ours %.2fx\n",
+            preset.c_str(), o.batch / kept.seconds, kept.minorFaults,
+            pps / (o.batch / kept.seconds));
+        row["official_kept_memory_pairs_per_s"] = o.batch / kept.seconds;
+        row["official_kept_memory_minor_faults_per_step"] = kept.minorFaults;
+        row["ratio_kept_memory"] = pps / (o.batch / kept.seconds);
+      }
     } else if (!o.crocoDir.empty()) {
       std::printf("%-6s official CroCo-Flow step did not run (%s with torch, --croco-dir)\n",
                   preset.c_str(), o.python.c_str());
@@ -162,8 +206,9 @@ int main(int argc, char** argv) {
                  "A checkout of naver/croco, to time its train step alongside");
   app.add_option("--python", o.python, "The Python with torch that runs the official step");
   app.add_flag("!--no-live", o.live, "Skip the live-rendering runs");
-  app.add_flag("--finetune", o.finetune,
-               "Time finetune's flow step (DPT head) instead, beside naver/croco's CroCo-Flow step");
+  app.add_flag(
+      "--finetune", o.finetune,
+      "Time finetune's flow step (DPT head) instead, beside naver/croco's CroCo-Flow step");
   CLI11_PARSE(app, argc, argv);
   try {
     torch::set_num_threads(o.threads);

@@ -5,10 +5,12 @@ weight decay 0.05 but on biases and 1-D parameters), from a checkout of naver/cr
 
   croco_flow_step.py --croco-dir DIR --preset tiny --img-size 224 --batch 8 --threads 2 \
       --hooks 5 5 6 7
-Prints one line: SUMMARY croco_flow_step ... train_s=<median seconds per step>.
+Prints one line: SUMMARY croco_flow_step ... train_s=<median seconds per step>
+minflt_per_step=<minor page faults per timed step>.
 """
 import argparse
 import os
+import resource
 import sys
 import time
 
@@ -64,13 +66,16 @@ def main():
 
     step()
     times = []
+    faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
     for _ in range(a.repeat):
         t = time.perf_counter()
         step()
         times.append(time.perf_counter() - t)
+    faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) / a.repeat
     times.sort()
-    print("SUMMARY croco_flow_step preset=%s batch=%d threads=%d img=%d torch=%s train_s=%.4f"
-          % (a.preset, a.batch, a.threads, s, torch.__version__, times[len(times) // 2]))
+    print("SUMMARY croco_flow_step preset=%s batch=%d threads=%d img=%d torch=%s train_s=%.4f "
+          "minflt_per_step=%d" % (a.preset, a.batch, a.threads, s, torch.__version__,
+                                  times[len(times) // 2], faults))
     return 0
 
 

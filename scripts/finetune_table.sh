@@ -4,7 +4,7 @@
 # (encoder and decoder), for flow, depth and relative pose, over several seeds, with paired 95 %
 # intervals, and each against the task's trivial baseline.
 #
-#   scripts/finetune_table.sh OUT [SEEDS]     (default 3 seeds; about 30 minutes on 2 cores)
+#   scripts/finetune_table.sh OUT [SEEDS]     (default 3 seeds; about 20 minutes on 2 cores)
 #
 # Steps (each skipped when its output exists, so a killed run continues): pairs with flow and
 # depth from the shipped room and apartment (training) and studio (held out); pre-training of the

@@ -20,6 +20,7 @@
 #include "trainer/grad_scaler.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
+#include "util/heap.h"
 #include "util/plot.h"
 #include "util/progress_line.h"
 #include "util/timer.h"
@@ -465,6 +466,8 @@ class TrainingLoop {
 }  // namespace
 
 nlohmann::json runTraining(const TrainConfig& c, TrainingTask& task, Distributed* dist) {
+  // Each step's large activations reuse the last step's memory instead of fresh pages.
+  if (c.device == "cpu") keepFreedMemoryForReuse();
   TrainingLoop run(c, task, dist);
   run.buildModelAndOptimizer();
   run.resumeOrStartLog();
