@@ -124,54 +124,65 @@ long minorFaults() {
 }
 
 #if PAIRCAST_WITH_FINETUNE
-// finetune's flow step (DPT head) for each preset, beside the official one.
+// Prints and adds to `row` the official step's figures, under `label`, its keys `prefix`... and
+// `ratioKey` (ours over it).
+void addOfficialColumns(nlohmann::json& row, const std::string& preset, const StepFigures& off,
+                        double batch, double ours, const char* label, const std::string& prefix,
+                        const char* ratioKey) {
+  const double pps = batch / off.seconds;
+  std::printf("%-6s %s: %8.2f pairs/s  %9.0f minor faults/step -> ours %.2fx\n", preset.c_str(),
+              label, pps, off.minorFaults, ours / pps);
+  row[prefix + "pairs_per_s"] = pps;
+  row[prefix + "minor_faults_per_step"] = off.minorFaults;
+  row[ratioKey] = ours / pps;
+}
+
+// finetune's flow step (DPT head) on `preset`: pairs/s, data wait and minor faults per step.
+nlohmann::json timeFinetune(const Options& o, const std::vector<std::string>& shards,
+                            const std::string& tmp, const std::string& preset,
+                            std::vector<int>* hooks) {
+  FinetuneConfig c;
+  c.data = shards;
+  c.model.croco = presetConfig(preset);
+  c.model.croco.img_size = o.imgSize;
+  c.train.batchSize = o.batch;
+  c.train.maxSteps = o.steps;
+  c.train.epochs = 100;
+  c.train.saveEvery = 1000000;
+  c.train.out = tmp + "/finetune-" + preset;
+  c.train.device = o.device;
+  c.train.amp = o.amp;
+  c.train.progress = false;
+  const long faults0 = minorFaults();
+  const nlohmann::json s = runFinetune(c);
+  const double faults = static_cast<double>(minorFaults() - faults0) / o.steps;
+  auto [pps, wait] = steadyRate(c.train.out, o.batch, o.warmupSteps);
+  std::printf(
+      "%-6s finetune flow (dpt) %8.2f pairs/s  data-wait %5.1f%%  %9.0f minor faults/step\n",
+      preset.c_str(), pps, 100 * wait, faults);
+  *hooks = s["hooks"].get<std::vector<int>>();
+  return {{"preset", preset},   {"task", "flow"},    {"head", "dpt"},
+          {"pairs_per_s", pps}, {"data_wait", wait}, {"minor_faults_per_step", faults}};
+}
+
+// finetune's flow step (DPT head) for each preset, beside the official one as Python runs it
+// and with glibc keeping freed memory as ours does.
 nlohmann::json finetuneRows(const Options& o, const std::vector<std::string>& shards,
                             const std::string& tmp) {
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& preset : o.presets) {
-    FinetuneConfig c;
-    c.data = shards;
-    c.model.croco = presetConfig(preset);
-    c.model.croco.img_size = o.imgSize;
-    c.train.batchSize = o.batch;
-    c.train.maxSteps = o.steps;
-    c.train.epochs = 100;
-    c.train.saveEvery = 1000000;
-    c.train.out = tmp + "/finetune-" + preset;
-    c.train.device = o.device;
-    c.train.amp = o.amp;
-    c.train.progress = false;
-    const long faults0 = minorFaults();
-    const nlohmann::json s = runFinetune(c);
-    const double faults = static_cast<double>(minorFaults() - faults0) / o.steps;
-    auto [pps, wait] = steadyRate(c.train.out, o.batch, o.warmupSteps);
-    std::printf(
-        "%-6s finetune flow (dpt) %8.2f pairs/s  data-wait %5.1f%%  %9.0f minor faults/step\n",
-        preset.c_str(), pps, 100 * wait, faults);
-    nlohmann::json row = {{"preset", preset},  {"task", "flow"},
-                          {"head", "dpt"},     {"pairs_per_s", pps},
-                          {"data_wait", wait}, {"minor_faults_per_step", faults}};
-    const auto hooks = s["hooks"].get<std::vector<int>>();
+    std::vector<int> hooks;
+    nlohmann::json row = timeFinetune(o, shards, tmp, preset, &hooks);
+    const double ours = row["pairs_per_s"].get<double>();
     const StepFigures off = officialFlowStep(o, preset, hooks, false);
     if (off.seconds > 0) {
+      addOfficialColumns(row, preset, off, o.batch, ours,
+                         "official CroCo-Flow train step (model only)", "official_", "ratio");
       const StepFigures kept = officialFlowStep(o, preset, hooks, true);
-      std::printf(
-          "%-6s official CroCo-Flow train step (model only): %8.2f pairs/s  %9.0f minor "
-          "faults/step -> ours %.2fx\n",
-          preset.c_str(), o.batch / off.seconds, off.minorFaults, pps / (o.batch / off.seconds));
-      row["official_pairs_per_s"] = o.batch / off.seconds;
-      row["official_minor_faults_per_step"] = off.minorFaults;
-      row["ratio"] = pps / (o.batch / off.seconds);
-      if (kept.seconds > 0) {
-        std::printf(
-            "%-6s the same, glibc keeping freed memory as ours: %8.2f pairs/s  %9.0f minor "
-            "faults/step -> ours %.2fx\n",
-            preset.c_str(), o.batch / kept.seconds, kept.minorFaults,
-            pps / (o.batch / kept.seconds));
-        row["official_kept_memory_pairs_per_s"] = o.batch / kept.seconds;
-        row["official_kept_memory_minor_faults_per_step"] = kept.minorFaults;
-        row["ratio_kept_memory"] = pps / (o.batch / kept.seconds);
-      }
+      if (kept.seconds > 0)
+        addOfficialColumns(row, preset, kept, o.batch, ours,
+                           "the same, glibc keeping freed memory as ours", "official_kept_memory_",
+                           "ratio_kept_memory");
     } else if (!o.crocoDir.empty()) {
       std::printf("%-6s official CroCo-Flow step did not run (%s with torch, --croco-dir)\n",
                   preset.c_str(), o.python.c_str());

@@ -43,7 +43,8 @@ void addTrainingFlags(CLI::App& app, Flags& f) {
       ->check(CLI::IsMember({"tiny", "small", "base"}));
   app.add_option("--img-size", f.imgSize, "Training crop size; prediction tiles by it");
   app.add_option("--patch-size", f.patchSize,
-                 "ViT patch size (16; 8 keeps 64 patches at --img-size 64, with --head linear)")
+                 "ViT patch size (16; 8 gives 64 patches at --img-size 64, for --head linear or "
+                 "pose: the DPT head needs 16)")
       ->check(CLI::Range(1, 64));
   addLoopFlags(app, t);
   app.add_flag("--no-jitter", f.noJitter, "No colour jitter");
