@@ -4,8 +4,6 @@
 
 #include <algorithm>
 #include <cstring>
-#include <type_traits>
-#include <utility>
 
 #include "util/error.h"
 
@@ -82,32 +80,101 @@ bool isRgb(const exr_attr_chlist_t* list) {
   return true;
 }
 
-// Lays each of the pipeline's channels out as float32 interleaved over `channels`, rows of
-// `width` pixels from `base`.
-template <typename Pipeline>
-void layOut(Pipeline& pipe, const float* base, int width, int channels, bool rgb) {
+// Where the pixels of a scanline part are: rows of `width` float32 pixels of `channels`
+// interleaved, from row `top` of the file; `linesPerChunk` rows to a chunk.
+struct Layout {
+  int width = 0, height = 0, channels = 0, top = 0, linesPerChunk = 1;
+  bool rgb = false;
+};
+
+// The two directions of OpenEXR's chunk pipeline, so that one loop serves both. `io` and `coding`
+// name what failed in the messages.
+struct Decoding {
+  using Pipeline = exr_decode_pipeline_t;
+  static constexpr const char* io = "read";
+  static constexpr const char* coding = "decode";
+  static exr_result_t chunk(exr_context_t c, int part, int y, exr_chunk_info_t* info) {
+    return exr_read_scanline_chunk_info(c, part, y, info);
+  }
+  static exr_result_t start(exr_context_t c, int part, const exr_chunk_info_t* info, Pipeline* p) {
+    return exr_decoding_initialize(c, part, info, p);
+  }
+  static exr_result_t update(exr_context_t c, int part, const exr_chunk_info_t* info, Pipeline* p) {
+    return exr_decoding_update(c, part, info, p);
+  }
+  static exr_result_t routines(exr_context_t c, int part, Pipeline* p) {
+    return exr_decoding_choose_default_routines(c, part, p);
+  }
+  static exr_result_t run(exr_context_t c, int part, Pipeline* p) {
+    return exr_decoding_run(c, part, p);
+  }
+  static void destroy(exr_context_t c, Pipeline* p) { exr_decoding_destroy(c, p); }
+  static void point(exr_coding_channel_info_t& ch, const float* first) {
+    ch.decode_to_ptr = reinterpret_cast<uint8_t*>(const_cast<float*>(first));
+  }
+};
+
+struct Encoding {
+  using Pipeline = exr_encode_pipeline_t;
+  static constexpr const char* io = "write";
+  static constexpr const char* coding = "encode";
+  static exr_result_t chunk(exr_context_t c, int part, int y, exr_chunk_info_t* info) {
+    return exr_write_scanline_chunk_info(c, part, y, info);
+  }
+  static exr_result_t start(exr_context_t c, int part, const exr_chunk_info_t* info, Pipeline* p) {
+    return exr_encoding_initialize(c, part, info, p);
+  }
+  static exr_result_t update(exr_context_t c, int part, const exr_chunk_info_t* info, Pipeline* p) {
+    return exr_encoding_update(c, part, info, p);
+  }
+  static exr_result_t routines(exr_context_t c, int part, Pipeline* p) {
+    return exr_encoding_choose_default_routines(c, part, p);
+  }
+  static exr_result_t run(exr_context_t c, int part, Pipeline* p) {
+    return exr_encoding_run(c, part, p);
+  }
+  static void destroy(exr_context_t c, Pipeline* p) { exr_encoding_destroy(c, p); }
+  static void point(exr_coding_channel_info_t& ch, const float* first) {
+    ch.encode_from_ptr = reinterpret_cast<const uint8_t*>(first);
+  }
+};
+
+// Lays each of the pipeline's channels out as float32 interleaved, rows from `rows`.
+template <typename Coding>
+void layOut(typename Coding::Pipeline& pipe, const float* rows, const Layout& l) {
   for (int c = 0; c < pipe.channel_count; ++c) {
     exr_coding_channel_info_t& ch = pipe.channels[c];
-    const float* first = base + slotOf(ch.channel_name, c, channels, rgb);
-    if constexpr (std::is_same_v<Pipeline, exr_decode_pipeline_t>)
-      ch.decode_to_ptr = reinterpret_cast<uint8_t*>(const_cast<float*>(first));
-    else
-      ch.encode_from_ptr = reinterpret_cast<const uint8_t*>(first);
-    ch.user_pixel_stride = static_cast<int32_t>(sizeof(float) * channels);
-    ch.user_line_stride = static_cast<int32_t>(sizeof(float) * channels * width);
+    Coding::point(ch, rows + slotOf(ch.channel_name, c, l.channels, l.rgb));
+    ch.user_pixel_stride = static_cast<int32_t>(sizeof(float) * l.channels);
+    ch.user_line_stride = static_cast<int32_t>(sizeof(float) * l.channels * l.width);
     ch.user_bytes_per_element = sizeof(float);
     ch.user_data_type = EXR_PIXEL_FLOAT;
   }
 }
 
-struct DecodeHeader {
-  int width = 0, height = 0, channels = 0, top = 0, linesPerChunk = 1;
-  bool rgb = false;
-};
+// Decodes every chunk of part `part` into `pixels`, or encodes `pixels` into it (its header
+// written), as `l` lays them out.
+template <typename Coding>
+void codeChunks(exr_context_t c, int part, const Layout& l, const float* pixels,
+                const std::string& name) {
+  typename Coding::Pipeline pipe{};
+  struct Destroy {
+    exr_context_t c;
+    typename Coding::Pipeline* p;
+    ~Destroy() { Coding::destroy(c, p); }
+  } destroy{c, &pipe};
+  for (int y = 0; y < l.height; y += l.linesPerChunk) {
+    exr_chunk_info_t chunk;
+    check(Coding::chunk(c, part, l.top + y, &chunk), name, Coding::io);
+    check(y == 0 ? Coding::start(c, part, &chunk, &pipe) : Coding::update(c, part, &chunk, &pipe),
+          name, Coding::coding);
+    layOut<Coding>(pipe, pixels + static_cast<size_t>(y) * l.width * l.channels, l);
+    if (y == 0) check(Coding::routines(c, part, &pipe), name, Coding::coding);
+    check(Coding::run(c, part, &pipe), name, Coding::coding);
+  }
+}
 
-DecodeHeader readHeader(exr_context_t c, const std::string& name) {
-  int parts = 0;
-  check(exr_get_count(c, &parts), name, "read");
+Layout readLayout(exr_context_t c, const std::string& name) {
   exr_storage_t storage;
   check(exr_get_storage(c, 0, &storage), name, "read");
   if (storage != EXR_STORAGE_SCANLINE)
@@ -116,64 +183,18 @@ DecodeHeader readHeader(exr_context_t c, const std::string& name) {
   check(exr_get_data_window(c, 0, &window), name, "read");
   const exr_attr_chlist_t* list = nullptr;
   check(exr_get_channels(c, 0, &list), name, "read");
-  DecodeHeader h;
-  h.width = window.max.x - window.min.x + 1;
-  h.height = window.max.y - window.min.y + 1;
-  h.top = window.min.y;
-  h.channels = list->num_channels;
-  h.rgb = isRgb(list);
+  Layout l;
+  l.width = window.max.x - window.min.x + 1;
+  l.height = window.max.y - window.min.y + 1;
+  l.top = window.min.y;
+  l.channels = list->num_channels;
+  l.rgb = isRgb(list);
   for (int i = 0; i < list->num_channels; ++i)
     if (list->entries[i].x_sampling != 1 || list->entries[i].y_sampling != 1)
       throw Error(name, "subsampled EXR channels are not read here");
-  if (h.width <= 0 || h.height <= 0 || h.channels <= 0) throw Error(name, "empty EXR image");
-  check(exr_get_scanlines_per_chunk(c, 0, &h.linesPerChunk), name, "read");
-  return h;
-}
-
-// Decodes every chunk into `image`, whose size `h` gives.
-void decodeChunks(exr_context_t c, const DecodeHeader& h, ImageF& image, const std::string& name) {
-  exr_decode_pipeline_t pipe = EXR_DECODE_PIPELINE_INITIALIZER;
-  struct Destroy {
-    exr_context_t c;
-    exr_decode_pipeline_t* p;
-    ~Destroy() { exr_decoding_destroy(c, p); }
-  } destroy{c, &pipe};
-  for (int y = 0; y < h.height; y += h.linesPerChunk) {
-    exr_chunk_info_t chunk;
-    check(exr_read_scanline_chunk_info(c, 0, h.top + y, &chunk), name, "read");
-    if (y == 0)
-      check(exr_decoding_initialize(c, 0, &chunk, &pipe), name, "decode");
-    else
-      check(exr_decoding_update(c, 0, &chunk, &pipe), name, "decode");
-    layOut(pipe, image.data.data() + static_cast<size_t>(y) * h.width * h.channels, h.width,
-           h.channels, h.rgb);
-    if (y == 0) check(exr_decoding_choose_default_routines(c, 0, &pipe), name, "decode");
-    check(exr_decoding_run(c, 0, &pipe), name, "decode");
-  }
-}
-
-// Encodes `image` chunk by chunk into part `part`, whose header is written.
-void encodeChunks(exr_context_t c, int part, const ImageF& image, const std::string& name) {
-  int32_t lines = 1;
-  check(exr_get_scanlines_per_chunk(c, part, &lines), name, "write");
-  exr_encode_pipeline_t pipe = EXR_ENCODE_PIPELINE_INITIALIZER;
-  struct Destroy {
-    exr_context_t c;
-    exr_encode_pipeline_t* p;
-    ~Destroy() { exr_encoding_destroy(c, p); }
-  } destroy{c, &pipe};
-  for (int y = 0; y < image.height; y += lines) {
-    exr_chunk_info_t chunk;
-    check(exr_write_scanline_chunk_info(c, part, y, &chunk), name, "write");
-    if (y == 0)
-      check(exr_encoding_initialize(c, part, &chunk, &pipe), name, "encode");
-    else
-      check(exr_encoding_update(c, part, &chunk, &pipe), name, "encode");
-    layOut(pipe, image.data.data() + static_cast<size_t>(y) * image.width * image.channels,
-           image.width, image.channels, image.channels == 3);
-    if (y == 0) check(exr_encoding_choose_default_routines(c, part, &pipe), name, "encode");
-    check(exr_encoding_run(c, part, &pipe), name, "encode");
-  }
+  if (l.width <= 0 || l.height <= 0 || l.channels <= 0) throw Error(name, "empty EXR image");
+  check(exr_get_scanlines_per_chunk(c, 0, &l.linesPerChunk), name, "read");
+  return l;
 }
 
 }  // namespace
@@ -188,14 +209,13 @@ ImageF decodeExrCore(const void* data, size_t size, const std::string& name) {
   exrMessage.clear();
   Context ctx;
   check(exr_start_read(&ctx.c, name.c_str(), &init), name, "read");
-  const DecodeHeader h = readHeader(ctx.c, name);
+  const Layout l = readLayout(ctx.c, name);
   ImageF image;
-  image.width = h.width;
-  image.height = h.height;
-  image.channels = h.channels;
-  image.data.assign(static_cast<size_t>(h.width) * h.height * h.channels, 0.0f);
-
-  decodeChunks(ctx.c, h, image, name);
+  image.width = l.width;
+  image.height = l.height;
+  image.channels = l.channels;
+  image.data.assign(static_cast<size_t>(l.width) * l.height * l.channels, 0.0f);
+  codeChunks<Decoding>(ctx.c, 0, l, image.data.data(), name);
   return image;
 }
 
@@ -223,7 +243,13 @@ std::vector<unsigned char> encodeExrCore(const ImageF& image) {
     check(exr_add_channel(ctx.c, part, channel, EXR_PIXEL_FLOAT, EXR_PERCEPTUALLY_LINEAR, 1, 1),
           name, "write");
   check(exr_write_header(ctx.c), name, "write");
-  encodeChunks(ctx.c, part, image, name);
+  Layout l;
+  l.width = image.width;
+  l.height = image.height;
+  l.channels = image.channels;
+  l.rgb = rgb;
+  check(exr_get_scanlines_per_chunk(ctx.c, part, &l.linesPerChunk), name, "write");
+  codeChunks<Encoding>(ctx.c, part, l, image.data.data(), name);
   check(exr_finish(&ctx.c), name, "write");  // writes the chunk offsets
   return bytes;
 }
