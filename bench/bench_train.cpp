@@ -6,7 +6,6 @@
 // --finetune times finetune's flow step instead (DPT head, LaplacianLossBounded, data included)
 // beside naver/croco's CroCo-Flow step (CroCoDownstreamBinocular with PixelwiseTaskWithDPT,
 // model only), same preset, size, batch and threads.
-#include <sys/resource.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -19,6 +18,7 @@
 #include "model/flops.h"
 #include "trainer/trainer.h"
 #include "util/error.h"
+#include "util/heap.h"
 #if PAIRCAST_WITH_RENDER
 #include "dataset/generate_job.h"
 #endif
@@ -117,12 +117,6 @@ StepFigures officialFlowStep(const Options& o, const std::string& preset,
   return {summaryValue(line, "train_s"), summaryValue(line, "minflt_per_step")};
 }
 
-long minorFaults() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return u.ru_minflt;
-}
-
 #if PAIRCAST_WITH_FINETUNE
 // Prints and adds to `row` the official step's figures, under `label`, its keys `prefix`... and
 // `ratioKey` (ours over it).
@@ -153,9 +147,9 @@ nlohmann::json timeFinetune(const Options& o, const std::vector<std::string>& sh
   c.train.device = o.device;
   c.train.amp = o.amp;
   c.train.progress = false;
-  const long faults0 = minorFaults();
+  const long faults0 = minorPageFaults();
   const nlohmann::json s = runFinetune(c);
-  const double faults = static_cast<double>(minorFaults() - faults0) / o.steps;
+  const double faults = static_cast<double>(minorPageFaults() - faults0) / o.steps;
   auto [pps, wait] = steadyRate(c.train.out, o.batch, o.warmupSteps);
   std::printf(
       "%-6s finetune flow (dpt) %8.2f pairs/s  data-wait %5.1f%%  %9.0f minor faults/step\n",

@@ -2,27 +2,16 @@
 // decoded straight from the JPEGs, CroCo's colour jitter, normalisation and masks), in pairs/s
 // and pairs/s per worker thread. bench/bench_loader.py runs it beside the Python loaders; it
 // prints one JSON line, with the minor page faults per pair in the steady state.
-#include <sys/resource.h>
-
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
 #include "trainer/batch_loader.h"
 #include "trainer/pair_dataset.h"
+#include "util/heap.h"
 #include "util/timer.h"
 
 using namespace paircast;
-
-namespace {
-
-long minorFaults() {  // of the whole process, every thread
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return u.ru_minflt;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   std::vector<std::string> shards;
@@ -50,11 +39,12 @@ int main(int argc, char** argv) {
     c.epochs = 1 << 20;
     BatchLoader loader({{&ds, 1.0, "shards"}}, c, 0, 0, 1);
     for (int b = 0; b < 3; ++b) loader.get(b);  // the threads' start and the ring's first fill
-    const long faults = minorFaults();
+    const long faults = minorPageFaults();
     const auto start = SteadyClock::now();
     for (int b = 3; b < 3 + batches; ++b) loader.get(b);
     const double seconds = secondsSince(start);
-    const double faultsPerPair = static_cast<double>(minorFaults() - faults) / (batches * batch);
+    const double faultsPerPair =
+        static_cast<double>(minorPageFaults() - faults) / (batches * batch);
     const double rate = batches * batch / seconds;
     std::printf("%s\n", nlohmann::json({{"bench", "trainer_loader"},
                                         {"workers", workers},

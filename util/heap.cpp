@@ -1,5 +1,7 @@
 #include "util/heap.h"
 
+#include <sys/resource.h>
+
 #include <cstdlib>
 #include <cstring>
 
@@ -19,6 +21,12 @@ bool keepFreedMemoryForReuse() {
 #else
   return false;
 #endif
+}
+
+long minorPageFaults() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_minflt;
 }
 
 }  // namespace paircast

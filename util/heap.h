@@ -12,4 +12,8 @@ namespace paircast {
 // glibc's defaults. Does nothing without glibc. Returns whether it took effect.
 bool keepFreedMemoryForReuse();
 
+// The minor page faults of the whole process so far, every thread (getrusage): what fresh memory
+// costs, for benchmarks and tests to count.
+long minorPageFaults();
+
 }  // namespace paircast

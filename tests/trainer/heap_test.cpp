@@ -5,7 +5,6 @@
 #include "util/heap.h"
 
 #include <gtest/gtest.h>
-#include <sys/resource.h>
 
 #include <cstdlib>
 #include <cstring>
@@ -15,21 +14,15 @@ namespace {
 
 constexpr size_t kBytes = size_t{96} << 20;  // over glibc's largest mmap threshold (32 MiB)
 
-long minorFaults() {
-  rusage u{};
-  getrusage(RUSAGE_SELF, &u);
-  return u.ru_minflt;
-}
-
 // The minor page faults of writing a fresh kBytes block and freeing it.
 long faultsOfOneRound() {
-  const long before = minorFaults();
+  const long before = minorPageFaults();
   char* p = static_cast<char*>(std::malloc(kBytes));
   EXPECT_NE(p, nullptr);
   std::memset(p, 1, kBytes);
   asm volatile("" : : "r"(p) : "memory");  // the writes happen
   std::free(p);
-  return minorFaults() - before;
+  return minorPageFaults() - before;
 }
 
 TEST(KeepFreedMemory, ALargeBlockAskedForAgainIsNotFaultedInAgain) {
