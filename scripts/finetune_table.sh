@@ -13,7 +13,9 @@
 # OUT/table.md and OUT/table.json. Environment: BUILD_DIR (default build), PRETRAIN_EPOCHS
 # (default 30: 1500 steps of 16 pairs), FINETUNE_EPOCHS (default 4: 400 steps of 8 pairs),
 # TASKS (default "flow depth pose"), PATCH_SIZE (default 16: 4 x 4 patches; 8 gives 8 x 8 at
-# about four times the time).
+# about four times the time), POSE_BLR (default 4e-3; pose learns nothing at 1e-2:
+# docs/finetune.md), PRETRAIN_ONLY=1 (stop after the two pre-trainings: scripts/pose_table.sh
+# starts from them).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/finetune_table.sh OUT [SEEDS]}
@@ -43,6 +45,7 @@ for task in croco mae; do
       --batch-size 16 --epochs "$pretrain_epochs" --blr 6e-3 --seed 0 \
       --out "$out/pretrain-$task" --quiet > /dev/null
 done
+[[ ${PRETRAIN_ONLY:-0} == 1 ]] && exit 0
 
 for ((seed = 0; seed < seeds; ++seed)); do
   for task in "${tasks[@]}"; do
@@ -51,12 +54,12 @@ for ((seed = 0; seed < seeds; ++seed)); do
       [[ -f "$run/heldout.json" ]] && continue
       ckpt=random
       [[ $init != random ]] && ckpt="$out/pretrain-$init/checkpoint-last.pth"
-      head=linear
-      [[ $task == pose ]] && head=pose
+      head=linear blr=1e-2
+      [[ $task == pose ]] && head=pose blr=${POSE_BLR:-4e-3}
       "$bin/finetune" --task "$task" --head "$head" --init "$ckpt" --preset tiny --img-size 64 \
         --patch-size "$patch" \
         --data "$out/train/pairs-*.tar" --eval-data "$out/heldout/pairs-*.tar" \
-        --batch-size 8 --epochs "$epochs" --warmup-epochs 1 --blr 1e-2 --seed "$seed" \
+        --batch-size 8 --epochs "$epochs" --warmup-epochs 1 --blr "$blr" --seed "$seed" \
         --out "$run" --quiet > /dev/null
       echo "finetune_table: $task from $init, seed $seed done" >&2
     done

@@ -27,15 +27,18 @@ std::string tool(const std::string& name) {
   return std::string(PAIRCAST_BINARY_DIR) + "/tools/" + name;
 }
 
-// 80 pairs of a shipped scene at 64 pixels with flow and depth, made once and reused: the first
-// shard's 64 to train on, the second's 16 held out.
-std::string truthShards(const std::string& scene, int shard) {
-  const std::string out = fs::path(::testing::TempDir()) / "paircast" / ("truth-" + scene);
+// Pairs of a shipped scene at 64 pixels with flow and depth, made once and reused: by default 80,
+// the first shard's 64 to train on and the second's 16 held out.
+std::string truthShards(const std::string& scene, int shard, int pairs = 80, int shardSize = 64) {
+  const std::string out = fs::path(::testing::TempDir()) / "paircast" /
+                          ("truth-" + scene + "-" + std::to_string(pairs) + "-" +
+                           std::to_string(shardSize));
   if (!fs::exists(out + "/summary.json")) {
     const int status = testing::runProcess(
         {tool("generate_pairs"), "--scenes", testing::sourceDir() + "/scenes/" + scene, "--out",
-         out, "--pairs-per-scene", "80", "--shard-size", "64", "--resolution", "64", "--save-flow",
-         "--save-depth", "--seed", "3", "--quiet", "--jobs", "2"});
+         out, "--pairs-per-scene", std::to_string(pairs), "--shard-size",
+         std::to_string(shardSize), "--resolution", "64", "--save-flow", "--save-depth", "--seed",
+         "3", "--quiet", "--jobs", "2"});
     EXPECT_EQ(status, 0) << "generate_pairs on " << scene;
   }
   return out + "/pairs-00000" + std::to_string(shard) + ".tar";
@@ -126,13 +129,19 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
-TEST(FinetuneRun, PoseErrorsOfTheIdentityAreThePairsOwnMotions) {
+// 400 pairs of the apartment to train on and 80 others held out; 40 epochs of 16 pairs from random
+// weights at --blr 2e-3 (at 1e-2 the pose head learns nothing: docs/finetune.md).
+TEST(FinetuneRun, PoseBeatsTheIdentityInRotationOnHeldOutPairs) {
   FinetuneConfig c = smallRun("pose", testing::scratchDir("pose"));
-  c.train.epochs = 4;
+  c.data = {truthShards("apartment", 0, 480, 400)};
+  c.evalData = {truthShards("apartment", 1, 480, 400)};
+  c.train.batchSize = 16;
+  c.train.blr = 2e-3;
   const nlohmann::json s = runFinetune(c);
   std::printf("held-out pose %s\n", s["heldout"].dump().c_str());
   // The identity's errors are each pair's rotation angle and baseline, from its cameras.
   const TruthPairs eval = TruthPairs::fromShards(c.evalData);
+  ASSERT_EQ(eval.size(), 80u);
   std::vector<double> angles, baselines;
   for (size_t i = 0; i < eval.size(); ++i) {
     const TruthPair p = eval.load(i);
@@ -142,7 +151,10 @@ TEST(FinetuneRun, PoseErrorsOfTheIdentityAreThePairsOwnMotions) {
   }
   EXPECT_NEAR(heldOut(s, "baseline", "median_rot_err"), median(angles), 1e-3);
   EXPECT_NEAR(heldOut(s, "baseline", "median_trans_err"), median(baselines), 1e-5);
-  EXPECT_TRUE(std::isfinite(heldOut(s, "model", "median_rot_err")));
+  // Measured: 19.8 and 21.8 degrees (seeds 0 and 1) against the identity's 27.4. The translation
+  // is not asserted: from 400 pairs of one scene it is fitted, not learnt (1.03 m held out against
+  // the identity's 0.79); on nine scenes it beats the identity too (scripts/pose_table.sh).
+  EXPECT_LT(heldOut(s, "model", "median_rot_err"), 0.9 * heldOut(s, "baseline", "median_rot_err"));
   EXPECT_TRUE(std::isfinite(heldOut(s, "model", "median_trans_err")));
 }
 
