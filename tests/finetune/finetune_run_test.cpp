@@ -30,15 +30,15 @@ std::string tool(const std::string& name) {
 // Pairs of a shipped scene at 64 pixels with flow and depth, made once and reused: by default 80,
 // the first shard's 64 to train on and the second's 16 held out.
 std::string truthShards(const std::string& scene, int shard, int pairs = 80, int shardSize = 64) {
-  const std::string out = fs::path(::testing::TempDir()) / "paircast" /
-                          ("truth-" + scene + "-" + std::to_string(pairs) + "-" +
-                           std::to_string(shardSize));
+  const std::string out =
+      fs::path(::testing::TempDir()) / "paircast" /
+      ("truth-" + scene + "-" + std::to_string(pairs) + "-" + std::to_string(shardSize));
   if (!fs::exists(out + "/summary.json")) {
     const int status = testing::runProcess(
         {tool("generate_pairs"), "--scenes", testing::sourceDir() + "/scenes/" + scene, "--out",
-         out, "--pairs-per-scene", std::to_string(pairs), "--shard-size",
-         std::to_string(shardSize), "--resolution", "64", "--save-flow", "--save-depth", "--seed",
-         "3", "--quiet", "--jobs", "2"});
+         out, "--pairs-per-scene", std::to_string(pairs), "--shard-size", std::to_string(shardSize),
+         "--resolution", "64", "--save-flow", "--save-depth", "--seed", "3", "--quiet", "--jobs",
+         "2"});
     EXPECT_EQ(status, 0) << "generate_pairs on " << scene;
   }
   return out + "/pairs-00000" + std::to_string(shard) + ".tar";
