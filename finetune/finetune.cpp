@@ -197,7 +197,9 @@ class FinetuneTask : public TrainingTask {
 // A fine-tuning checkpoint's model, on `device`, in eval mode.
 DownstreamNet loadFinetuned(const std::string& checkpoint, const torch::Device& device) {
   const Checkpoint ck = loadCheckpoint(checkpoint);
-  DownstreamNet net(downstreamConfigOf(ck, checkpoint));
+  const DownstreamConfig config = downstreamConfigOf(ck, checkpoint);
+  checkModelFitsState(config.croco, ck.model, checkpoint);
+  DownstreamNet net(config);
   loadStateDictStrict(*net, ck.model, checkpoint);
   net->to(device);
   net->eval();

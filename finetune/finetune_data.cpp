@@ -78,6 +78,8 @@ TruthPair TruthPairs::load(size_t i) const {
   for (const auto* img : {&p.flow, &p.depth1, &p.depth2})
     if (img->width != w || img->height != h)
       throw Error(name(MemberKind::kFlow, 1), "sample's maps differ in size from its camera");
+  if (p.depth1.channels != 1 || p.depth2.channels != 1)
+    throw Error(name(MemberKind::kDepth, 1), "sample's depth maps are not single-channel");
   if (p.rgb1.width != w || p.rgb1.height != h || p.rgb2.width != w || p.rgb2.height != h)
     throw Error(name(MemberKind::kImage, 1), "sample's images differ in size from its camera");
   return p;

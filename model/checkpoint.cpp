@@ -11,6 +11,7 @@
 #include <memory>
 #include <sstream>
 
+#include "model/flops.h"
 #include "model/pickle_reader.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -405,6 +406,19 @@ void checkConfigAgainstState(const CroCoConfig& c,
       state.count("dec_blocks." + std::to_string(c.dec_depth) + ".norm1.weight"))
     throw Error(source, "checkpoint's decoder depth differs from the config's dec_depth " +
                             std::to_string(c.dec_depth));
+}
+
+void checkModelFitsState(const CroCoConfig& c, const std::map<std::string, torch::Tensor>& state,
+                         const std::string& source) {
+  int64_t held = 0;
+  for (const auto& [key, t] : state) held += t.numel();
+  // A fine-tuning checkpoint keeps the encoder, and the decoder where the task is binocular: the
+  // whole CroCo network it is built from is at most a few times that. The slack covers heads.
+  const int64_t needed = countFlops(c).params +
+                        int64_t(c.numPatches()) * (c.enc_embed_dim + c.dec_embed_dim);  // pos_embed
+  if (needed > 4 * held + (int64_t(1) << 20))
+    throw Error(source, "its model configuration asks for " + std::to_string(needed) +
+                            " parameters, but it holds " + std::to_string(held) + " values");
 }
 
 }  // namespace paircast

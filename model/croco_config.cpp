@@ -1,5 +1,9 @@
 #include "model/croco_config.h"
 
+#include <climits>
+#include <cstdint>
+#include <type_traits>
+
 #include "util/error.h"
 
 namespace paircast {
@@ -24,11 +28,23 @@ void CroCoConfig::validate() const {
   if (enc_depth < 1 || dec_depth < 1 || mlp_ratio < 1)
     fail("depths and mlp_ratio must be positive");
   if (!(mask_ratio >= 0 && mask_ratio < 1)) fail("mask_ratio must be in [0, 1)");
+  // Upper bounds, far above any ViT built (ViT-22B is 6,144 wide and 48 deep): a checkpoint's
+  // configuration is untrusted, and it sizes the model before any weight is read.
+  if (enc_embed_dim > kMaxWidth || dec_embed_dim > kMaxWidth)
+    fail("embedding widths are at most " + std::to_string(kMaxWidth));
+  if (enc_depth > kMaxDepth || dec_depth > kMaxDepth)
+    fail("depths are at most " + std::to_string(kMaxDepth));
+  if (mlp_ratio > kMaxMlpRatio) fail("mlp_ratio is at most " + std::to_string(kMaxMlpRatio));
+  if (patch_size > kMaxPatch || img_size > kMaxImage)
+    fail("patch_size and img_size are at most " + std::to_string(kMaxPatch) + " and " +
+         std::to_string(kMaxImage));
+  if (int64_t(img_size / patch_size) * (img_size / patch_size) > kMaxPatches)
+    fail("at most " + std::to_string(kMaxPatches) + " patches an image");
   if (pos_embed == "cosine") {
     if (enc_embed_dim % 4 || dec_embed_dim % 4)
       fail("cosine embeddings need widths divisible by 4");
   } else if (rope()) {
-    if (ropeFrequency() <= 0) fail("RoPE frequency must be positive");
+    if (!(ropeFrequency() > 0 && ropeFrequency() < 1e30)) fail("RoPE frequency must be positive");
     if ((enc_embed_dim / enc_num_heads) % 4 || (dec_embed_dim / dec_num_heads) % 4)
       fail("RoPE needs head widths divisible by 4");
   } else {
@@ -73,8 +89,17 @@ CroCoConfig configFromJson(const nlohmann::json& j, const std::string& source) {
   if (!j.is_object()) throw Error(source, "model configuration is not a JSON object");
   CroCoConfig c;
   try {
+    // Each value must have its field's type: a float such as 1e20 read as an int is undefined.
     auto get = [&](const char* key, auto& field) {
-      if (j.contains(key)) field = j.at(key).get<std::decay_t<decltype(field)>>();
+      using T = std::decay_t<decltype(field)>;
+      if (!j.contains(key)) return;
+      const auto& v = j.at(key);
+      if constexpr (std::is_same_v<T, int>) {
+        if (!v.is_number_integer() || v.get<int64_t>() < INT_MIN || v.get<int64_t>() > INT_MAX)
+          throw Error(source, std::string("model configuration: '") + key +
+                                  "' is not an integer in range: " + v.dump().substr(0, 40));
+      }
+      field = v.get<T>();
     };
     get("img_size", c.img_size);
     get("patch_size", c.patch_size);

@@ -2,12 +2,21 @@
 // arguments), presets, and JSON for checkpoints ('args').
 #pragma once
 
+#include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
 
 namespace paircast {
 
 struct CroCoConfig {
+  // What validate() accepts at most: bounds on untrusted checkpoints, far above any model built.
+  static constexpr int kMaxWidth = 8192;
+  static constexpr int kMaxDepth = 256;
+  static constexpr int kMaxMlpRatio = 16;
+  static constexpr int kMaxPatch = 256;
+  static constexpr int kMaxImage = 8192;
+  static constexpr int64_t kMaxPatches = 1 << 16;
+
   int img_size = 224;
   int patch_size = 16;
   double mask_ratio = 0.9;

@@ -60,6 +60,10 @@ void DownstreamConfig::validate() const {
         throw OptionError("hooks", "DPT hook " + std::to_string(h) + " is not a block (0 to " +
                                        std::to_string(blocks - 1) + ")");
     if (layerDims.size() != 4) throw OptionError("layer_dims", "the DPT head takes 4 layer_dims");
+    for (int d : layerDims)
+      if (d < 1 || d > kMaxLayerDim)
+        throw OptionError("layer_dims", "DPT layer_dims are 1 to " + std::to_string(kMaxLayerDim) +
+                                            ", not " + std::to_string(d));
   }
 }
 
@@ -254,6 +258,24 @@ std::string DownstreamNetImpl::initFromPretrained(const Checkpoint& ck, const st
   return decoder ? "encoder+decoder" : "encoder";
 }
 
+namespace {
+
+// A list of integers from an untrusted file: a float such as 1e12 read as an int is undefined.
+std::vector<int> smallInts(const nlohmann::json& list, const char* key, const std::string& source) {
+  if (!list.is_array()) throw Error(source, std::string("head_kwargs: '") + key + "' is not a list");
+  std::vector<int> out;
+  for (const auto& v : list) {
+    if (!v.is_number_integer() || v.get<int64_t>() < -(int64_t(1) << 30) ||
+        v.get<int64_t>() > (int64_t(1) << 30))
+      throw Error(source, std::string("head_kwargs: '") + key + "' holds " + v.dump().substr(0, 40) +
+                              ", not an integer in range");
+    out.push_back(v.get<int>());
+  }
+  return out;
+}
+
+}  // namespace
+
 DownstreamConfig downstreamConfigOf(const Checkpoint& ck, const std::string& source) {
   const std::string task = trainedTask(ck);
   if (task != "flow" && task != "depth" && task != "pose")
@@ -262,15 +284,15 @@ DownstreamConfig downstreamConfigOf(const Checkpoint& ck, const std::string& sou
   c.task = task;
   c.croco = ck.hasArgs ? configFromJson(ck.args, source)
                        : configFromJson(ck.extra.value("croco_kwargs", nlohmann::json()), source);
-  c.head = ck.extra.value("head", std::string("dpt"));
-  if (ck.extra.contains("head_kwargs")) {
-    const auto& h = ck.extra["head_kwargs"];
-    try {
-      c.hooks = h.at("hooks_idx").get<std::vector<int>>();
-      c.layerDims = h.at("layer_dims").get<std::vector<int>>();
-    } catch (const nlohmann::json::exception& e) {
-      throw Error(source, std::string("bad head_kwargs: ") + e.what());
+  try {
+    c.head = ck.extra.value("head", std::string("dpt"));
+    if (ck.extra.contains("head_kwargs")) {
+      const auto& h = ck.extra["head_kwargs"];
+      c.hooks = smallInts(h.at("hooks_idx"), "hooks_idx", source);
+      c.layerDims = smallInts(h.at("layer_dims"), "layer_dims", source);
     }
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(source, std::string("bad head or head_kwargs: ") + e.what());
   }
   try {
     c.validate();

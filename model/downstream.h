@@ -31,6 +31,9 @@
 namespace paircast {
 
 struct DownstreamConfig {
+  // The widest DPT layer accepted (naver/croco's largest is 768): a checkpoint's head_kwargs are
+  // untrusted.
+  static constexpr int kMaxLayerDim = 4096;
   // Throws OptionError naming the field (the DPT head's image size among them).
   void validate() const;
   bool binocular() const { return task != "depth"; }

@@ -72,6 +72,7 @@ CroCoNet modelFromCheckpoint(const std::string& path, const std::optional<CroCoC
     throw Error(
         path, "checkpoint has no paircast hyper-parameters: give --preset or --enc-dim ... flags");
   }
+  checkModelFitsState(cfg, ck.model, path);
   CroCoNet net(cfg);
   loadStateDictStrict(net, ck.model, path);
   net->eval();

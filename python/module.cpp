@@ -404,20 +404,31 @@ class PyShardReader {
     for (int k = 0; k < s.record.views; ++k) {
       const std::string name = index.describe(i, MemberKind::kImage, k + 1);
       const Bytes jpeg = index.read(s.image[k]);
+      // Every map is checked against its view's camera: a skip with a warning, not a failure
+      // of the stack that puts a batch together.
+      const Camera& camera = s.record.camera[k];
+      auto expectCameraSize = [&](const auto& image, const std::string& member, int channels) {
+        if (image.width != camera.width || image.height != camera.height ||
+            image.channels != channels)
+          throw Error(member, "is " + std::to_string(image.width) + "x" +
+                                  std::to_string(image.height) + "x" +
+                                  std::to_string(image.channels) + ", its camera " +
+                                  std::to_string(camera.width) + "x" +
+                                  std::to_string(camera.height) + "x" + std::to_string(channels));
+      };
       d.rgb.push_back(decodeImage8(jpeg.data(), jpeg.size(), name));
-      if (d.rgb.back().size() != d.rgb[0].size())
-        throw Error(name, "differs in size from view 1 of its sample");
+      expectCameraSize(d.rgb.back(), name, 3);
       if (depth_ && !s.depth.empty()) {
+        const std::string depthName = index.describe(i, MemberKind::kDepth, k + 1);
         const Bytes exr = index.read(s.depth[k]);
-        d.depth.push_back(
-            decodeImageF(exr.data(), exr.size(), index.describe(i, MemberKind::kDepth, k + 1)));
+        d.depth.push_back(decodeImageF(exr.data(), exr.size(), depthName));
+        expectCameraSize(d.depth.back(), depthName, 1);
       }
       if (flow_) {
         const std::string name = index.describe(i, MemberKind::kFlow, k + 1);
         const Bytes flo = index.read(s.flow[k]);
         d.flow.push_back(decodeFlo(flo.data(), flo.size(), name));
-        if (d.flow.back().width != d.rgb[k].width || d.flow.back().height != d.rgb[k].height)
-          throw Error(name, "differs in size from its image");
+        expectCameraSize(d.flow.back(), name, 2);
       }
     }
     return d;

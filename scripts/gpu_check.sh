@@ -83,9 +83,20 @@ ldd "$BUILD_DIR/tools/pretrain" "$BUILD_DIR/tools/finetune" |
   ok render_libs "none linked"
 
 stage "tests (gpu_tests: SDPA forward, fused AdamW, train step and resume, NCCL group of one)"
-timeout 300 "$BUILD_DIR/tests/gpu_tests" 2>&1 | grep -E "^\[ *(OK|FAILED|SKIPPED|PASSED|RUN) *\]|Failure|error|skip" | tail -30
-rc=${PIPESTATUS[0]}
-ok tests "$([[ $rc == 0 ]] && echo passed || echo "FAILED (rc $rc)")"
+timeout 300 "$BUILD_DIR/tests/gpu_tests" > "$TMPD/gpu_tests.txt" 2>&1
+rc=$?
+grep -E "^\[ *(OK|FAILED|SKIPPED|PASSED|RUN) *\]|Failure|error|skip" "$TMPD/gpu_tests.txt" | tail -30
+# On the GPU machine no CUDA test may skip: a LibTorch built without CUDA skips them all and passes.
+skipped=$(grep -E "^\[  SKIPPED \] (Cuda|Pretrain\.Cuda)" "$TMPD/gpu_tests.txt" | sort -u |
+  sed 's/^\[  SKIPPED \] //; s/ (.*//' | tr '\n' ' ')
+if ((rc)); then
+  ok tests "FAILED (rc $rc)"
+elif [[ $DEVICE == cuda && -n "$skipped" ]]; then
+  ok tests "FAILED: CUDA tests skipped on a GPU machine: $skipped"
+  rc=1
+else
+  ok tests passed
+fi
 "$BUILD_DIR/tools/model_info" --preset base | tail -1
 
 stage "bench_train: $PRESET, 224 x 224, $DEVICE (bf16 on CUDA), batch $BATCH, beside the official step"
@@ -161,3 +172,8 @@ stage "summary"
 for k in build render_libs tests bench_train bench_unfused pretrain checkpoint finetune process_group; do
   printf '%-14s %s\n' "$k" "${RESULT[$k]:-not run}"
 done
+# The run fails when a stage failed: a CUDA test that skipped on the GPU machine included.
+for k in "${!RESULT[@]}"; do
+  [[ "${RESULT[$k]}" == *FAILED* ]] && { echo "gpu_check: FAILED ($k)"; exit 1; }
+done
+echo "gpu_check: no stage FAILED"

@@ -9,11 +9,13 @@ is the Python tests' --junitxml file (tests/CMakeLists.txt), read when the ctest
 Only the tests of this run count, so the policy follows CTEST_ARGS.
 
 A skip is allowed when its test and its reason both match an entry of ALLOWED (and the entry's
-release, when it names one, is this machine's); every other skip is a failure. --require-all makes
+release, when it names one, is this machine's; a CUDA skip only where the machine has no NVIDIA
+GPU, neither /dev/nvidia0 nor one that `nvidia-smi -L` lists); every other skip is a failure. --require-all makes
 every skip a failure, the allowed ones included. Exit status: 0, or 1 on a failure.
 """
 
 import re
+import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -27,6 +29,7 @@ class Allowed:
     reason: str  # full match of its GTEST_SKIP() message
     why: str
     debian: str = ""  # VERSION_ID of the only Debian release where it is allowed ("" any)
+    without_gpu: bool = False  # allowed only on a machine with no NVIDIA GPU
 
 
 # The skips allowed on CI's machines (Debian 12, and Debian 13 in a chroot). docs/releases.md,
@@ -36,7 +39,8 @@ ALLOWED = (
             tests=r"Cuda\.\w+|Pretrain\.CudaStep",
             reason=r"no CUDA device",
             why="Debian's LibTorch is built without CUDA and CI's machines have no GPU; these run "
-                "on a GPU machine"),
+                "on a GPU machine",
+            without_gpu=True),
     Allowed("torchrun on Debian 13's torch",
             tests=r"Torchrun\.\w+",
             reason=r"this torchrun cannot start its rendezvous store \(python3-torch built without "
@@ -97,10 +101,21 @@ def pytest_skips(path):
     return skips
 
 
-def allowed_by(test, reason, release):
+def gpu_present():
+    """Whether this machine has an NVIDIA GPU: a device node, or one that nvidia-smi lists."""
+    if Path("/dev/nvidia0").exists():
+        return True
+    try:
+        listed = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return listed.returncode == 0 and "GPU" in listed.stdout
+
+
+def allowed_by(test, reason, release, has_gpu):
     for rule in ALLOWED:
         if (re.fullmatch(rule.tests, test) and re.fullmatch(rule.reason, reason, re.S)
-                and rule.debian in ("", release)):
+                and rule.debian in ("", release) and not (rule.without_gpu and has_gpu)):
             return rule
     return None
 
@@ -122,9 +137,12 @@ def main(argv):
             skips.append(("python", f"its skips are unknown: pytest wrote no {files[1]}"))
 
     release = debian_release()
+    has_gpu = gpu_present() if skips else False
+    if has_gpu:
+        print("skip policy: this machine has an NVIDIA GPU: no CUDA test may skip")
     allowed, refused = {}, []
     for test, reason in skips:
-        rule = allowed_by(test, reason, release)
+        rule = allowed_by(test, reason, release, has_gpu)
         if rule:
             allowed.setdefault(rule, []).append((test, reason))
         else:

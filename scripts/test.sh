@@ -21,6 +21,11 @@
 # (tests/launch/slurm_cluster.sh check exits 3). The policy applies to the tests that ran, so it
 # follows CTEST_ARGS. docs/releases.md, "Skips", has the list and the reasons.
 #
+# Then scripts/test_inventory.py compares the tests the build registered with
+# tests/registered_tests.txt, and fails naming the tests and modules a missing dependency left out
+# (no pybind11: no Python test; no GoogleTest: none at all). A CTEST_ARGS filter that matches no
+# test fails too.
+#
 # Why --sanitize leaves out model/, trainer/ and sweep/: the prebuilt LibTorch is not instrumented,
 # so ASan checks none of its code, and its tests (CroCo forward/backward passes, training runs)
 # become too slow for the 600 s ctest limit on a small machine. Our own code that reads untrusted
@@ -80,7 +85,7 @@ if ((sanitize)); then
 else
   scripts/build.sh
 fi
-policy=$PWD/scripts/skip_policy.py
+policy=$PWD/scripts/skip_policy.py inventory=$PWD/scripts/test_inventory.py
 cd "${BUILD_DIR:-build}"
 # Where each test's output, skip messages included, is kept whole for the skip policy; the
 # python test writes pytest's (tests/CMakeLists.txt). Removed first: only this run's tests count.
@@ -88,8 +93,9 @@ junit=$PWD/Testing/ctest-junit.xml pytest_junit=$PWD/Testing/pytest-junit.xml
 rm -f "$junit" "$pytest_junit"
 status=0
 # shellcheck disable=SC2086  # CTEST_ARGS is a list of words
-ctest --output-on-failure -j "$JOBS" --timeout 600 --output-junit "$junit" \
+ctest --output-on-failure -j "$JOBS" --timeout 600 --output-junit "$junit" --no-tests=error \
   --test-output-size-passed 1000000 ${CTEST_ARGS:-} || status=$?
+python3 "$inventory" check . "$junit" || ((status)) || status=1
 policy_args=("$junit" "$pytest_junit")
 ((require_all)) && policy_args=(--require-all "${policy_args[@]}")
 python3 "$policy" "${policy_args[@]}" || ((status)) || status=1

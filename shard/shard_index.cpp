@@ -14,6 +14,9 @@ namespace paircast {
 namespace {
 
 constexpr uint64_t kBlock = 512;
+// A sample's JSON record: a few kilobytes for 99 views. A parse builds several times its bytes in
+// nested containers, so a record past this is skipped unread.
+constexpr uint64_t kMaxRecordBytes = 1ull << 20;
 
 // An open file, closed on every path out.
 struct Fd {
@@ -111,7 +114,9 @@ std::string paxPath(const std::string& data) {
     const size_t space = data.find(' ', pos);
     if (space == std::string::npos) break;
     const size_t length = std::strtoull(data.c_str() + pos, nullptr, 10);
-    if (length == 0 || pos + length > data.size()) break;
+    // Written so that no length can overflow: a record holds at least its length, the space and
+    // the newline, and lies inside the header.
+    if (length <= space - pos + 1 || length > data.size() - pos) break;
     const std::string record = data.substr(space + 1, pos + length - space - 2);
     if (record.rfind("path=", 0) == 0) return record.substr(5);
     pos += length;
@@ -278,6 +283,9 @@ ShardIndex ShardIndex::open(const std::string& path, const Warn& warn,
   const std::string damage = walker.walk([&](PendingSample&& p) {
     const std::string sample = "sample '" + printable(p.key) + "'";
     nlohmann::json json;
+    if (p.hasRecord && p.record.size > kMaxRecordBytes)
+      return report(sample + "'s record is " + std::to_string(p.record.size) +
+                    " bytes (at most " + std::to_string(kMaxRecordBytes) + "), skipped");
     if (p.hasRecord) {
       Bytes bytes(p.record.size);
       if (readAt(f.fd, bytes.data(), bytes.size(), p.record.offset))

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <exception>
 #include <functional>
+#include <new>
 #include <string>
 
 #include "util/error.h"
@@ -51,8 +52,13 @@ inline int runTool(const char* name, CLI::App& app, int argc, char** argv,
   } catch (const std::logic_error& e) {
     std::fprintf(stderr, "%s: internal error: %s\n", name, e.what());
     return 3;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "%s: error: out of memory\n", name);
+    return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "%s: error: %s\n", name, e.what());
+    // One line: LibTorch's errors carry a backtrace after their message.
+    const std::string what = e.what();
+    std::fprintf(stderr, "%s: error: %s\n", name, what.substr(0, what.find('\n')).c_str());
     return 1;
   }
 }

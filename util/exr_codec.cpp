@@ -10,6 +10,14 @@
 namespace paircast {
 namespace {
 
+// The largest image read here: far beyond any camera (16,384 pixels a side), and 2^31 values.
+constexpr int64_t kMaxExrSide = 1 << 16;
+constexpr int kMaxExrChannels = 64;
+// No EXR compression stores more values per byte of file than this: the densest, DWA on a flat
+// image, keeps one DC value per 8 x 8 block and then deflates those at most 1,032:1 (about 33,000
+// values a byte); zip alone reaches about 500, PIZ's run-length codes about 200.
+constexpr uint64_t kMaxValuesPerByte = 1 << 16;
+
 // OpenEXR reports through a C callback; its last message goes into the error we throw.
 thread_local std::string exrMessage;
 
@@ -183,16 +191,22 @@ Layout readLayout(exr_context_t c, const std::string& name) {
   check(exr_get_data_window(c, 0, &window), name, "read");
   const exr_attr_chlist_t* list = nullptr;
   check(exr_get_channels(c, 0, &list), name, "read");
+  // In 64 bits: a data window from INT_MIN to INT_MAX overflows an int.
+  const int64_t width = int64_t(window.max.x) - window.min.x + 1;
+  const int64_t height = int64_t(window.max.y) - window.min.y + 1;
+  if (width <= 0 || height <= 0 || list->num_channels <= 0) throw Error(name, "empty EXR image");
+  if (width > kMaxExrSide || height > kMaxExrSide || list->num_channels > kMaxExrChannels)
+    throw Error(name, "EXR image too large: " + std::to_string(width) + "x" +
+                          std::to_string(height) + "x" + std::to_string(list->num_channels));
   Layout l;
-  l.width = window.max.x - window.min.x + 1;
-  l.height = window.max.y - window.min.y + 1;
+  l.width = static_cast<int>(width);
+  l.height = static_cast<int>(height);
   l.top = window.min.y;
   l.channels = list->num_channels;
   l.rgb = isRgb(list);
   for (int i = 0; i < list->num_channels; ++i)
     if (list->entries[i].x_sampling != 1 || list->entries[i].y_sampling != 1)
       throw Error(name, "subsampled EXR channels are not read here");
-  if (l.width <= 0 || l.height <= 0 || l.channels <= 0) throw Error(name, "empty EXR image");
   check(exr_get_scanlines_per_chunk(c, 0, &l.linesPerChunk), name, "read");
   return l;
 }
@@ -210,6 +224,14 @@ ImageF decodeExrCore(const void* data, size_t size, const std::string& name) {
   Context ctx;
   check(exr_start_read(&ctx.c, name.c_str(), &init), name, "read");
   const Layout l = readLayout(ctx.c, name);
+  // The header's size is checked against the file's before the image is allocated: no EXR
+  // compression stores more than kMaxValuesPerByte values in one byte, so a short file that
+  // claims a huge window is refused here instead of asking for gigabytes.
+  const uint64_t values = uint64_t(l.width) * uint64_t(l.height) * uint64_t(l.channels);
+  if (values > kMaxValuesPerByte * size)
+    throw Error(name, "EXR header claims " + std::to_string(l.width) + "x" +
+                          std::to_string(l.height) + "x" + std::to_string(l.channels) +
+                          " values in a file of " + std::to_string(size) + " bytes");
   ImageF image;
   image.width = l.width;
   image.height = l.height;

@@ -39,11 +39,15 @@ ImageF decodeFlo(const void* data, size_t size, const std::string& name) {
   if (magic != kFloMagic) throw Error(name, "not a .flo file: wrong magic number");
   if (wh[0] < 1 || wh[1] < 1 || wh[0] > kMaxSide || wh[1] > kMaxSide)
     throw Error(name, "bad .flo size " + std::to_string(wh[0]) + "x" + std::to_string(wh[1]));
-  ImageF flow(wh[0], wh[1], 2);
-  const size_t expected = kHeader + flow.size() * sizeof(float);
+  // The byte count is checked against the header before anything is allocated: a 12-byte file
+  // that claims 65,536 x 65,536 must not ask for 32 GiB.
+  const size_t values = size_t(wh[0]) * size_t(wh[1]) * 2;
+  const size_t expected = kHeader + values * sizeof(float);
   if (size != expected)
     throw Error(name, "truncated or padded .flo: " + std::to_string(size) + " bytes, expected " +
-                          std::to_string(expected));
+                          std::to_string(expected) + " for " + std::to_string(wh[0]) + "x" +
+                          std::to_string(wh[1]));
+  ImageF flow(wh[0], wh[1], 2);
   std::memcpy(flow.data.data(), bytes + kHeader, flow.size() * sizeof(float));
   return flow;
 }

@@ -52,7 +52,8 @@ std::string decodeJpeg(const unsigned char* data, size_t size, int channels, int
   // Checked before anything is allocated: a few bytes of header can claim any size, and the
   // files come from shards users download.
   const uint64_t pixelCount = static_cast<uint64_t>(cinfo.image_width) * cinfo.image_height;
-  if (pixelCount == 0 || pixelCount > (uint64_t(1) << 28)) {
+  // No JPEG holds more than about 300 pixels a byte (an 8 x 8 block costs at least 2 bits).
+  if (pixelCount == 0 || pixelCount > (uint64_t(1) << 28) || pixelCount > 4096 * uint64_t(size)) {
     std::snprintf(err.message, sizeof err.message, "image is too large or empty (%ux%u)",
                   cinfo.image_width, cinfo.image_height);
     jpeg_destroy_decompress(&cinfo);

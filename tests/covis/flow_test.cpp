@@ -146,5 +146,19 @@ TEST(FloFile, BadFilesAreRefusedNamingThem) {
   EXPECT_ERROR_CONTAINS(readFlo("/nonexistent/x.flo"), "/nonexistent/x.flo");
 }
 
+// A 12-byte file that claims the largest sides the format allows: 65,536 x 65,536 x 2 floats is
+// 32 GiB. It is refused from its byte count, before anything is allocated (a vector of that size
+// would throw std::bad_alloc, or be zeroed into the OOM killer on a 24 GiB machine).
+TEST(FloFile, AHeaderThatLiesAboutItsSizeIsRefusedBeforeAllocating) {
+  std::vector<unsigned char> bytes = encodeFlo(ImageF(1, 1, 2, 0.0f));
+  bytes.resize(12);
+  const int32_t side = 1 << 16;
+  std::memcpy(bytes.data() + 4, &side, 4);
+  std::memcpy(bytes.data() + 8, &side, 4);
+  EXPECT_ERROR_CONTAINS(decodeFlo(bytes.data(), bytes.size(), "shard.tar: 000001.flow1.flo"),
+                        "shard.tar: 000001.flow1.flo: truncated or padded .flo: 12 bytes, "
+                        "expected 34359738380 for 65536x65536");
+}
+
 }  // namespace
 }  // namespace paircast

@@ -8,6 +8,8 @@
 #include <chrono>
 
 #include "model/checkpoint.h"
+#include "model/downstream.h"
+#include "model/reconstruct.h"
 #include "model/pickle_pieces.h"
 #include "test_errors.h"
 #include "test_paths.h"
@@ -134,6 +136,49 @@ TEST(UntrustedCheckpoint, TheValuesItKnowsStillLoad) {
   EXPECT_EQ(ck.epoch, 5);
   ASSERT_TRUE(ck.hasArgs);
   EXPECT_DOUBLE_EQ(ck.args["lr"].get<double>(), 1e-4);
+}
+
+// A checkpoint's configuration sizes the model built before its weights are read: each value
+// must be an integer in range, and the model must fit what the file holds.
+TEST(UntrustedCheckpoint, ConfigurationsAreBoundedBeforeAModelIsBuilt) {
+  using nlohmann::json;
+  EXPECT_ERROR_CONTAINS(configFromJson(json{{"enc_embed_dim", 1e9}}, "f.pth"), "f.pth",
+                        "'enc_embed_dim' is not an integer in range");
+  EXPECT_ERROR_CONTAINS(configFromJson(json{{"enc_depth", 1e20}}, "f.pth"), "f.pth", "enc_depth");
+  EXPECT_ERROR_CONTAINS(configFromJson(json{{"dec_depth", int64_t(1) << 40}}, "f.pth"), "f.pth",
+                        "not an integer in range");
+  EXPECT_ERROR_CONTAINS(
+      configFromJson(json{{"enc_embed_dim", 1 << 20}, {"enc_num_heads", 1}}, "f.pth"),
+      "embedding widths are at most 8192");
+  EXPECT_ERROR_CONTAINS(configFromJson(json{{"img_size", 8192}, {"patch_size", 2}}, "f.pth"),
+                        "at most 65536 patches");
+  EXPECT_ERROR_CONTAINS(configFromJson(json{{"pos_embed", "RoPEnan"}}, "f.pth"),
+                        "RoPE frequency");
+  // The base model's configuration over four values: refused before the 110M parameters are
+  // made, by reconstruct's loader.
+  const std::string dir = testing::scratchDir("fits");
+  const std::string path = dir + "/small.pth";
+  saveCheckpoint(path, {{"w", torch::zeros({4})}}, 1, json{{"args", configToJson(CroCoConfig())}});
+  EXPECT_ERROR_CONTAINS(modelFromCheckpoint(path, std::nullopt), path,
+                        "parameters, but it holds 4 values");
+}
+
+// A fine-tuning checkpoint's head and head_kwargs: wrong types and a billion channels are
+// refused naming the file.
+TEST(UntrustedCheckpoint, HeadKwargsAreBounded) {
+  using nlohmann::json;
+  Checkpoint ck;
+  ck.extra = json{{"task", "flow"},
+                  {"croco_kwargs", configToJson(presetConfig("tiny"))},
+                  {"head", "dpt"},
+                  {"head_kwargs", {{"hooks_idx", {1, 2, 3, 4}},
+                                   {"layer_dims", {96, 192, 384, 1000000000}}}}};
+  EXPECT_ERROR_CONTAINS(downstreamConfigOf(ck, "ft.pth"), "ft.pth",
+                        "layer_dims are 1 to 4096, not 1000000000");
+  ck.extra["head_kwargs"]["layer_dims"] = json{96, 192, 384, 1e12};
+  EXPECT_ERROR_CONTAINS(downstreamConfigOf(ck, "ft.pth"), "ft.pth");
+  ck.extra["head"] = 5;
+  EXPECT_ERROR_CONTAINS(downstreamConfigOf(ck, "ft.pth"), "ft.pth", "bad head");
 }
 
 }  // namespace

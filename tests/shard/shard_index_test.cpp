@@ -163,5 +163,35 @@ TEST(ShardIndex, GnuLongNamesAndPaxPathsNameTheNextMember) {
   EXPECT_EQ(r.keys, (std::vector<std::string>{"a-00000000", longKey})) << r.warnings;
 }
 
+// Pax records whose lengths are lies: one so large that adding it to the position wraps around
+// to the start (which looped for ever), a zero, and one shorter than its own digits. The scan
+// stops reading the header and the samples around it are still indexed.
+TEST(ShardIndex, PaxRecordsWhoseLengthsLieEndTheHeaderWithoutLooping) {
+  for (const std::string& lie : {std::string("6 a=b\n18446744073709551610 x\n"),
+                                 std::string("0 path=x\n"), std::string("2 path=x\n")}) {
+    auto members = sample("a-00000000", 2);
+    members.push_back({"PaxHeader", lie, 'x'});
+    const auto next = sample("b-00000001", 2);
+    members.insert(members.end(), next.begin(), next.end());
+    const Indexed r = indexOf(write("pax.tar", ustar(members)));
+    EXPECT_EQ(r.keys, (std::vector<std::string>{"a-00000000", "b-00000001"})) << lie;
+  }
+}
+
+// A sample's record is parsed into nested containers several times its size: one past 1 MiB is
+// skipped, named, without being read.
+TEST(ShardIndex, AnOversizedRecordIsSkippedUnread) {
+  auto members = sample("a-00000000", 2);
+  auto big = sample("b-00000001", 2);
+  big.back().data = std::string((1 << 20) + 1, '[');
+  members.insert(members.end(), big.begin(), big.end());
+  const Indexed r = indexOf(write("record.tar", ustar(members)));
+  EXPECT_EQ(r.keys, (std::vector<std::string>{"a-00000000"}));
+  EXPECT_NE(r.warnings.find("sample 'b-00000001''s record is 1048577 bytes (at most 1048576), "
+                            "skipped"),
+            std::string::npos)
+      << r.warnings;
+}
+
 }  // namespace
 }  // namespace paircast

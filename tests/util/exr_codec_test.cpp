@@ -4,7 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
+#include <climits>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 
@@ -81,6 +85,42 @@ TEST(ExrCodec, BadBytesGiveAnErrorNamingTheFile) {
   EXPECT_ERROR_CONTAINS(decodeExrCore(flipped.data(), flipped.size(), "y.exr"), "y.exr", "cannot");
   ImageF two = depthLike(4, 4, 2);
   EXPECT_ERROR_CONTAINS(encodeExrCore(two), "1 or 3 channels");
+}
+
+// The file's own header with its data window widened to `side` x `side` (xmin, ymin, xmax, ymax
+// after "dataWindow\0box2i\0" and the attribute's size, 16).
+std::vector<unsigned char> withDataWindow(std::vector<unsigned char> bytes, int32_t side) {
+  const std::string key("dataWindow\0box2i\0\x10\0\0\0", 21);
+  const auto at = std::search(bytes.begin(), bytes.end(), key.begin(), key.end());
+  EXPECT_NE(at, bytes.end()) << "no dataWindow attribute";
+  const int32_t window[4] = {0, 0, side - 1, side - 1};
+  std::memcpy(&*(at + key.size()), window, sizeof window);
+  return bytes;
+}
+
+// A 1 KB depth map whose header claims 65,536 x 65,536 (16 GiB of floats): both codecs refuse it
+// from its size before allocating, naming the member.
+TEST(ExrCodec, AHeaderClaimingMoreThanItsBytesHoldIsRefusedBeforeAllocating) {
+  const std::vector<unsigned char> bytes = withDataWindow(encodeExr(depthLike(8, 8, 1)), 65536);
+  const std::string name = "shard.tar: 000001.depth.1.exr";
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_ERROR_CONTAINS(decodeExrCore(bytes.data(), bytes.size(), name), name,
+                        "EXR header claims 65536x65536x1 values in a file of");
+  // OpenImageIO's path refuses 65,536 x 65,536 as over 2^28 pixels; 12,000 x 12,000 is under
+  // that and its 1 GiB, and still far more than the file's few hundred bytes can hold.
+  EXPECT_ERROR_CONTAINS(decodeImageF(bytes.data(), bytes.size(), name), name, "too large");
+  const std::vector<unsigned char> under = withDataWindow(encodeExr(depthLike(8, 8, 1)), 12000);
+  EXPECT_ERROR_CONTAINS(decodeImageF(under.data(), under.size(), name), name,
+                        "image header claims 12000x12000x1 values in");
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(2));
+  // A window from INT_MIN to INT_MAX, whose width overflows an int.
+  std::vector<unsigned char> wide = encodeExr(depthLike(8, 8, 1));
+  const std::string key("dataWindow\0box2i\0\x10\0\0\0", 21);
+  const auto at = std::search(wide.begin(), wide.end(), key.begin(), key.end());
+  ASSERT_NE(at, wide.end());
+  const int32_t window[4] = {INT32_MIN, 0, INT32_MAX, 7};
+  std::memcpy(&*(at + key.size()), window, sizeof window);
+  EXPECT_ERROR_CONTAINS(decodeExrCore(wide.data(), wide.size(), "wide.exr"), "wide.exr");
 }
 
 }  // namespace
