@@ -55,7 +55,15 @@ void PairStream::work() {
     const uint64_t n = counter_++;
     const uint64_t global = n * options_.partCount + options_.partIndex;
     SceneState& s = *scenes_[global % scenes_.size()];
-    auto sample = s.generator->generate(options_.seed, global / scenes_.size());
+    std::optional<PairSample> sample;
+    try {
+      sample = s.generator->generate(options_.seed, global / scenes_.size());
+    } catch (...) {  // handed to the consumer: an exception leaving a thread ends the process
+      std::lock_guard<std::mutex> lock(mu_);
+      if (!failure_) failure_ = std::current_exception();
+      stop();
+      return;
+    }
     if (!sample) continue;
     std::unique_lock<std::mutex> lock(mu_);
     notFull_.wait(lock, [&] { return stopped_ || queue_.size() < options_.queueCapacity; });
@@ -68,6 +76,7 @@ void PairStream::work() {
 std::optional<PairSample> PairStream::next() {
   std::unique_lock<std::mutex> lock(mu_);
   notEmpty_.wait(lock, [&] { return stopped_ || !queue_.empty(); });
+  if (failure_) std::rethrow_exception(failure_);
   if (queue_.empty()) return std::nullopt;
   PairSample s = std::move(queue_.front());
   queue_.pop_front();

@@ -5,6 +5,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <deque>
+#include <exception>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -38,7 +39,8 @@ class PairStream {
   PairStream(const PairStream&) = delete;
   PairStream& operator=(const PairStream&) = delete;
 
-  // The next pair; blocks while the queue is empty. nullopt after stop().
+  // The next pair; blocks while the queue is empty. nullopt after stop(). Rethrows the error
+  // that stopped a worker (a scene that fails to render), on the consumer's thread.
   std::optional<PairSample> next();
   void stop();
   size_t usableScenes() const { return scenes_.size(); }
@@ -57,6 +59,7 @@ class PairStream {
   std::atomic<uint64_t> counter_;
   std::atomic<uint64_t> position_{0};
   std::atomic<bool> stopped_{false};
+  std::exception_ptr failure_;  // a worker's error, rethrown by next(); guarded by mu_
 };
 
 }  // namespace paircast

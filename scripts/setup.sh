@@ -25,6 +25,7 @@ PACKAGES=(
   nlohmann-json3-dev libcli11-dev libspdlog-dev libarchive-dev libnanoflann-dev libjpeg-dev zlib1g-dev
   libboost-dev  # Boost.Math: the t quantiles of the sweep's confidence intervals
   libopenexr-dev  # OpenEXR's C library: EXR depth in the trainer-only build (util/exr_codec.h)
+  libdraco-dev  # the glTF tests encode a Draco mesh (scripts/test_inventory.py expects them)
   slurmctld slurmd slurm-client  # the engine tests (tests/launch/) run a one-node Slurm cluster
   # The Python package (python/): pybind11, numpy, and its tests and pip install.
   python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-setuptools

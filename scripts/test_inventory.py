@@ -59,7 +59,7 @@ def read_list():
     for number, line in enumerate(LIST.read_text().splitlines(), 1):
         if not line.strip() or line.startswith("#"):
             continue
-        parts = line.split()
+        parts = line.split(None, 1)
         if len(parts) != 2:
             raise SystemExit(f"{LIST}:{number}: expected 'MODULE TEST', got '{line}'")
         tests[parts[1]] = parts[0]

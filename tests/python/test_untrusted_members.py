@@ -70,7 +70,7 @@ def peak_rss_of(args):
     return result.returncode, out, result.stderr, int(peak)
 
 
-CASES = [("flow.1.flo", lying_flo), ("depth.1.exr", lying_exr), ("1.jpeg", lying_jpeg)]
+CASES = [(".1.flow.flo", lying_flo), (".1.depth.exr", lying_exr), (".1.jpg", lying_jpeg)]
 
 
 @pytest.fixture(scope="module", params=CASES, ids=["flo", "exr", "jpeg"])
@@ -106,7 +106,7 @@ def test_pretrain_trains_past_the_member(crafted, tmp_path):
                                     "--img-size", "32", "--batch-size", "1", "--max-steps", "2",
                                     "--workers", "1", "--out", tmp_path / "run", "--quiet"])
     assert rc == 0, err
-    assert (member in err) == member.endswith(".jpeg"), err
+    assert (member in err) == member.endswith(".jpg"), err
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["steps"] == 2
     assert peak < PEAK_LIMIT_KB, f"peak RSS {peak} KiB"
