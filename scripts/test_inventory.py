@@ -41,6 +41,12 @@ RENDER_MODULES = {"util", "render", "covis", "dataset", "trainer", "reliability"
                   "launch", "python"}
 
 
+def plain(name):
+    """A test's name without the parameter gtest prints after it ("  # GetParam() = ..."), whose
+    form differs between GoogleTest and CMake versions."""
+    return re.split(r"\s+#\s", name, maxsplit=1)[0].strip()
+
+
 def registered(build_dir):
     """{test: module} of the tests ctest lists in build_dir."""
     out = subprocess.run(["ctest", "--show-only=json-v1"], cwd=build_dir, check=True,
@@ -50,7 +56,7 @@ def registered(build_dir):
         command = test.get("command") or [""]
         executable = Path(command[0]).name
         module = re.sub(r"_tests$", "", executable) if executable.endswith("_tests") else test["name"]
-        tests[test["name"]] = module
+        tests[plain(test["name"])] = module
     return tests
 
 
@@ -62,7 +68,7 @@ def read_list():
         parts = line.split(None, 1)
         if len(parts) != 2:
             raise SystemExit(f"{LIST}:{number}: expected 'MODULE TEST', got '{line}'")
-        tests[parts[1]] = parts[0]
+        tests[plain(parts[1])] = parts[0]
     return tests
 
 
