@@ -155,6 +155,7 @@ std::vector<PairRecord> readCrocoRecords(const std::string& dir, const std::set<
       } catch (const nlohmann::json::exception& e) {
         throw Error(m, std::string("bad metadata: ") + e.what());
       }
+      if (!meta[scene].is_object()) throw Error(m, "bad metadata: not a JSON object");
     }
     const auto& mv = meta[scene].value("multiviews", nlohmann::json::object());
     if (!mv.contains(index)) continue;

@@ -272,7 +272,19 @@ class TrainingLoop {
   }
 
  private:
+  // A checkpoint's entries of the wrong type or shape are an error naming it, not a JSON or
+  // LibTorch exception.
   void restoreCheckpoint() {
+    try {
+      restoreCheckpointEntries();
+    } catch (const nlohmann::json::exception& e) {
+      throw Error(ckptPath_, std::string("cannot resume: bad checkpoint entry: ") + e.what());
+    } catch (const c10::Error& e) {
+      throw Error(ckptPath_, std::string("cannot resume: ") + e.what_without_backtrace());
+    }
+  }
+
+  void restoreCheckpointEntries() {
     const Checkpoint ck = loadCheckpoint(ckptPath_);
     task_.restore(ck, ckptPath_);
     restoreOptimizer(*opt_, ordered_, ck.extraTensors, ckptPath_);
@@ -293,7 +305,9 @@ class TrainingLoop {
     std::string line, kept;
     while (std::getline(in, line)) {
       auto j = nlohmann::json::parse(line, nullptr, false);
-      if (j.is_object() && j.value("step", int64_t{-1}) < iter_) {
+      const bool whole = j.is_object() && j.contains("step") && j["step"].is_number_integer() &&
+                         j.contains("loss") && j["loss"].is_number();
+      if (whole && j["step"].get<int64_t>() < iter_) {
         kept += line + "\n";
         curve_.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
       }
