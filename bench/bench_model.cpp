@@ -11,6 +11,7 @@
 #include "model/autocast.h"
 #include "model/croco_net.h"
 #include "model/flops.h"
+#include "util/blas_core.h"
 
 using namespace paircast;
 using Clock = std::chrono::steady_clock;
@@ -65,6 +66,7 @@ nlohmann::json pythonBench(const std::string& crocoDir, const std::string& prese
 }  // namespace
 
 int main(int argc, char** argv) {
+  paircast::checkBlasCore("bench_model", argv);  // OpenBLAS's right kernels (util/blas_core.h)
   std::vector<std::string> presets = {"tiny", "small", "base"};
   int batch = 8, threads = 2, repeat = 3, rounds = 2;
   std::string crocoDir, deviceName = "cpu";
@@ -72,7 +74,7 @@ int main(int argc, char** argv) {
   double peakTflops = 800.0;
   CLI::App app{"CroCo forward / forward+backward speed"};
   app.add_option("--device", deviceName, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  app.add_flag("--bf16", bf16, "Autocast to bf16 (CUDA), with TF32 matmuls");
+  app.add_flag("--bf16", bf16, "Autocast to bf16 (CPU or CUDA), with TF32 matmuls on CUDA");
   app.add_option("--peak-tflops", peakTflops,
                  "The device's dense bf16 peak, for the utilisation (H100: ~800)");
   app.add_option("--presets", presets, "Presets to time");
@@ -115,14 +117,14 @@ int main(int argc, char** argv) {
     auto img2 = torch::randn({batch, 3, 224, 224}, device);
     auto forward = [&] {
       torch::NoGradGuard ng;
-      AutocastGuard ac(cuda && bf16);
+      AutocastGuard ac(device.type(), bf16);
       net->forward(img1, img2);
       sync();
     };
     auto trainStep = [&] {
       torch::Tensor loss;
       {
-        AutocastGuard ac(cuda && bf16);
+        AutocastGuard ac(device.type(), bf16);
         auto out = net->forward(img1, img2);
         loss = maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target);
       }

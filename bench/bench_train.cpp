@@ -3,6 +3,11 @@
 // MaskedMSE and AdamW, model only) in Python when --croco-dir names a checkout of naver/croco.
 // CPU by default (tiny and small at batch 16); on CUDA (--device cuda --amp bf16) it also gives
 // the model FLOP utilisation, with the paper's FLOP convention and with the full count.
+// On the CPU one run gives, for the same preset, size, batch and threads: ours at the precision
+// --amp auto picks and ours in float32, the official step in float32 and under
+// torch.autocast("cpu", dtype=torch.bfloat16), the machine's GEMM peak at both precisions
+// (a 2048^3 matmul through LibTorch) and each step's model FLOP/s as a fraction of the peak at
+// its precision.
 // --finetune times finetune's flow step instead (DPT head, LaplacianLossBounded, data included)
 // beside naver/croco's CroCo-Flow step (CroCoDownstreamBinocular with PixelwiseTaskWithDPT,
 // model only), same preset, size, batch and threads.
@@ -15,10 +20,14 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "model/autocast.h"
 #include "model/flops.h"
+#include "model/precision.h"
 #include "trainer/trainer.h"
+#include "util/blas_core.h"
 #include "util/error.h"
 #include "util/heap.h"
+#include "util/timer.h"
 #if PAIRCAST_WITH_RENDER
 #include "dataset/generate_job.h"
 #endif
@@ -34,7 +43,7 @@ namespace {
 struct Options {
   std::vector<std::string> presets = {"tiny", "small"};
   int batch = 16, steps = 12, warmupSteps = 2, threads = 2, workers = 2, imgSize = 224;
-  std::string crocoDir, python = "/usr/bin/python3", device = "cpu", amp = "bf16";
+  std::string crocoDir, python = "/usr/bin/python3", device = "cpu", amp = "auto";
   std::vector<std::string> data;  // shards; none: generated from scenes/ (full build)
   bool live = true, fusedAdamW = true, finetune = false;
   double peakTflops = 800.0;
@@ -62,16 +71,58 @@ double summarySeconds(const std::string& cmd) {
 }
 
 // The official step's seconds per iteration, timed by tests/model/croco_ref.py on the same
-// device, batch and thread count; 0 when it could not run.
-double officialTrainSeconds(const Options& o, const std::string& preset) {
+// device, batch and thread count, under autocast to `amp` (bf16, fp16 or none); 0 when it could
+// not run.
+double officialTrainSeconds(const Options& o, const std::string& preset, const std::string& amp) {
   if (o.crocoDir.empty()) return 0;
-  const std::string cmd =
-      o.python + " " + std::string(PAIRCAST_SOURCE_DIR) +
-      "/tests/model/croco_ref.py bench --preset " + preset + " --batch " + std::to_string(o.batch) +
-      " --threads " + std::to_string(o.threads) + " --device " + o.device + " --amp " +
-      (o.device == "cuda" ? o.amp : "none") + " --optimizer --repeat " +
-      std::to_string(o.device == "cuda" ? 20 : 3) + " --croco-dir '" + o.crocoDir + "'";
+  const std::string cmd = o.python + " " + std::string(PAIRCAST_SOURCE_DIR) +
+                          "/tests/model/croco_ref.py bench --preset " + preset + " --batch " +
+                          std::to_string(o.batch) + " --threads " + std::to_string(o.threads) +
+                          " --device " + o.device + " --amp " + amp + " --optimizer --repeat " +
+                          std::to_string(o.device == "cuda" ? 20 : 3) + " --croco-dir '" +
+                          o.crocoDir + "'";
   return summarySeconds(cmd);
+}
+
+// The device's GEMM peak at `dtype`, GFLOP/s: the best of 5 n^3 matmuls through LibTorch (at
+// the threads set), after one to warm up.
+double gemmPeakGflops(const torch::Device& device, torch::ScalarType dtype, int n = 2048) {
+  torch::NoGradGuard ng;
+  const auto a = torch::randn({n, n}, device).to(dtype), b = torch::randn({n, n}, device).to(dtype);
+  const auto sync = [&] {
+    if (device.is_cuda()) torch::cuda::synchronize();
+  };
+  double best = 1e30;
+  for (int rep = 0; rep < 6; ++rep) {
+    sync();
+    const auto t0 = SteadyClock::now();
+    torch::mm(a, b);
+    sync();
+    if (rep > 0) best = std::min(best, secondsSince(t0));
+  }
+  return 2.0 * n * n * n / best / 1e9;
+}
+
+// The peaks of both precisions, and the one a step at `precision` ("float32", "bf16", "fp16")
+// is measured against.
+struct GemmPeaks {
+  double float32 = 0, bf16 = 0;  // GFLOP/s
+  double at(const std::string& precision) const { return precision == "float32" ? float32 : bf16; }
+};
+
+// A training step's model FLOP/s (3x the forward's, the full count) at `pairsPerS`, as a
+// fraction of the peak at its precision.
+double gemmFraction(double forwardFlops, double pairsPerS, const GemmPeaks& peaks,
+                    const std::string& precision) {
+  return 3 * forwardFlops * pairsPerS / (peaks.at(precision) * 1e9);
+}
+
+// Prints and adds the GEMM-peak fraction of a step at `pps` pairs/s and `precision` under `key`.
+void addFraction(nlohmann::json& row, const char* key, double flops, double pps,
+                 const GemmPeaks& peaks, const std::string& precision) {
+  const double f = gemmFraction(flops, pps, peaks, precision);
+  std::printf("  %.1f%% of the %s GEMM peak", 100 * f, precision.c_str());
+  row[key] = f;
 }
 
 // Steady-state pairs/s and data wait from OUT/log.jsonl, leaving out the first `skip` steps
@@ -105,13 +156,14 @@ struct StepFigures {
 // naver/croco's CroCo-Flow step (bench/croco_flow_step.py), as Python runs it, or with glibc
 // keeping freed memory as finetune does (`keepMemory`).
 StepFigures officialFlowStep(const Options& o, const std::string& preset,
-                             const std::vector<int>& hooks, bool keepMemory) {
+                             const std::vector<int>& hooks, bool keepMemory,
+                             const std::string& amp = "none") {
   if (o.crocoDir.empty()) return {};
   std::string cmd = (keepMemory ? kKeepMemoryTunables : "") + o.python + " " +
                     std::string(PAIRCAST_SOURCE_DIR) + "/bench/croco_flow_step.py --preset " +
                     preset + " --batch " + std::to_string(o.batch) + " --threads " +
                     std::to_string(o.threads) + " --img-size " + std::to_string(o.imgSize) +
-                    " --croco-dir '" + o.crocoDir + "' --hooks";
+                    " --amp " + amp + " --croco-dir '" + o.crocoDir + "' --hooks";
   for (int h : hooks) cmd += " " + std::to_string(h);
   const std::string line = summaryLine(cmd);
   return {summaryValue(line, "train_s"), summaryValue(line, "minflt_per_step")};
@@ -131,10 +183,11 @@ void addOfficialColumns(nlohmann::json& row, const std::string& preset, const St
   row[ratioKey] = ours / pps;
 }
 
-// finetune's flow step (DPT head) on `preset`: pairs/s, data wait and minor faults per step.
+// finetune's flow step (DPT head) on `preset` at --amp `amp`: pairs/s, data wait and minor
+// faults per step.
 nlohmann::json timeFinetune(const Options& o, const std::vector<std::string>& shards,
                             const std::string& tmp, const std::string& preset,
-                            std::vector<int>* hooks) {
+                            const std::string& amp, std::vector<int>* hooks) {
   FinetuneConfig c;
   c.data = shards;
   c.model.croco = presetConfig(preset);
@@ -143,35 +196,76 @@ nlohmann::json timeFinetune(const Options& o, const std::vector<std::string>& sh
   c.train.maxSteps = o.steps;
   c.train.epochs = 100;
   c.train.saveEvery = 1000000;
-  c.train.out = tmp + "/finetune-" + preset;
+  c.train.out = tmp + "/finetune-" + preset + "-" + amp;
   c.train.device = o.device;
-  c.train.amp = o.amp;
+  c.train.amp = amp;
   c.train.progress = false;
   const long faults0 = minorPageFaults();
   const nlohmann::json s = runFinetune(c);
   const double faults = static_cast<double>(minorPageFaults() - faults0) / o.steps;
   auto [pps, wait] = steadyRate(c.train.out, o.batch, o.warmupSteps);
+  const std::string ran = s["precision"]["ran"];
   std::printf(
-      "%-6s finetune flow (dpt) %8.2f pairs/s  data-wait %5.1f%%  %9.0f minor faults/step\n",
-      preset.c_str(), pps, 100 * wait, faults);
+      "%-6s finetune flow (dpt), %-7s %8.2f pairs/s  data-wait %5.1f%%  %9.0f minor faults/step\n",
+      preset.c_str(), ran.c_str(), pps, 100 * wait, faults);
   *hooks = s["hooks"].get<std::vector<int>>();
   return {{"preset", preset},   {"task", "flow"},    {"head", "dpt"},
-          {"pairs_per_s", pps}, {"data_wait", wait}, {"minor_faults_per_step", faults}};
+          {"pairs_per_s", pps}, {"data_wait", wait}, {"minor_faults_per_step", faults},
+          {"precision", ran}};
+}
+
+// The flow step's forward FLOPs, backbone only: both views encoded whole, the decoder, no DPT
+// head (model/flops.h counts the pre-training head).
+double flowBackboneFlops(const Options& o, const std::string& preset) {
+  CroCoConfig c = presetConfig(preset);
+  c.img_size = o.imgSize;
+  c.mask_ratio = 0;
+  return countFlops(c).flops_full;
 }
 
 // finetune's flow step (DPT head) for each preset, beside the official one as Python runs it
 // and with glibc keeping freed memory as ours does.
 nlohmann::json finetuneRows(const Options& o, const std::vector<std::string>& shards,
-                            const std::string& tmp) {
+                            const std::string& tmp, const GemmPeaks& peaks) {
   nlohmann::json rows = nlohmann::json::array();
   for (const auto& preset : o.presets) {
     std::vector<int> hooks;
-    nlohmann::json row = timeFinetune(o, shards, tmp, preset, &hooks);
+    nlohmann::json row = timeFinetune(o, shards, tmp, preset, o.amp, &hooks);
     const double ours = row["pairs_per_s"].get<double>();
+    const double flops = flowBackboneFlops(o, preset);
+    const std::string ran = row["precision"];
+    std::printf("%-6s ours, %s:", preset.c_str(), ran.c_str());
+    addFraction(row, "gemm_fraction", flops, ours, peaks, ran);
+    std::printf(" (backbone FLOPs, DPT head not counted)\n");
+    if (ran != "float32") {
+      std::vector<int> unused;
+      const nlohmann::json f32 = timeFinetune(o, shards, tmp, preset, "none", &unused);
+      row["float32_pairs_per_s"] = f32["pairs_per_s"];
+      std::printf("%-6s ours, float32 -> %s is %.2fx it;", preset.c_str(), ran.c_str(),
+                  ours / f32["pairs_per_s"].get<double>());
+      addFraction(row, "float32_gemm_fraction", flops, f32["pairs_per_s"].get<double>(), peaks,
+                  "float32");
+      std::printf("\n");
+    }
     const StepFigures off = officialFlowStep(o, preset, hooks, false);
     if (off.seconds > 0) {
       addOfficialColumns(row, preset, off, o.batch, ours,
                          "official CroCo-Flow train step (model only)", "official_", "ratio");
+      if (o.device == "cpu") {
+        const StepFigures offBf16 = officialFlowStep(o, preset, hooks, false, "bf16");
+        if (offBf16.seconds > 0) {
+          addOfficialColumns(row, preset, offBf16, o.batch, ours,
+                             "official CroCo-Flow step under CPU bf16 autocast", "official_bf16_",
+                             "ratio_bf16");
+          std::printf("%-6s official float32:", preset.c_str());
+          addFraction(row, "official_gemm_fraction", flops, o.batch / off.seconds, peaks,
+                      "float32");
+          std::printf("; official bf16:");
+          addFraction(row, "official_bf16_gemm_fraction", flops, o.batch / offBf16.seconds, peaks,
+                      "bf16");
+          std::printf("\n");
+        }
+      }
       const StepFigures kept = officialFlowStep(o, preset, hooks, true);
       if (kept.seconds > 0)
         addOfficialColumns(row, preset, kept, o.batch, ours,
@@ -190,6 +284,8 @@ nlohmann::json finetuneRows(const Options& o, const std::vector<std::string>& sh
 }  // namespace
 
 int main(int argc, char** argv) {
+  // OpenBLAS's right kernels for both steps: the official one inherits OPENBLAS_CORETYPE.
+  checkBlasCore("bench_train", argv);
   Options o;
   CLI::App app{"Pre-training step speed, data included"};
   app.add_option("--presets", o.presets, "Presets");
@@ -202,8 +298,10 @@ int main(int argc, char** argv) {
   app.add_option("--data", o.data,
                  "Tar shards or globs to train from (default: pairs generated from scenes/)");
   app.add_option("--device", o.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  app.add_option("--amp", o.amp, "On CUDA: bf16, fp16 or none")
-      ->check(CLI::IsMember({"bf16", "fp16", "none"}));
+  app.add_option("--amp", o.amp,
+                 "Our step's precision: auto (bf16 on CUDA and on CPUs with bf16 units), bf16, "
+                 "fp16 (CUDA) or none; a second run times it in float32")
+      ->check(CLI::IsMember({"auto", "bf16", "fp16", "none"}));
   app.add_flag("!--no-fused-adamw", o.fusedAdamW, "On CUDA, LibTorch's unfused AdamW step");
   app.add_option("--peak-tflops", o.peakTflops,
                  "The device's dense bf16 peak for the utilisation (H100 and H200: ~800 measured)");
@@ -217,6 +315,15 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   try {
     torch::set_num_threads(o.threads);
+    const torch::Device device(o.device == "cuda" ? torch::kCUDA : torch::kCPU);
+    const Precision precision = resolvePrecision(o.amp, device.type(), "bench_train");
+    GemmPeaks peaks;
+    if (o.device == "cpu") {
+      peaks.float32 = gemmPeakGflops(device, torch::kFloat32);
+      peaks.bf16 = gemmPeakGflops(device, torch::kBFloat16);
+      std::printf("GEMM peak, 2048^3 matmul, %d threads: float32 %.0f GFLOP/s, bf16 %.0f GFLOP/s\n",
+                  o.threads, peaks.float32, peaks.bf16);
+    }
     const std::string tmp =
         (fs::temp_directory_path() / ("bench_train_" + std::to_string(::getpid()))).string();
     std::vector<std::string> shards = o.data;
@@ -242,7 +349,7 @@ int main(int argc, char** argv) {
     if (o.finetune) {
       std::printf("batch %d, %s, %d torch threads, %dx%d crops, %d steps (%d left out)\n", o.batch,
                   o.device.c_str(), o.threads, o.imgSize, o.imgSize, o.steps, o.warmupSteps);
-      rows = finetuneRows(o, shards, tmp);
+      rows = finetuneRows(o, shards, tmp, peaks);
       o.presets.clear();
     }
 #else
@@ -250,73 +357,119 @@ int main(int argc, char** argv) {
 #endif
     std::printf(
         "batch %d, %s%s, %d torch threads, %d workers, %dx%d crops, %d steps (%d left out)\n",
-        o.batch, o.device.c_str(), o.device == "cuda" ? (" " + o.amp).c_str() : "", o.threads,
-        o.workers, o.imgSize, o.imgSize, o.steps, o.warmupSteps);
+        o.batch, o.device.c_str(), (" " + precision.ran).c_str(), o.threads, o.workers, o.imgSize,
+        o.imgSize, o.steps, o.warmupSteps);
+    // Ours on `preset` at --amp `amp`: steady pairs/s, data wait and summary.json.
+    auto runOurs = [&](const std::string& preset, bool isLive, const std::string& amp) {
+      TrainConfig c;
+#if PAIRCAST_WITH_RENDER
+      if (isLive) c.live = {scenes};
+#endif
+      if (!isLive) c.shards = shards;
+      c.model = presetConfig(preset);
+      c.model.img_size = o.imgSize;
+      c.batchSize = o.batch;
+      c.maxSteps = o.steps;
+      c.epochs = 100;
+      c.saveEvery = 1000000;
+      c.out = tmp + "/run-" + preset + (isLive ? "-live-" : "-shards-") + amp;
+      c.workers = o.workers;
+      c.device = o.device;
+      c.amp = amp;
+      c.fusedAdamW = o.fusedAdamW;
+      c.progress = false;
+      const nlohmann::json s = runPretrain(c);
+      auto [pps, wait] = steadyRate(c.out, o.batch, o.warmupSteps);
+      if (pps <= 0) pps = s["pairs_per_s"], wait = s["data_wait"];
+      return std::make_tuple(pps, wait, s);
+    };
+    // On CUDA the official step runs at our precision; on the CPU in float32 and in bf16.
+    const std::string officialAmp = precision.ran == "float32" ? "none" : precision.ran;
     for (const auto& preset : o.presets) {
+      const FlopCount f = countFlops([&] {
+        CroCoConfig c = presetConfig(preset);
+        c.img_size = o.imgSize;
+        return c;
+      }());
       for (const bool isLive : {false, true}) {
         if (isLive && !o.live) continue;
-        TrainConfig c;
-#if PAIRCAST_WITH_RENDER
-        if (isLive) c.live = {scenes};
-#endif
-        if (!isLive) c.shards = shards;
-        c.model = presetConfig(preset);
-        c.model.img_size = o.imgSize;
-        c.batchSize = o.batch;
-        c.maxSteps = o.steps;
-        c.epochs = 100;
-        c.saveEvery = 1000000;
-        c.out = tmp + "/run-" + preset + (isLive ? "-live" : "-shards");
-        c.workers = o.workers;
-        c.device = o.device;
-        c.amp = o.amp;
-        c.fusedAdamW = o.fusedAdamW;
-        c.progress = false;
-        const nlohmann::json s = runPretrain(c);
-        auto [pps, wait] = steadyRate(c.out, o.batch, o.warmupSteps);
-        if (pps <= 0) pps = s["pairs_per_s"], wait = s["data_wait"];
-        std::printf("%-6s %-7s %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
-                    isLive ? "live" : "shards", pps, 100 * wait);
-        nlohmann::json row = {{"preset", preset},   {"source", isLive ? "live" : "shards"},
-                              {"pairs_per_s", pps}, {"data_wait", wait},
-                              {"loss", s["loss"]},  {"fused_adamw", s.value("fused_adamw", false)}};
+        const auto [pps, wait, s] = runOurs(preset, isLive, o.amp);
+        std::printf("%-6s %-7s %-7s %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
+                    isLive ? "live" : "shards", precision.ran.c_str(), pps, 100 * wait);
+        nlohmann::json row = {
+            {"preset", preset},          {"source", isLive ? "live" : "shards"},
+            {"pairs_per_s", pps},        {"data_wait", wait},
+            {"loss", s["loss"]},         {"fused_adamw", s.value("fused_adamw", false)},
+            {"precision", precision.ran}};
         if (o.device == "cuda") {
           // Forward and backward: 3x the forward FLOPs.
-          const FlopCount f = countFlops(c.model);
           const double mfuPaper = 3 * f.flops * pps / (o.peakTflops * 1e12);
           const double mfuFull = 3 * f.flops_full * pps / (o.peakTflops * 1e12);
           std::printf("  MFU %.1f%% (paper's FLOPs), %.1f%% (full count) of %.0f TFLOP/s",
                       100 * mfuPaper, 100 * mfuFull, o.peakTflops);
           row["mfu_paper"] = mfuPaper;
           row["mfu_full"] = mfuFull;
+        } else {
+          addFraction(row, "gemm_fraction", f.flops_full, pps, peaks, precision.ran);
         }
         std::printf("\n");
         if (!isLive) {
-          const double off = officialTrainSeconds(o, preset);
+          if (o.device == "cpu" && precision.ran != "float32") {
+            const auto [pps32, wait32, s32] = runOurs(preset, false, "none");
+            std::printf("%-6s shards  float32 %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
+                        pps32, 100 * wait32);
+            addFraction(row, "float32_gemm_fraction", f.flops_full, pps32, peaks, "float32");
+            std::printf("  -> %s is %.2fx\n", precision.ran.c_str(), pps / pps32);
+            row["float32_pairs_per_s"] = pps32;
+            row["float32_data_wait"] = wait32;
+          }
+          const double off =
+              officialTrainSeconds(o, preset, o.device == "cuda" ? officialAmp : "none");
           if (off > 0) {
             std::printf(
-                "%-6s official CroCo train step (model only): %8.2f pairs/s -> ours %.2fx\n",
-                preset.c_str(), o.batch / off, pps / (o.batch / off));
+                "%-6s official CroCo train step (model only), %s: %8.2f pairs/s -> ours %.2fx",
+                preset.c_str(), o.device == "cuda" ? officialAmp.c_str() : "float32", o.batch / off,
+                pps / (o.batch / off));
             row["official_pairs_per_s"] = o.batch / off;
             row["ratio"] = pps / (o.batch / off);
+            if (o.device == "cpu")
+              addFraction(row, "official_gemm_fraction", f.flops_full, o.batch / off, peaks,
+                          "float32");
+            std::printf("\n");
           } else if (!o.crocoDir.empty()) {
             std::printf("%-6s official step did not run (%s with torch, --croco-dir)\n",
                         preset.c_str(), o.python.c_str());
+          }
+          const double offBf16 = o.device == "cpu" ? officialTrainSeconds(o, preset, "bf16") : 0;
+          if (offBf16 > 0) {
+            std::printf(
+                "%-6s official step under torch.autocast(\"cpu\", bf16): %8.2f pairs/s -> ours "
+                "%.2fx",
+                preset.c_str(), o.batch / offBf16, pps / (o.batch / offBf16));
+            row["official_bf16_pairs_per_s"] = o.batch / offBf16;
+            row["ratio_bf16"] = pps / (o.batch / offBf16);
+            addFraction(row, "official_bf16_gemm_fraction", f.flops_full, o.batch / offBf16, peaks,
+                        "bf16");
+            std::printf("\n");
           }
         }
         rows.push_back(row);
       }
     }
     fs::remove_all(tmp);
-    std::printf("%s\n", nlohmann::json({{"batch", o.batch},
-                                        {"threads", o.threads},
-                                        {"device", o.device},
-                                        {"amp", o.device == "cuda" ? o.amp : "none"},
-                                        {"img_size", o.imgSize},
-                                        {"peak_tflops", o.peakTflops},
-                                        {"results", rows}})
-                            .dump()
-                            .c_str());
+    std::printf(
+        "%s\n",
+        nlohmann::json({{"batch", o.batch},
+                        {"threads", o.threads},
+                        {"device", o.device},
+                        {"amp", o.amp},
+                        {"precision", precision.toJson()},
+                        {"gemm_peak_gflops", {{"float32", peaks.float32}, {"bf16", peaks.bf16}}},
+                        {"img_size", o.imgSize},
+                        {"peak_tflops", o.peakTflops},
+                        {"results", rows}})
+            .dump()
+            .c_str());
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_train: error: %s\n", e.what());

@@ -4,7 +4,8 @@ PixelwiseTaskWithDPT (3 channels), stereoflow's LaplacianLossBounded and AdamW (
 weight decay 0.05 but on biases and 1-D parameters), from a checkout of naver/croco.
 
   croco_flow_step.py --croco-dir DIR --preset tiny --img-size 224 --batch 8 --threads 2 \
-      --hooks 5 5 6 7
+      --hooks 5 5 6 7 [--amp bf16]
+--amp bf16 runs the forward and the loss under torch.autocast("cpu", dtype=torch.bfloat16).
 Prints one line: SUMMARY croco_flow_step ... train_s=<median seconds per step>
 minflt_per_step=<minor page faults per timed step>.
 """
@@ -35,6 +36,7 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--hooks", type=int, nargs=4, required=True)
+    ap.add_argument("--amp", default="none", choices=["none", "bf16"])
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
     sys.path.insert(0, a.croco_dir)
@@ -58,8 +60,9 @@ def main():
     gt = 5 * torch.randn(a.batch, 2, s, s)
 
     def step():
-        out = net(img1, img2)
-        loss = crit(out[:, :2], gt, out[:, 2:3])
+        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=a.amp == "bf16"):
+            out = net(img1, img2)
+            loss = crit(out[:, :2].float(), gt, out[:, 2:3].float())
         loss.backward()
         opt.step()
         opt.zero_grad(set_to_none=True)
@@ -73,9 +76,9 @@ def main():
         times.append(time.perf_counter() - t)
     faults = (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - faults) / a.repeat
     times.sort()
-    print("SUMMARY croco_flow_step preset=%s batch=%d threads=%d img=%d torch=%s train_s=%.4f "
-          "minflt_per_step=%d" % (a.preset, a.batch, a.threads, s, torch.__version__,
-                                  times[len(times) // 2], faults))
+    print("SUMMARY croco_flow_step preset=%s batch=%d threads=%d img=%d amp=%s torch=%s "
+          "train_s=%.4f minflt_per_step=%d" % (a.preset, a.batch, a.threads, s, a.amp,
+                                               torch.__version__, times[len(times) // 2], faults))
     return 0
 
 

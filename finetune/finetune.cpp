@@ -6,6 +6,7 @@
 #include "finetune/evaluate.h"
 #include "finetune/finetune_data.h"
 #include "model/checkpoint.h"
+#include "model/precision.h"
 #include "trainer/distributed.h"
 #include "trainer/training_loop.h"
 #include "util/atomic_file.h"
@@ -25,8 +26,7 @@ void FinetuneConfig::validate() const {
   if (train.epochs < 1) throw OptionError("epochs", "epochs must be >= 1");
   if (train.device != "cpu" && train.device != "cuda")
     throw OptionError("device", "the device must be cpu or cuda, not '" + train.device + "'");
-  if (train.amp != "bf16" && train.amp != "fp16" && train.amp != "none")
-    throw OptionError("amp", "mixed precision must be bf16, fp16 or none, not '" + train.amp + "'");
+  checkAmp(train.amp);
   if (init.empty()) throw OptionError("init", "--init takes random or a checkpoint");
   model.validate();
 }

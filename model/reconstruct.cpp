@@ -3,6 +3,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "model/autocast.h"
 #include "model/checkpoint.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -83,7 +84,8 @@ Reconstruction reconstructWith(CroCoNet& model, const torch::Tensor& img1,
                                const torch::Tensor& img2, const torch::Tensor& mask) {
   torch::NoGradGuard noGrad;
   const CroCoConfig& c = model->config();
-  const CroCoOutput out = model->forward(img1, img2, mask);
+  CroCoOutput out = model->forward(img1, img2, mask);
+  out.prediction = out.prediction.to(torch::kFloat32);  // bf16 under autocast
   // Un-normalise the norm_pix prediction with the target patches' statistics, as the paper shows.
   auto target = out.target;
   auto mean = target.mean(-1, true), std = torch::sqrt(target.var(-1, true, true) + 1e-6);
@@ -119,6 +121,7 @@ Reconstruction reconstruct(const ReconstructOptions& o) {
     torch::manual_seed(o.seed);
     mask = model->randomMask(1, torch::kCPU);
   }
+  const AutocastGuard autocast(resolvePrecision(o.amp, at::kCPU, "reconstruct"));
   return reconstructWith(model, img1, taskReference(task, img2), mask);
 }
 

@@ -16,6 +16,7 @@ struct ReconstructOptions {
   std::string maskFile;  // 0/1 per patch, row-major, 1 = masked; empty: random
   uint64_t seed = 0;
   std::optional<CroCoConfig> config;  // for checkpoints without our args (official ones)
+  std::string amp = "auto";           // the forward's precision on the CPU: auto, bf16 or none
 };
 
 struct Reconstruction {

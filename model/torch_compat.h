@@ -8,9 +8,11 @@
 //        TensorImpl pointer (a string of it before); c10d's Gloo and NCCL groups are
 //        c10d::Backends (c10d::ProcessGroups before).
 //   2.1: at::_fused_adamw_, AdamW's multi-tensor CUDA kernel (float lr overload).
-//   2.4: autocast is switched per device type (set_autocast_enabled(kCUDA, on)); before, by
-//        set_enabled and set_autocast_gpu_dtype. c10d::TCPStoreOptions asks for the libuv
-//        backend by default, which builds without libuv (Debian 13's) refuse to start.
+//   2.4: autocast is switched per device type (set_autocast_enabled(kCUDA, on),
+//        set_autocast_dtype(kCPU, bf16)); before, by set_enabled / set_cpu_enabled and
+//        set_autocast_gpu_dtype / set_autocast_cpu_dtype (deprecated, with a warning, since).
+//        c10d::TCPStoreOptions asks for the libuv backend by default, which builds without libuv
+//        (Debian 13's) refuse to start.
 #pragma once
 
 #include <ATen/autocast_mode.h>
@@ -58,23 +60,39 @@ inline torch::Tensor scaledDotProductAttention(const torch::Tensor& q, const tor
 
 // ---- mixed precision ----
 
-// Autocast on CUDA to `dtype` (bf16 or fp16) from now on, for this thread.
-inline void enableCudaAutocast(at::ScalarType dtype) {
+// Whether autocast is on for `device` (kCPU or kCUDA), for this thread.
+inline bool isAutocast(at::DeviceType device) {
 #if PAIRCAST_TORCH_AT_LEAST(2, 4)
-  at::autocast::set_autocast_enabled(at::kCUDA, true);
-  at::autocast::set_autocast_dtype(at::kCUDA, dtype);
+  return at::autocast::is_autocast_enabled(device);
 #else
-  at::autocast::set_enabled(true);
-  at::autocast::set_autocast_gpu_dtype(dtype);
+  return device == at::kCPU ? at::autocast::is_cpu_enabled() : at::autocast::is_enabled();
 #endif
 }
 
-// Autocast on CUDA off again (its cache of cast weights is the caller's to clear).
-inline void disableCudaAutocast() {
+// The type autocast casts to on `device` (kCPU or kCUDA).
+inline at::ScalarType autocastDtype(at::DeviceType device) {
 #if PAIRCAST_TORCH_AT_LEAST(2, 4)
-  at::autocast::set_autocast_enabled(at::kCUDA, false);
+  return at::autocast::get_autocast_dtype(device);
 #else
-  at::autocast::set_enabled(false);
+  return device == at::kCPU ? at::autocast::get_autocast_cpu_dtype()
+                            : at::autocast::get_autocast_gpu_dtype();
+#endif
+}
+
+// Autocast on `device` (kCPU or kCUDA) on or off from now on, for this thread, casting to
+// `dtype` (bf16, or fp16 on CUDA). Its cache of cast weights is the caller's to clear.
+inline void setAutocast(at::DeviceType device, bool enabled, at::ScalarType dtype) {
+#if PAIRCAST_TORCH_AT_LEAST(2, 4)
+  at::autocast::set_autocast_enabled(device, enabled);
+  at::autocast::set_autocast_dtype(device, dtype);
+#else
+  if (device == at::kCPU) {
+    at::autocast::set_cpu_enabled(enabled);
+    at::autocast::set_autocast_cpu_dtype(dtype);
+  } else {
+    at::autocast::set_enabled(enabled);
+    at::autocast::set_autocast_gpu_dtype(dtype);
+  }
 #endif
 }
 

@@ -11,6 +11,7 @@
 #include "dataset/generate_job.h"
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
+#include "model/precision.h"
 #include "sweep/heldout_eval.h"
 #include "sweep/sweep_downstream.h"
 #include "sweep/sweep_pool.h"
@@ -67,6 +68,7 @@ void trainRun(const SweepConfig& c, const CroCoConfig& mc, const SweepRun& run, 
   t.model = mc;
   t.task = run.task;
   t.device = c.device;
+  t.amp = c.amp;
   // --batch-size is per process, as in pretrain: epochs count the global batch.
   setSweepSchedule(t, c.steps, c.pairsPerSet, c.batchSize, dist ? dist->worldSize() : 1);
   t.blr = c.blr;
@@ -110,6 +112,7 @@ nlohmann::json rankSettings(const SweepConfig& c) {
           {"seed", c.seed},
           {"resolution", c.resolution},
           {"device", c.device},
+          {"amp", c.amp},
           {"seeds", c.seeds},
           {"baselines", c.baselines},
           {"sets", c.sets},
@@ -523,6 +526,7 @@ void SweepConfig::validate() const {
     throw OptionError("pairs_per_set", "pairs per set must be at least one batch (" +
                                            std::to_string(batchSize) + ")");
   if (steps < 1) throw OptionError("steps", "training steps must be >= 1");
+  checkAmp(amp);
   if (evalPairs < 1) throw OptionError("eval_pairs", "held-out pairs must be >= 1");
   if (probeViews < 4) throw OptionError("probe_views", "the depth probe needs at least 4 views");
   if (seeds < 1 || seeds > 1000) throw OptionError("seeds", "seeds must be in 1..1000");

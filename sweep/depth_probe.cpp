@@ -30,8 +30,10 @@ torch::Tensor encoderFeatures(CroCoNet& model, const torch::Tensor& images, int 
   model->eval();
   std::vector<torch::Tensor> out;
   for (int64_t i = 0; i < images.size(0); i += batch)
-    out.push_back(model->encode(images.slice(0, i, std::min<int64_t>(i + batch, images.size(0))),
-                                torch::Tensor()));
+    out.push_back(model
+                      ->encode(images.slice(0, i, std::min<int64_t>(i + batch, images.size(0))),
+                               torch::Tensor())
+                      .to(torch::kFloat32));  // bf16 under autocast
   if (wasTraining) model->train();
   return torch::cat(out);
 }

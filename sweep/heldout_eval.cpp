@@ -8,6 +8,7 @@
 
 #include "dataset/generate_job.h"
 #include "dataset/pair_generator.h"
+#include "model/autocast.h"
 #include "model/reconstruct.h"
 #include "sweep/sweep_scene.h"
 #include "trainer/pair_dataset.h"
@@ -125,6 +126,10 @@ HeldOut loadHeldOut(const SweepConfig& c, const CroCoConfig& mc,
   h.probeSettings = {{"version", 1},
                      {"pairs_per_scene", c.mechanismPairs},
                      {"covis", {c.mechanismMinCovis, c.mechanismMaxCovis}}};
+  // On the CPU, where fp16 has no autocast: a sweep trained in fp16 on CUDA evaluates at auto.
+  h.precision = resolvePrecision(c.amp == "fp16" ? "auto" : c.amp, at::kCPU, "covis_sweep");
+  // Figures computed in float32 stay valid for float32; bf16 ones are others.
+  if (h.precision.autocast()) h.probeSettings["precision"] = h.precision.ran;
   return h;
 }
 
@@ -141,6 +146,7 @@ nlohmann::json constantDepthBaseline(const HeldOut& h) {
 
 nlohmann::json evaluate(CroCoNet& model, const HeldOut& h, const std::string& task) {
   torch::NoGradGuard ng;
+  const AutocastGuard autocast(h.precision);
   model->eval();
   double lossSum = 0;
   int64_t n = 0;
@@ -148,7 +154,8 @@ nlohmann::json evaluate(CroCoNet& model, const HeldOut& h, const std::string& ta
     const int64_t j = std::min<int64_t>(i + 16, h.img1.size(0));
     auto out = pretrainForward(model, task, h.img1.slice(0, i, j), h.img2.slice(0, i, j),
                                h.mask.slice(0, i, j));
-    lossSum += maskedMse(out.prediction, out.mask, out.target).item<double>() * (j - i);
+    lossSum += maskedMse(out.prediction.to(torch::kFloat32), out.mask, out.target).item<double>() *
+               (j - i);
     n += j - i;
   }
   const DepthMetrics m = crossFitProbe(model, h.probeA, h.probeB);

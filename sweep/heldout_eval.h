@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "model/croco_net.h"
+#include "model/precision.h"
 #include "sweep/covis_sweep.h"
 #include "sweep/depth_probe.h"
 #include "sweep/mechanism_probe.h"
@@ -22,6 +23,7 @@ struct HeldOut {
   ProbeData probeA, probeB;        // the depth probe's two halves (crossFitProbe)
   MechanismPairs mechanism;        // the mechanism probes' pairs
   nlohmann::json probeSettings;    // what the mechanism probes were made with
+  Precision precision;             // what the evaluation computes in (--amp, on the CPU)
 };
 
 // Makes the evaluation data (the pairs at covis ~0.5 are generated once into heldout/xv; the
@@ -32,7 +34,7 @@ HeldOut loadHeldOut(const SweepConfig& config, const CroCoConfig& model,
 
 // A model's held-out figures: its completion loss on its own task (with the reference view for
 // "croco", without for "mae") over the held-out pairs and their fixed masks, the depth probe
-// (probe_*), and the mechanism probes (mechanismProbes).
+// (probe_*), and the mechanism probes (mechanismProbes), at heldout.precision.
 nlohmann::json evaluate(CroCoNet& model, const HeldOut& heldout, const std::string& task);
 
 // Whether an eval.json holds the figures `evaluate` gives now for this held-out data: it was

@@ -196,6 +196,7 @@ FinetuneConfig finetuneConfig(const SweepConfig& c, const CroCoConfig& mc,
   f.init = job.init;
   TrainConfig& t = f.train;
   t.device = c.device;
+  t.amp = c.amp;
   setSweepSchedule(t, c.finetuneSteps, static_cast<int64_t>(data.trainPairs), c.finetuneBatch,
                    world);
   t.blr = c.finetuneBlr;

@@ -20,6 +20,9 @@ int main(int argc, char** argv) {
   app.add_option("--mask-file", o.maskFile,
                  "0/1 per patch, row-major, 1 = masked (default: random)");
   app.add_option("--seed", o.seed, "Seed of the random mask");
+  app.add_option("--amp", o.amp,
+                 "auto (bf16 on CPUs with bf16 units, else float32), bf16 or none (float32)")
+      ->check(CLI::IsMember({"auto", "bf16", "none"}));
   app.add_option("--out", out, "Output grid (.png)")->required();
   app.add_option("--save-prediction", savePrediction, "Raw head output as float32 .npy [N, p*p*3]");
   app.add_option("--preset", preset, "Hyper-parameters for foreign checkpoints: tiny, small, base");

@@ -9,6 +9,7 @@
 #include <new>
 #include <string>
 
+#include "util/blas_core.h"
 #include "util/error.h"
 #include "util/launch_env.h"
 
@@ -29,10 +30,12 @@ inline void logLaunch(const char* name, const std::string& line) {
   if (!line.empty()) std::fprintf(stderr, "%s: %s\n", name, line.c_str());
 }
 
+// Before all else, the OpenBLAS core check (util/blas_core.h).
 // Exit codes: 0 success, 1 error (bad input, I/O), 2 bad command line, 3 internal error.
 // A library's OptionError is a bad command line: the message gets the flag's name.
 inline int runTool(const char* name, CLI::App& app, int argc, char** argv,
                    const std::function<int()>& body) {
+  checkBlasCore(name, argv);  // may run the command again, with OpenBLAS's right kernels
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

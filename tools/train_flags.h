@@ -18,8 +18,10 @@ inline void addLoopFlags(CLI::App& app, TrainConfig& c) {
   app.add_option("--weight-decay", c.weightDecay, "AdamW weight decay (not on biases and norms)");
   app.add_flag("--resume", c.resume, "Continue from OUT/checkpoint-last.pth");
   app.add_option("--device", c.device, "cpu or cuda")->check(CLI::IsMember({"cpu", "cuda"}));
-  app.add_option("--amp", c.amp, "On CUDA: bf16, fp16 (with a dynamic loss scale) or none")
-      ->check(CLI::IsMember({"bf16", "fp16", "none"}));
+  app.add_option("--amp", c.amp,
+                 "auto (bf16 on CUDA and on CPUs with bf16 units, else float32), bf16, fp16 "
+                 "(CUDA, with a dynamic loss scale) or none (float32)")
+      ->check(CLI::IsMember({"auto", "bf16", "fp16", "none"}));
   app.add_option("--seed", c.seed, "Random seed");
   app.add_option("--save-every", c.saveEvery, "Iterations between checkpoints");
   app.add_option("--log-every", c.logEvery, "Iterations between log lines")

@@ -8,6 +8,7 @@
 
 #include "model/checkpoint.h"
 #include "model/croco_net.h"
+#include "model/precision.h"
 #include "model/reconstruct.h"
 #include "trainer/batch_loader.h"
 #include "trainer/distributed.h"
@@ -45,8 +46,7 @@ void TrainConfig::validate() const {
     throw OptionError("data",
                       "give a data source: shards, a CroCo folder or live scenes (or "
                       "several, with weights)");
-  if (amp != "bf16" && amp != "fp16" && amp != "none")
-    throw OptionError("amp", "mixed precision must be bf16, fp16 or none, not '" + amp + "'");
+  checkAmp(amp);
   if (task != "croco" && task != "mae")
     throw OptionError("task", "the task must be croco or mae, not '" + task + "'");
   if (out.empty()) throw OptionError("out", "an output folder is required");

@@ -44,9 +44,10 @@ struct TrainConfig {
   std::string out;
   bool resume = false;
   std::string device = "cpu";
-  // Mixed precision on CUDA: "bf16" (autocast), "fp16" (autocast and a dynamic loss scale, as
-  // torch.cuda.amp.GradScaler) or "none" (float32, TF32 matmuls).
-  std::string amp = "bf16";
+  // Mixed precision (model/precision.h): "auto" (bf16 autocast on CUDA and on a CPU with bf16
+  // units, float32 elsewhere), "bf16", "fp16" (CUDA only: autocast and a dynamic loss scale, as
+  // torch.cuda.amp.GradScaler) or "none" (float32; TF32 matmuls on CUDA).
+  std::string amp = "auto";
   bool fusedAdamW = true;  // on CUDA with LibTorch >= 2.1: AdamW as one fused kernel per group
   bool forceLossScaling = false;  // the fp16 loss scale on any device (tests)
   double initScale = 65536.0;     // GradScaler's defaults

@@ -19,6 +19,7 @@
 #include "trainer/fused_adamw.h"
 #include "trainer/grad_scaler.h"
 #include "util/atomic_file.h"
+#include "util/blas_core.h"
 #include "util/error.h"
 #include "util/heap.h"
 #include "util/plot.h"
@@ -142,6 +143,7 @@ class TrainingLoop {
           torch::Device(torch::kCUDA, dist ? static_cast<c10::DeviceIndex>(dist->localRank()) : 0);
       allowTf32();
     }
+    precision_ = resolvePrecision(c.amp, device_.type(), tool_);
     if (const std::string blas = lead_ && !device_.is_cuda() ? pthreadOpenBlas() : "";
         !blas.empty())
       std::fprintf(stderr,
@@ -176,9 +178,8 @@ class TrainingLoop {
                                      torch::optim::AdamWOptions(adamw).weight_decay(0.0)));
     opt_ = std::make_unique<torch::optim::AdamW>(groups, adamw);
     // fp16 needs a loss scale; bf16 has float32's range and does not.
-    scaler_ =
-        std::make_unique<GradScaler>((device_.is_cuda() && c_.amp == "fp16") || c_.forceLossScaling,
-                                     c_.initScale, c_.scaleGrowthInterval);
+    scaler_ = std::make_unique<GradScaler>(precision_.ran == "fp16" || c_.forceLossScaling,
+                                           c_.initScale, c_.scaleGrowthInterval);
   }
 
   // From OUT/checkpoint-last.pth with --resume (the log cut back to its step), else a new log.
@@ -265,6 +266,8 @@ class TrainingLoop {
     s["world_size"] = world_;
     s["fused_adamw"] = c_.fusedAdamW && device_.is_cuda() && fusedAdamWCompiled();
     if (scaler_->enabled()) s["loss_scale"] = scaler_->scale();
+    s["precision"] = precision_.toJson();
+    s["openblas_core"] = blasCore().toJson();
     task_.summarise(s);
     if (lead_) writeFileAtomic((fs::path(c_.out) / "summary.json").string(), s.dump(1) + "\n");
     if (dist_) dist_->barrier();
@@ -330,9 +333,8 @@ class TrainingLoop {
   double step() {
     torch::Tensor loss;
     {
-      // On CUDA: bf16 or fp16 autocast; the task computes the loss itself in float32.
-      AutocastGuard autocast(device_.is_cuda() && c_.amp != "none",
-                             c_.amp == "fp16" ? at::kHalf : at::kBFloat16);
+      // bf16 or fp16 autocast, or none; the task computes the loss itself in float32.
+      const AutocastGuard autocast(precision_);
       loss = task_.loss(device_);
     }
     if (iter_ == c_.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
@@ -398,10 +400,10 @@ class TrainingLoop {
     const double rate = (iter_ - firstIter_) / std::max(1e-9, since(start_));
     char line[256];
     std::snprintf(line, sizeof line,
-                  "[%s] step %lld/%lld  epoch %.2f  loss %.4f  lr %.2e  %.1f pairs/s  "
+                  "[%s] step %lld/%lld  epoch %.2f  loss %.4f  lr %.2e  %.1f pairs/s  %s  "
                   "data-wait %.1f%%  ETA %.0fs",
                   tool_.c_str(), static_cast<long long>(iter_), static_cast<long long>(stopAt_),
-                  epoch_, stepLoss_, currentLr(), rate * c_.batchSize,
+                  epoch_, stepLoss_, currentLr(), rate * c_.batchSize, precision_.ran.c_str(),
                   100 * waitTotal_ / std::max(1e-9, stepTotal_),
                   (stopAt_ - iter_) / std::max(rate, 1e-9));
     return line;
@@ -464,6 +466,7 @@ class TrainingLoop {
   double lr_ = 0;                       // the peak lr
   std::unique_ptr<torch::optim::AdamW> opt_;
   std::unique_ptr<GradScaler> scaler_;
+  Precision precision_;
   // Position.
   int64_t iter_ = 0, firstIter_ = 0;
   std::vector<std::pair<int64_t, double>> curve_;  // (step, loss) of the logged steps

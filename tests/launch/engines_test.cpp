@@ -352,7 +352,7 @@ std::vector<std::string> trainArgs(int batch) {
   // No --workers: pretrain.sbatch gives it from --cpus-per-task (and batches do not depend on it).
   return {"--img-size",  "32", "--batch-size", std::to_string(batch),
           "--max-steps", "3",  "--epochs",     "4",
-          "--seed",      "4"};
+          "--seed",      "4",  "--amp",        "none"};  // bf16 rounds each rank's half apart
 }
 
 // One process with the doubled batch, into `out`.

@@ -157,7 +157,9 @@ def bench(args):
         return times[len(times) // 2] if cuda else times[0]
 
     def autocast():
-        return torch.autocast(dev.type, dtype=amp, enabled=cuda and amp is not None)
+        # CPU autocast takes bf16 only (torch 1.13 refuses fp16 there).
+        return torch.autocast(dev.type, dtype=amp,
+                              enabled=amp is not None and (cuda or amp == torch.bfloat16))
 
     def fwd():
         with torch.no_grad(), autocast():
@@ -197,7 +199,7 @@ def main():
     b.add_argument("--cpu-time", action="store_true", help="process CPU seconds, not wall-clock")
     b.add_argument("--device", default="cpu", help="cpu or cuda")
     b.add_argument("--amp", default="none", choices=["none", "bf16", "fp16"],
-                   help="autocast dtype on CUDA")
+                   help="autocast dtype (on the CPU: bf16 only)")
     b.add_argument("--optimizer", action="store_true", help="the train step includes AdamW's step")
     o = sub.add_parser("officialize", help="re-save CKPT laid out as official CroCo checkpoints")
     o.add_argument("ckpt")

@@ -179,6 +179,7 @@ SweepConfig miniSweep(const std::string& out) {
   c.jobs = 2;
   c.workers = 1;
   c.progress = false;
+  c.amp = "none";  // float32 on every CPU
   return c;
 }
 
