@@ -194,18 +194,6 @@ class FinetuneTask : public TrainingTask {
   torch::Device device_{torch::kCPU};
 };
 
-// A fine-tuning checkpoint's model, on `device`, in eval mode.
-DownstreamNet loadFinetuned(const std::string& checkpoint, const torch::Device& device) {
-  const Checkpoint ck = loadCheckpoint(checkpoint);
-  const DownstreamConfig config = downstreamConfigOf(ck, checkpoint);
-  checkModelFitsState(config.croco, ck.model, checkpoint);
-  DownstreamNet net(config);
-  loadStateDictStrict(*net, ck.model, checkpoint);
-  net->to(device);
-  net->eval();
-  return net;
-}
-
 torch::Device deviceNamed(const std::string& name) {
   if (name == "cpu") return torch::kCPU;
   if (name != "cuda")
@@ -216,6 +204,17 @@ torch::Device deviceNamed(const std::string& name) {
 }
 
 }  // namespace
+
+DownstreamNet loadFinetuned(const std::string& checkpoint, const torch::Device& device) {
+  const Checkpoint ck = loadCheckpoint(checkpoint);
+  const DownstreamConfig config = downstreamConfigOf(ck, checkpoint);
+  checkModelFitsState(config.croco, ck.model, checkpoint, config.headParameters());
+  DownstreamNet net(config);
+  loadStateDictStrict(*net, ck.model, checkpoint);
+  net->to(device);
+  net->eval();
+  return net;
+}
 
 DownstreamNet initialNet(const FinetuneConfig& c, std::string* initialised) {
   torch::manual_seed(c.train.seed);

@@ -55,6 +55,12 @@ torch::Tensor finetuneLoss(const std::string& task, const std::string& head,
                            const torch::Tensor& out, const torch::Tensor& flow,
                            const torch::Tensor& depth, const torch::Tensor& pose);
 
+// A fine-tuning checkpoint's model, on `device`, in eval mode: its configuration (croco_kwargs,
+// task, head, head_kwargs) checked against its tensors before the model is built, then its
+// weights loaded strictly. Throws paircast::Error naming the file.
+DownstreamNet loadFinetuned(const std::string& checkpoint,
+                            const torch::Device& device = torch::kCPU);
+
 // finetune --predict: the model of `checkpoint` on one pair (depth: image 1 alone), written to
 // `out`: flow .flo (and a colour-wheel PNG beside it, same name with .png), depth .exr (metres),
 // pose .json. Returns what was written.

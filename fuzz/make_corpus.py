@@ -1,10 +1,20 @@
 #!/usr/bin/python3
 """Writes the small seed corpora in fuzz/corpus/<target>/ (each file a few KB at most).
 
-Every seed is made here from scratch: tiny scenes, shards, JSON records and checkpoints that our
-readers accept, so that libFuzzer starts from valid structure and mutates inward. Run it again
-after changing a format (the files are committed):  /usr/bin/python3 fuzz/make_corpus.py
-The checkpoint seeds need Debian's python3-torch (/usr/bin/python3); without it they are skipped.
+Tiny scenes, JSON records and checkpoints are made here from scratch; the .flo and EXR members
+and the shard with flow and depth are real outputs of generate_pairs. All are inputs our readers
+accept, so that libFuzzer starts from valid structure and mutates inward. Run it again after
+changing a format (the files are committed):
+
+  /usr/bin/python3 fuzz/make_corpus.py [--pairs DIR | --build BUILD_DIR]
+
+--pairs DIR takes the real outputs from DIR, written by
+  generate_pairs --scenes scenes/room --out DIR --pairs-per-scene 2 --resolution 16 --save-flow
+    --save-depth --format both --shard-size 1 --seed 3 --jobs 1
+otherwise that command is run from BUILD_DIR/tools (default build/) into a temporary folder.
+Without either, and without torch for the checkpoint seeds, those targets' seeds are left as they
+are: a target's folder is emptied only when its seeds are written again. The checkpoint seeds
+need Debian's python3-torch (/usr/bin/python3).
 """
 import argparse
 import collections
@@ -13,18 +23,25 @@ import json
 import os
 import shutil
 import struct
+import subprocess
 import tarfile
+import tempfile
 import zlib
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "corpus")
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.join(REPO, "fuzz", "corpus")
+_written = set()  # targets whose folder this run emptied
 
 
-def write(target, name, data):
+def write(target, name, data, limit=8192):
     folder = os.path.join(ROOT, target)
+    if target not in _written:
+        shutil.rmtree(folder, ignore_errors=True)
+        _written.add(target)
     os.makedirs(folder, exist_ok=True)
     if isinstance(data, str):
         data = data.encode()
-    assert len(data) <= 8192, (target, name, len(data))
+    assert len(data) <= limit, (target, name, len(data))
     with open(os.path.join(folder, name), "wb") as f:
         f.write(data)
 
@@ -257,6 +274,45 @@ def shard_seeds():
             write("fuzz_shard_index", name, f.read())
 
 
+# ---- real outputs: .flo and EXR members, a shard with flow and depth ----
+
+GENERATE = ["--scenes", os.path.join(REPO, "scenes", "room"), "--pairs-per-scene", "2",
+            "--resolution", "16", "--save-flow", "--save-depth", "--format", "both",
+            "--shard-size", "1", "--seed", "3", "--jobs", "1", "--quiet"]
+
+
+def real_outputs(pairs, build, scratch):
+    """The folder of generate_pairs' outputs (module docstring), or None when there is none."""
+    if pairs:
+        return pairs
+    tool = os.path.join(build, "tools", "generate_pairs")
+    if not os.access(tool, os.X_OK):
+        return None
+    out = os.path.join(scratch, "pairs")
+    subprocess.run([tool, "--out", out] + GENERATE, check=True, stdout=subprocess.DEVNULL)
+    return out
+
+
+def read(path):
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def real_seeds(folder):
+    """Members as generate_pairs writes them, in CroCo's layout and in shards (the same bytes)."""
+    croco = os.path.join(folder, "room")
+    for pair in ("00000000", "00000001"):
+        write("fuzz_flo", "room_%s_1_flow.flo" % pair, read(os.path.join(croco, pair + "_1_flow.flo")))
+        write("fuzz_exr", "room_%s_1_depth.exr" % pair,
+              read(os.path.join(croco, pair + "_1_depth.exr")))
+    # A shard of one pair with both views' JPEGs, depth and flow: what finetune and ShardPairs
+    # read. At generate_pairs' smallest resolution (16) it is 18 KiB, over the 8 KiB of the other
+    # seeds; libFuzzer's -max_len follows the largest seed.
+    shard = read(os.path.join(folder, "pairs-000000.tar"))
+    for target in ("fuzz_shard", "fuzz_shard_index"):
+        write(target, "room_flow_depth.tar", shard, limit=20 * 1024)
+
+
 # ---- checkpoints ----
 
 def checkpoint_seeds():
@@ -266,13 +322,13 @@ def checkpoint_seeds():
         print("make_corpus: python3-torch missing, checkpoint seeds left as they are")
         return
 
-    def save(name, obj):
+    def save(target, name, obj):
         buf = io.BytesIO()
         torch.save(obj, buf)
-        write("fuzz_checkpoint", name, buf.getvalue())
+        write(target, name, buf.getvalue(), limit=16 * 1024)
 
     w = torch.arange(6, dtype=torch.float32).reshape(2, 3)
-    save("croco_style.pth", {
+    save("fuzz_checkpoint", "croco_style.pth", {
         "model": collections.OrderedDict(
             [("enc.weight", w), ("enc.bias", torch.zeros(2, dtype=torch.float16))]),
         "args": argparse.Namespace(model="CroCoNet(enc_depth=2)", lr=1e-4, norm_pix_loss=True),
@@ -281,21 +337,114 @@ def checkpoint_seeds():
                       "param_groups": [{"lr": 1e-4, "betas": (0.9, 0.95), "params": [0, 1]}]},
     })
     base = torch.arange(8, dtype=torch.float64)
-    save("views_and_dtypes.pth", collections.OrderedDict([
+    save("fuzz_checkpoint", "views_and_dtypes.pth", collections.OrderedDict([
         ("slice", base[2:5]), ("matrix", base.view(2, 4)), ("transposed", base.view(2, 4).t()),
         ("long", torch.tensor([1, -2, 3], dtype=torch.int64)),
         ("mask", torch.tensor([True, False])), ("scalar", torch.tensor(2.5)),
         ("empty", torch.zeros(0, 3)), ("param", torch.nn.Parameter(torch.ones(2)))]))
+    finetune_checkpoint_seeds(torch, save)
+
+
+def downstream_state(task, head, img, patch, width, mlp_ratio, rope):
+    """{name: shape} of DownstreamNet (model/downstream.h) with one encoder and one decoder block
+    of `width` channels and one head each."""
+    E = D = width
+    grid = img // patch
+    shapes = collections.OrderedDict()
+
+    def linear(name, out, inp):
+        shapes[name + ".weight"], shapes[name + ".bias"] = (out, inp), (out,)
+
+    def norm(name, dim):
+        shapes[name + ".weight"], shapes[name + ".bias"] = (dim,), (dim,)
+
+    def block(prefix, dim, cross):
+        norm(prefix + "norm1", dim)
+        linear(prefix + "attn.qkv", 3 * dim, dim)
+        linear(prefix + "attn.proj", dim, dim)
+        if cross:
+            for name in ("projq", "projk", "projv", "proj"):
+                linear(prefix + "cross_attn." + name, dim, dim)
+        norm(prefix + "norm2", dim)
+        if cross:
+            norm(prefix + "norm3", dim)
+            norm(prefix + "norm_y", dim)  # norm_im2_in_dec
+        linear(prefix + "mlp.fc1", mlp_ratio * dim, dim)
+        linear(prefix + "mlp.fc2", dim, mlp_ratio * dim)
+
+    shapes["patch_embed.proj.weight"], shapes["patch_embed.proj.bias"] = (E, 3, patch, patch), (E,)
+    if not rope:
+        shapes["enc_pos_embed"], shapes["dec_pos_embed"] = (grid * grid, E), (grid * grid, D)
+    block("enc_blocks.0.", E, False)
+    norm("enc_norm", E)
+    if task != "depth":
+        linear("decoder_embed", D, E)
+        block("dec_blocks.0.", D, True)
+        norm("dec_norm", D)
+    if head == "linear":
+        linear("prediction_head", patch * patch * (2 if task == "flow" else 1), D)
+    else:  # pose: PoseHead(D, patches), 64 hidden
+        linear("head.fc1", 64, D)
+        linear("head.fc2", 12, grid * grid * 64)
+    return shapes
+
+
+def finetune_checkpoint(torch, task, head, img, patch, width, pos_embed):
+    """What finetune's checkpoints hold (finetune/finetune.cpp FinetuneTask::save, the training
+    loop's entries), for a one-block model. Every tensor is a view of one storage: torch.save
+    writes one record per storage, and 46 records would double the file. Its pickle alone (46
+    names and tensors, 5 KiB) and the pose head (64 hidden values a patch) take it past the 8 KiB
+    of other seeds: save() allows 16 KiB."""
+    shapes = downstream_state(task, head, img, patch, width, 1, pos_embed != "cosine")
+    sizes = [int(torch.Size(s).numel()) for s in shapes.values()]
+    torch.manual_seed(sum(sizes))
+    flat = torch.randn(sum(sizes)) * 0.02
+    state, offset = collections.OrderedDict(), 0
+    for (name, shape), n in zip(shapes.items(), sizes):
+        state[name] = flat[offset:offset + n].view(shape)
+        offset += n
+    kwargs = {"img_size": img, "patch_size": patch, "mask_ratio": 0.9, "enc_embed_dim": width,
+              "enc_depth": 1, "enc_num_heads": 1, "dec_embed_dim": width, "dec_depth": 1,
+              "dec_num_heads": 1, "mlp_ratio": 1, "norm_im2_in_dec": True, "pos_embed": pos_embed}
+    return {"model": state, "epoch": 1, "croco_kwargs": kwargs, "task": task, "head": head,
+            "args": dict(kwargs, decoder="cross"), "step": 4, "seed": 0, "batch_size": 2,
+            "accum_iter": 1, "init": "random"}
+
+
+def finetune_checkpoint_seeds(torch, save):
+    save("fuzz_finetune_checkpoint", "flow_linear_cosine.pth",
+         finetune_checkpoint(torch, "flow", "linear", 8, 4, 4, "cosine"))
+    save("fuzz_finetune_checkpoint", "depth_linear_rope.pth",
+         finetune_checkpoint(torch, "depth", "linear", 8, 4, 4, "RoPE100"))
+    save("fuzz_finetune_checkpoint", "pose_one_patch.pth",
+         finetune_checkpoint(torch, "pose", "pose", 4, 4, 4, "cosine"))
 
 
 def main():
-    shutil.rmtree(ROOT, ignore_errors=True)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--pairs", help="generate_pairs' outputs (see above)")
+    parser.add_argument("--build", default=os.path.join(REPO, "build"),
+                        help="the build whose tools/generate_pairs writes them (default build/)")
+    args = parser.parse_args()
+    # The real shard shares its folders with seeds made here: kept when it cannot be made again.
+    shards = {t: os.path.join(ROOT, t, "room_flow_depth.tar") for t in ("fuzz_shard",
+                                                                         "fuzz_shard_index")}
+    old = {t: read(p) for t, p in shards.items() if os.path.exists(p)}
     obj_seeds()
     ply_seeds()
     glb_seeds()
     camera_seeds()
     sample_json_seeds()
     shard_seeds()
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = real_outputs(args.pairs, args.build, scratch)
+        if folder:
+            real_seeds(folder)
+        else:
+            print("make_corpus: no generate_pairs (--pairs, --build): .flo, EXR and real shard "
+                  "seeds left as they are")
+            for target, data in old.items():
+                write(target, os.path.basename(shards[target]), data, limit=len(data))
     checkpoint_seeds()
     for target in sorted(os.listdir(ROOT)):
         files = os.listdir(os.path.join(ROOT, target))

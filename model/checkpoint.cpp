@@ -409,13 +409,15 @@ void checkConfigAgainstState(const CroCoConfig& c,
 }
 
 void checkModelFitsState(const CroCoConfig& c, const std::map<std::string, torch::Tensor>& state,
-                         const std::string& source) {
+                         const std::string& source, int64_t headParameters) {
   int64_t held = 0;
   for (const auto& [key, t] : state) held += t.numel();
   // A fine-tuning checkpoint keeps the encoder, and the decoder where the task is binocular: the
-  // whole CroCo network it is built from is at most a few times that. The slack covers heads.
-  const int64_t needed = countFlops(c).params +
-                        int64_t(c.numPatches()) * (c.enc_embed_dim + c.dec_embed_dim);  // pos_embed
+  // whole CroCo network it is built from is at most a few times that. The slack covers
+  // pre-training's own head.
+  const int64_t needed =
+      countFlops(c).params + headParameters +
+      int64_t(c.numPatches()) * (c.enc_embed_dim + c.dec_embed_dim);  // pos_embed
   if (needed > 4 * held + (int64_t(1) << 20))
     throw Error(source, "its model configuration asks for " + std::to_string(needed) +
                             " parameters, but it holds " + std::to_string(held) + " values");

@@ -70,11 +70,12 @@ void checkConfigAgainstState(const CroCoConfig& config,
                              const std::map<std::string, torch::Tensor>& state,
                              const std::string& source);
 
-// Refuses, naming `source`, a configuration whose CroCo network would hold more than a few times
-// the values the checkpoint's own tensors hold: the configuration of an untrusted file sizes the
+// Refuses, naming `source`, a configuration whose CroCo network, plus `headParameters` (a
+// downstream head's: DownstreamConfig::headParameters), would hold more than a few times the
+// values the checkpoint's own tensors hold: the configuration of an untrusted file sizes the
 // model that is built (and filled at random) before its weights are read into it.
 void checkModelFitsState(const CroCoConfig& config,
                          const std::map<std::string, torch::Tensor>& state,
-                         const std::string& source);
+                         const std::string& source, int64_t headParameters = 0);
 
 }  // namespace paircast

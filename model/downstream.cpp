@@ -36,6 +36,28 @@ int DownstreamConfig::channels() const {
   return 12;
 }
 
+int64_t DownstreamConfig::headParameters() const {
+  auto linear = [](int64_t in, int64_t out) { return in * out + out; };
+  const int64_t E = croco.enc_embed_dim, D = croco.dec_embed_dim, C = channels();
+  const int64_t p = croco.patch_size;
+  if (head == "linear") return linear(binocular() ? D : E, p * p * C);
+  if (head == "pose") return linear(D, 64) + linear(croco.numPatches() * 64, 12);
+  // DPT (model/dpt_head.cpp): per map a 1x1 projection, a resampling (transposed 4x4 and 2x2,
+  // none, strided 3x3) and layer_rn (3x3, no bias); four fusion blocks; the regression head.
+  const DptOptions o;
+  const int64_t F = o.featureDim, last = o.lastDim;
+  const std::vector<int> h =
+      hooks.empty() ? defaultDptHooks(croco.enc_depth, binocular() ? croco.dec_depth : 0) : hooks;
+  const int64_t resample[4] = {16, 4, 0, 9};
+  int64_t n = 0;
+  for (int k = 0; k < 4; ++k) {
+    const int64_t dim = layerDims.at(k), tokens = h.at(k) < croco.enc_depth ? E : D;
+    n += linear(tokens, dim) + (resample[k] ? linear(dim * resample[k], dim) : 0) + dim * F * 9;
+  }
+  n += 4 * (linear(F, F) + 4 * linear(F * 9, F));
+  return n + linear(F * 9, F / 2) + linear(F / 2 * 9, last) + linear(last, C);
+}
+
 void DownstreamConfig::validate() const {
   croco.validate();
   if (task != "flow" && task != "depth" && task != "pose")

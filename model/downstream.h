@@ -39,6 +39,10 @@ struct DownstreamConfig {
   bool binocular() const { return task != "depth"; }
   // Output channels of the pixel-wise head: flow 2 (+1 confidence with the DPT head), depth 1.
   int channels() const;
+  // The head's parameters, counted from the configuration alone: a checkpoint's must be checked
+  // before the head is built (the DPT head's reassembly grows with layer_dims squared: 4 x 4,096
+  // asks for 2 GB).
+  int64_t headParameters() const;
 
   CroCoConfig croco;
   std::string task = "flow";  // flow, depth or pose

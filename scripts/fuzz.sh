@@ -19,7 +19,7 @@ seconds=${1:-60}
 BUILD_DIR=${BUILD_DIR:-build-fuzz}
 JOBS=${JOBS:-$(nproc)}
 ALL_TARGETS="fuzz_scene_obj fuzz_scene_ply fuzz_scene_glb fuzz_camera_json fuzz_shard
-  fuzz_shard_index fuzz_sample_json fuzz_checkpoint"
+  fuzz_shard_index fuzz_sample_json fuzz_checkpoint fuzz_flo fuzz_exr fuzz_finetune_checkpoint"
 TARGETS=${TARGETS:-$ALL_TARGETS}
 
 scripts/setup.sh clang libclang-rt-14-dev  # libFuzzer and the sanitizer runtimes

@@ -181,5 +181,35 @@ TEST(UntrustedCheckpoint, HeadKwargsAreBounded) {
   EXPECT_ERROR_CONTAINS(downstreamConfigOf(ck, "ft.pth"), "ft.pth", "bad head");
 }
 
+// The heads' parameters are counted from the configuration alone (checkModelFitsState takes
+// them), so the count must be what the built head holds, for each head; and a DPT head of
+// 4 x 4,096 layer_dims (2 GB) over a file of a few values is refused before it is built.
+TEST(UntrustedCheckpoint, HeadParametersAreCountedBeforeTheHeadIsBuilt) {
+  DownstreamConfig c;
+  c.croco.img_size = 32;
+  c.croco.patch_size = 16;
+  c.croco.enc_embed_dim = 16, c.croco.enc_depth = 2, c.croco.enc_num_heads = 2;
+  c.croco.dec_embed_dim = 8, c.croco.dec_depth = 2, c.croco.dec_num_heads = 2;
+  c.layerDims = {8, 16, 24, 32};
+  for (const auto& [task, head] :
+       std::vector<std::pair<std::string, std::string>>{{"flow", "linear"},
+                                                        {"depth", "linear"},
+                                                        {"pose", "pose"},
+                                                        {"flow", "dpt"},
+                                                        {"depth", "dpt"}}) {
+    c.task = task, c.head = head;
+    SCOPED_TRACE(task + " " + head);
+    DownstreamNet net(c);
+    int64_t built = 0;
+    for (const auto& [name, p] : net->uniqueParameters())
+      if (name.rfind("head.", 0) == 0 || name.rfind("prediction_head.", 0) == 0) built += p.numel();
+    EXPECT_EQ(c.headParameters(), built);
+  }
+  c.task = "flow", c.head = "dpt", c.layerDims = {4096, 4096, 4096, 4096};
+  const std::map<std::string, torch::Tensor> state{{"patch_embed.proj.weight", torch::zeros({4})}};
+  EXPECT_ERROR_CONTAINS(checkModelFitsState(c.croco, state, "ft.pth", c.headParameters()), "ft.pth",
+                        "asks for", "but it holds 4 values");
+}
+
 }  // namespace
 }  // namespace paircast
