@@ -228,6 +228,8 @@ std::vector<std::string> miniArgs(const std::string& out) {
           "4",
           "--jobs",
           "2",
+          "--amp",
+          "none",  // float32 on every CPU, as miniSweep
           "--quiet"};
 }
 
