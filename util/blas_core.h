@@ -1,6 +1,6 @@
 // Which kernels OpenBLAS runs. It picks them at load time from CPUID and can fall back to an
-// older core than the CPU has (Haswell's on an AVX-512 bf16 CPU, even Prescott's on some VMs):
-// float32 matmuls then run 1.3-3x slower and nothing says so. The start-up check (runTool)
+// older core than the CPU has (Prescott's for an AVX-512 Xeon on some VMs): float32 matmuls
+// then run up to 3x slower and nothing says so. The start-up check (runTool)
 // compares its core with the CPU's flags and, where it is older, executes the command again with
 // OPENBLAS_CORETYPE set, which OpenBLAS reads only when it loads.
 //

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstring>
 
+#include "util/decode_limits.h"
 #include "util/error.h"
 
 namespace paircast {
@@ -13,10 +14,6 @@ namespace {
 // The largest image read here: far beyond any camera (16,384 pixels a side), and 2^31 values.
 constexpr int64_t kMaxExrSide = 1 << 16;
 constexpr int kMaxExrChannels = 64;
-// No EXR compression stores more values per byte of file than this: the densest, DWA on a flat
-// image, keeps one DC value per 8 x 8 block and then deflates those at most 1,032:1 (about 33,000
-// values a byte); zip alone reaches about 500, PIZ's run-length codes about 200.
-constexpr uint64_t kMaxValuesPerByte = 1 << 16;
 
 // OpenEXR reports through a C callback; its last message goes into the error we throw.
 thread_local std::string exrMessage;

@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "util/atomic_file.h"
+#include "util/decode_limits.h"
 #include "util/error.h"
 #include "util/jpeg_encoder.h"
 
@@ -48,11 +49,6 @@ std::vector<unsigned char> encode(const Image<T>& image, const std::string& form
   if (!out->close()) throw Error(name, out->geterror());
   return bytes;
 }
-
-// No image format stores more values per byte of file than this (a flat PNG of 1-bit pixels,
-// deflated 1,032:1, about 8,000; DWA-compressed EXR, about 33,000), so a header that claims more
-// than its file's bytes can hold is refused before anything is allocated.
-constexpr uint64_t kMaxValuesPerByte = 1 << 16;
 
 template <typename T>
 Image<T> decode(std::unique_ptr<ImageInput> in, const std::string& name, int channels,
