@@ -25,8 +25,8 @@ inline bool runShardIndexInput(std::string_view bytes, const std::string& dir = 
         if (static_cast<size_t>(c.width) * c.height > (1u << 22)) continue;  // bounded memory
         out.resize(3 * static_cast<size_t>(c.width) * c.height);
         acceptedOrRefused([&] {
-          set.decodeView(i, k, CropBox{0, 0, c.height, c.width},
-                         PixelLayout::kNormalizedFloatCHW, out.data());
+          set.decodeView(i, k, CropBox{0, 0, c.height, c.width}, PixelLayout::kNormalizedFloatCHW,
+                         out.data());
         });
       }
       acceptedOrRefused([&] { set.decodeFlow(i, 0); });

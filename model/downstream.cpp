@@ -284,13 +284,14 @@ namespace {
 
 // A list of integers from an untrusted file: a float such as 1e12 read as an int is undefined.
 std::vector<int> smallInts(const nlohmann::json& list, const char* key, const std::string& source) {
-  if (!list.is_array()) throw Error(source, std::string("head_kwargs: '") + key + "' is not a list");
+  if (!list.is_array())
+    throw Error(source, std::string("head_kwargs: '") + key + "' is not a list");
   std::vector<int> out;
   for (const auto& v : list) {
     if (!v.is_number_integer() || v.get<int64_t>() < -(int64_t(1) << 30) ||
         v.get<int64_t>() > (int64_t(1) << 30))
-      throw Error(source, std::string("head_kwargs: '") + key + "' holds " + v.dump().substr(0, 40) +
-                              ", not an integer in range");
+      throw Error(source, std::string("head_kwargs: '") + key + "' holds " +
+                              v.dump().substr(0, 40) + ", not an integer in range");
     out.push_back(v.get<int>());
   }
   return out;

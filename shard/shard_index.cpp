@@ -284,8 +284,8 @@ ShardIndex ShardIndex::open(const std::string& path, const Warn& warn,
     const std::string sample = "sample '" + printable(p.key) + "'";
     nlohmann::json json;
     if (p.hasRecord && p.record.size > kMaxRecordBytes)
-      return report(sample + "'s record is " + std::to_string(p.record.size) +
-                    " bytes (at most " + std::to_string(kMaxRecordBytes) + "), skipped");
+      return report(sample + "'s record is " + std::to_string(p.record.size) + " bytes (at most " +
+                    std::to_string(kMaxRecordBytes) + "), skipped");
     if (p.hasRecord) {
       Bytes bytes(p.record.size);
       if (readAt(f.fd, bytes.data(), bytes.size(), p.record.offset))

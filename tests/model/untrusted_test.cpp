@@ -9,8 +9,8 @@
 
 #include "model/checkpoint.h"
 #include "model/downstream.h"
-#include "model/reconstruct.h"
 #include "model/pickle_pieces.h"
+#include "model/reconstruct.h"
 #include "test_errors.h"
 #include "test_paths.h"
 #include "util/error.h"
@@ -152,8 +152,7 @@ TEST(UntrustedCheckpoint, ConfigurationsAreBoundedBeforeAModelIsBuilt) {
       "embedding widths are at most 8192");
   EXPECT_ERROR_CONTAINS(configFromJson(json{{"img_size", 8192}, {"patch_size", 2}}, "f.pth"),
                         "at most 65536 patches");
-  EXPECT_ERROR_CONTAINS(configFromJson(json{{"pos_embed", "RoPEnan"}}, "f.pth"),
-                        "RoPE frequency");
+  EXPECT_ERROR_CONTAINS(configFromJson(json{{"pos_embed", "RoPEnan"}}, "f.pth"), "RoPE frequency");
   // The base model's configuration over four values: refused before the 110M parameters are
   // made, by reconstruct's loader.
   const std::string dir = testing::scratchDir("fits");
@@ -168,11 +167,11 @@ TEST(UntrustedCheckpoint, ConfigurationsAreBoundedBeforeAModelIsBuilt) {
 TEST(UntrustedCheckpoint, HeadKwargsAreBounded) {
   using nlohmann::json;
   Checkpoint ck;
-  ck.extra = json{{"task", "flow"},
-                  {"croco_kwargs", configToJson(presetConfig("tiny"))},
-                  {"head", "dpt"},
-                  {"head_kwargs", {{"hooks_idx", {1, 2, 3, 4}},
-                                   {"layer_dims", {96, 192, 384, 1000000000}}}}};
+  ck.extra = json{
+      {"task", "flow"},
+      {"croco_kwargs", configToJson(presetConfig("tiny"))},
+      {"head", "dpt"},
+      {"head_kwargs", {{"hooks_idx", {1, 2, 3, 4}}, {"layer_dims", {96, 192, 384, 1000000000}}}}};
   EXPECT_ERROR_CONTAINS(downstreamConfigOf(ck, "ft.pth"), "ft.pth",
                         "layer_dims are 1 to 4096, not 1000000000");
   ck.extra["head_kwargs"]["layer_dims"] = json{96, 192, 384, 1e12};

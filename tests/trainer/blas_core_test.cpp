@@ -99,7 +99,6 @@ TEST(BlasCore, OlderCoreIsFixedByRunningAgainOrWarned) {
   EXPECT_EQ(user.summary["action"], "kept OPENBLAS_CORETYPE=Prescott");
   EXPECT_EQ(user.output.find("warning: OpenBLAS"), std::string::npos) << user.output;
 
-
   const ToolRun off =
       pretrainWith("PAIRCAST_OPENBLAS_CHECK=0 PAIRCAST_FAKE_BLAS_CORE=Prescott", dir + "/off");
   ASSERT_EQ(off.rc, 0) << off.output;
