@@ -95,11 +95,24 @@ Image<T> readFileImage(const std::string& path, int channels) {
   return decode<T>(std::move(in), path, channels, bytes);
 }
 
+// Bytes in memory are decoded by the reader their name's extension names, and by no other.
+// ImageInput::open would offer bytes that fail that reader to every other one: a shard's .exr
+// member that lies would reach libtiff, which prints to stderr, and a TIFF named .exr would
+// decode. A name without a known extension still goes to every reader.
 template <typename T>
 Image<T> readMemImage(const void* data, size_t size, const std::string& name, int channels) {
   OIIO::Filesystem::IOMemReader proxy(data, size);
-  auto in = ImageInput::open(name, nullptr, &proxy);
-  if (!in) throw Error(name, "cannot decode image: " + OIIO::geterror());
+  // By the format's name: given a file name, create() looks for that file.
+  const std::string ext = lowerExtension(name);
+  auto in = ext.empty() ? nullptr : ImageInput::create(ext);
+  if (!in) {
+    in = ImageInput::open(name, nullptr, &proxy);
+    if (!in) throw Error(name, "cannot decode image: " + OIIO::geterror());
+    return decode<T>(std::move(in), name, channels, size);
+  }
+  ImageSpec spec;
+  if (!in->set_ioproxy(&proxy) || !in->open(name, spec))
+    throw Error(name, "cannot decode image: " + in->geterror());
   return decode<T>(std::move(in), name, channels, size);
 }
 

@@ -120,6 +120,21 @@ TEST(ImageIo, ExrKeepsFloatDepthExactly) {
   EXPECT_EQ(back.data, depth.data);
 }
 
+TEST(ImageIo, BytesInMemoryAreDecodedOnlyByTheReaderTheirNameNames) {
+  // A shard's member named .exr that is not one is refused, not handed to every other reader
+  // (libtiff, among them, prints to stderr); a name without an extension still finds its reader.
+  const Image8 image = gradient(8, 6);
+  const auto tiff = encodeImage(image, "tif", 0);
+  ::testing::internal::CaptureStderr();
+  EXPECT_ERROR_CONTAINS(decodeImageF(tiff.data(), tiff.size(), "shard.tar: p.1.depth.exr"),
+                        "shard.tar: p.1.depth.exr: cannot decode image");
+  EXPECT_ERROR_CONTAINS(decodeImage8(tiff.data(), tiff.size(), "shard.tar: p.1.png"),
+                        "shard.tar: p.1.png: cannot decode image");
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
+  EXPECT_EQ(decodeImage8(tiff.data(), tiff.size(), "p.1.tif").data, image.data);
+  EXPECT_EQ(decodeImage8(tiff.data(), tiff.size(), "embedded texture").data, image.data);
+}
+
 TEST(ImageIo, BadFilesGiveErrorsNamingThem) {
   const std::string dir = testing::scratchDir("bad");
   EXPECT_ERROR_CONTAINS(readImage8(dir + "/none.png"), dir + "/none.png: no such file");
