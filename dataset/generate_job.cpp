@@ -676,6 +676,7 @@ void GenerateRun::writeShardIndex(const nlohmann::json& perScene) {
                                 {"covis_masks", cfg_.pair.covisMasks},
                                 {"resolution", cfg_.pair.resolution},
                                 {"hfov", cfg_.pair.hfov},
+                                {"motion", motionJson(cfg_.pair.sampler)},
                                 {"seed", cfg_.seed}};
   writeFileAtomic(outPath("index", ".json"), index.dump(1) + "\n");
 }
@@ -751,6 +752,7 @@ void GenerateRun::writeSceneMetadata(const SceneJob& job, const std::string& up,
                                {"hfov", cfg_.pair.hfov},
                                {"minimum_covisibility", cfg_.pair.minCovis},
                                {"maximum_covisibility", cfg_.pair.maxCovis},
+                               {"motion", motionJson(cfg_.pair.sampler)},
                                {"seed", cfg_.seed},
                                {"generator", "paircast"},
                                {"up", up},

@@ -202,6 +202,10 @@ void PairOptions::validate() const {
     throw OptionError("min_valid", "the minimum valid fraction must be in [0, 1]");
   if (maxAttempts < 1 || maxReferences < 1)
     throw OptionError("max_attempts", "attempt limits must be at least 1");
+  if (!in(sampler.nearTranslation, 0, 100))
+    throw OptionError("near_translation", "the near motion's translation must be in [0, 100] m");
+  if (!in(sampler.nearRotation, 0, 90))
+    throw OptionError("near_rotation", "the near motion's rotation must be in [0, 90] degrees");
   if (views < 1 || views > kMaxViews)
     throw OptionError("views", "views must be in [1, " + std::to_string(kMaxViews) + "], got " +
                                    std::to_string(views));

@@ -16,6 +16,17 @@ Eigen::Matrix3d orientationNoise(double panDeg, double tiltDeg, double rollDeg) 
       .toRotationMatrix();
 }
 
+SamplerOptions::Motion parseMotion(const std::string& name) {
+  if (name == "walk") return SamplerOptions::Motion::kWalk;
+  if (name == "near") return SamplerOptions::Motion::kNear;
+  throw OptionError("motion", "the motion is walk or near, not '" + name + "'");
+}
+
+nlohmann::json motionJson(const SamplerOptions& o) {
+  if (o.motion == SamplerOptions::Motion::kWalk) return {{"kind", "walk"}};
+  return {{"kind", "near"}, {"translation", o.nearTranslation}, {"rotation", o.nearRotation}};
+}
+
 ViewpointSampler::ViewpointSampler(const Scene& scene, const RayCaster& caster,
                                    const SamplerOptions& options)
     : options_(options),
@@ -59,8 +70,28 @@ Viewpoint ViewpointSampler::sampleReference(const Camera& intrinsics, Rng& rng) 
   return v;
 }
 
+Viewpoint ViewpointSampler::sampleNear(const Camera& intrinsics, const Viewpoint& from,
+                                       Rng& rng) const {
+  Eigen::Vector3d d(rng.normal(), rng.normal(), rng.normal());
+  d = d.normalized() * options_.nearTranslation * std::cbrt(rng.uniform(0.0, 1.0));
+  d -= 0.5 * d.dot(up_) * up_;
+  const double a = options_.nearRotation;
+  const double pan = rng.uniform(-a, a), tilt = rng.uniform(-a, a);
+  const double roll = rng.uniform(-a / 2, a / 2);
+  Viewpoint v;
+  const Eigen::Vector3d horizontal = d - d.dot(up_) * up_;
+  const auto snapped = floor_.snap(from.floorPoint + horizontal.cast<float>());
+  v.floorPoint = snapped ? *snapped : from.floorPoint;
+  v.camera = intrinsics;
+  v.orientation = habitatQuaternion(from.camera.R_cam2world * orientationNoise(pan, tilt, roll));
+  v.camera.R_cam2world = cameraRotationFromHabitat(v.orientation);
+  v.camera.t_cam2world = from.camera.t_cam2world + d;
+  return v;
+}
+
 Viewpoint ViewpointSampler::sampleOther(const Camera& intrinsics, const Viewpoint& from,
                                         const Eigen::Vector3d& target, Rng& rng) const {
+  if (options_.motion == SamplerOptions::Motion::kNear) return sampleNear(intrinsics, from, rng);
   Viewpoint v;
   v.floorPoint = from.floorPoint;
   const Eigen::Vector3f a = up_.unitOrthogonal().cast<float>();

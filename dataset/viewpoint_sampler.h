@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 
 #include "dataset/floor_map.h"
 #include "dataset/habitat_frame.h"
@@ -27,8 +28,24 @@ struct SamplerOptions {
   // and moves its height and orientation noise towards the first view's by s / walkScale, so
   // near-identical views (covis up to 1) are proposed too (covis_sweep's pool).
   double minWalkScale = 0;
+  // How the second view moves from the first. kWalk: CroCo's random walk on the floor, looking
+  // at the first view's mean point (wide pairs, for pre-training). kNear: a bounded motion around
+  // the first camera, as consecutive video frames move (flow-style pairs: small, dense motions):
+  // a translation uniform in the ball of radius nearTranslation (its vertical part halved) and a
+  // turn of the first camera by pan and tilt uniform in [-nearRotation, nearRotation] degrees
+  // and roll in half that.
+  enum class Motion { kWalk, kNear };
+  Motion motion = Motion::kWalk;
+  double nearTranslation = 0.25;  // metres
+  double nearRotation = 4.0;      // degrees
   FloorOptions floor;
 };
+
+// "walk" or "near" (generate_pairs --motion); throws OptionError for anything else.
+SamplerOptions::Motion parseMotion(const std::string& name);
+// {"kind": "walk"}, or {"kind": "near", "translation": m, "rotation": degrees}: index.json's and
+// metadata.json's "motion".
+nlohmann::json motionJson(const SamplerOptions& options);
 
 // A sampled camera with the floor point under it.
 struct Viewpoint {
@@ -47,7 +64,8 @@ class ViewpointSampler {
   // A reference view: random floor point, height and yaw, plus orientation noise.
   // `intrinsics` gives the size and K; its pose is ignored.
   Viewpoint sampleReference(const Camera& intrinsics, Rng& rng) const;
-  // The second view: a random walk from `from.floorPoint`, looking at `target`, plus noise.
+  // The second view: a random walk from `from.floorPoint`, looking at `target`, plus noise; with
+  // Motion::kNear, a bounded motion of `from` instead (target unused).
   Viewpoint sampleOther(const Camera& intrinsics, const Viewpoint& from,
                         const Eigen::Vector3d& target, Rng& rng) const;
   Camera sampleView(const Camera& intrinsics, Rng& rng) const {
@@ -62,6 +80,7 @@ class ViewpointSampler {
   // worldFromCamera rotation looking along `forward` (levelled on up), then the noise.
   HabitatQuaternion orient(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, Rng& rng,
                            double noiseScale = 1.0) const;
+  Viewpoint sampleNear(const Camera& intrinsics, const Viewpoint& from, Rng& rng) const;
   SamplerOptions options_;
   Eigen::Vector3d up_;
   FloorMap floor_;

@@ -118,14 +118,22 @@ torch::Tensor predict(DownstreamNet& net, const torch::Tensor& img1, const torch
   return out;
 }
 
+torch::Tensor landsInFrame(const torch::Tensor& flow) {
+  const int64_t H = flow.size(-2), W = flow.size(-1);
+  const auto x = torch::arange(W, flow.options()).view({1, W}) + 0.5 + flow.select(-3, 0);
+  const auto y = torch::arange(H, flow.options()).view({H, 1}) + 0.5 + flow.select(-3, 1);
+  return (x >= 0) & (x < W) & (y >= 0) & (y < H);
+}
+
 nlohmann::json flowMetrics(const torch::Tensor& pred, const torch::Tensor& truth,
                            const torch::Tensor& covisible) {
   const torch::Tensor valid = torch::isfinite(truth).all(0);
   const torch::Tensor safe = torch::where(valid.unsqueeze(0), truth, torch::zeros_like(truth));
   const torch::Tensor err = (pred - safe).pow(2).sum(0).sqrt();
-  const torch::Tensor e = err.masked_select(valid);
+  const torch::Tensor e = err.masked_select(valid & landsInFrame(safe));
   return {{"aepe", number(meanOf(e))},
           {"aepe_covisible", number(meanOf(err.masked_select(valid & covisible)))},
+          {"aepe_all_known", number(meanOf(err.masked_select(valid)))},
           {"px1", number(meanOf((e > 1).to(torch::kFloat64)))},
           {"px3", number(meanOf((e > 3).to(torch::kFloat64)))},
           {"px5", number(meanOf((e > 5).to(torch::kFloat64)))}};

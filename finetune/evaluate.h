@@ -32,14 +32,21 @@ struct HeldOutFigures {
   std::vector<nlohmann::json> baseline;
 };
 
-// flow: aepe (valid pixels), aepe_covisible (pixels view 2 sees), px1, px3, px5 (shares of
-// valid pixels with an error above 1, 3, 5 px); depth: delta1, absrel, rmse (log-depth
+// flow: aepe, the primary figure, over the pixels the loss trains on (known flow landing inside
+// view 2's frame), aepe_covisible (pixels view 2 sees), aepe_all_known (every pixel with known
+// flow, out of frame and occluded ones too), px1, px3, px5 (shares of aepe's pixels with an
+// error above 1, 3, 5 px); depth: delta1, absrel, rmse (log-depth
 // predictions exponentiated); pose: trans_err (m), rot_err (degrees). The baseline's depth is
 // `constantDepth`.
 HeldOutFigures evaluateHeldOut(DownstreamNet& net, const TruthPairs& data, size_t limit,
                                double constantDepth, const torch::Device& device);
 // Means of each metric over the pairs (medians for the pose errors), with the count.
 nlohmann::json summariseFigures(const std::vector<nlohmann::json>& pairs);
+
+// The pixels whose flow lands inside the image: flow [..., 2, H, W] in pixels (unknown flow
+// given as anything finite; mask it apart) -> bool [..., H, W], the pixel centre (x + 0.5 + u,
+// y + 0.5 + v) in [0, W) x [0, H).
+torch::Tensor landsInFrame(const torch::Tensor& flow);
 
 // The flow metrics of a prediction against the truth ([2, H, W] each, truth +inf unknown) and a
 // covisibility mask ([H, W] bool).

@@ -24,6 +24,9 @@ void FinetuneConfig::validate() const {
   if (train.out.empty()) throw OptionError("out", "an output folder is required");
   if (train.batchSize < 1) throw OptionError("batch_size", "the batch size must be >= 1");
   if (train.epochs < 1) throw OptionError("epochs", "epochs must be >= 1");
+  if (evalEvery < 0) throw OptionError("eval_every", "--eval-every must be >= 0");
+  if (evalEvery > 0 && evalData.empty())
+    throw OptionError("eval_every", "--eval-every needs --eval-data");
   if (train.device != "cpu" && train.device != "cuda")
     throw OptionError("device", "the device must be cpu or cuda, not '" + train.device + "'");
   checkAmp(train.amp);
@@ -33,19 +36,19 @@ void FinetuneConfig::validate() const {
 
 torch::Tensor finetuneLoss(const std::string& task, const std::string& head,
                            const torch::Tensor& out, const torch::Tensor& flow,
-                           const torch::Tensor& depth, const torch::Tensor& pose) {
+                           const torch::Tensor& depth, const torch::Tensor& pose,
+                           double flowScale) {
   if (task == "flow") {
     const auto finite = torch::isfinite(flow).all(1);  // [B, S, S]
-    const auto gt = torch::where(finite.unsqueeze(1), flow, torch::zeros_like(flow));
-    const auto valid = finite & (gt.pow(2).sum(1).sqrt() < 1e4);
-    const auto pred = out.narrow(1, 0, 2);
+    const auto known = torch::where(finite.unsqueeze(1), flow, torch::zeros_like(flow));
+    const auto valid = finite & (known.pow(2).sum(1).sqrt() < 1e4);
+    // Both in units of flowScale pixels (DownstreamConfig::flowScale).
+    const auto gt = known / flowScale;
+    const auto pred = out.narrow(1, 0, 2) / flowScale;
     if (head == "linear") {
       // The squared error where the flow lands inside the other view's crop: the pixels whose
       // flow the images show (out-of-frame flows reach hundreds of pixels and swamp it).
-      const int64_t H = flow.size(2), W = flow.size(3);
-      const auto x = torch::arange(W, flow.options()).view({1, 1, W}) + 0.5 + gt.select(1, 0);
-      const auto y = torch::arange(H, flow.options()).view({1, H, 1}) + 0.5 + gt.select(1, 1);
-      const auto inFrame = valid & (x >= 0) & (x < W) & (y >= 0) & (y < H);
+      const auto inFrame = valid & landsInFrame(known);
       return (gt - pred).pow(2).mean(1).masked_select(inFrame).mean();
     }
     // LaplacianLossBounded: the third channel is a confidence in [a, b] = [0.25, 4].
@@ -133,7 +136,8 @@ class FinetuneTask : public TrainingTask {
     device_ = device;
     const TruthBatch b = batch_.to(device);
     const torch::Tensor out = net_->forward(b.img1, b.img2).to(torch::kFloat32);
-    return finetuneLoss(c_.model.task, c_.model.head, out, b.flow, b.depth, b.pose);
+    return finetuneLoss(c_.model.task, c_.model.head, out, b.flow, b.depth, b.pose,
+                        c_.model.flowScaleInUse());
   }
 
   void save(const std::string& path, int64_t epoch, const nlohmann::json& extra,
@@ -149,10 +153,21 @@ class FinetuneTask : public TrainingTask {
     if (theirs.task != c_.model.task || theirs.head != c_.model.head)
       throw Error(path, "checkpoint of task " + theirs.task + " (head " + theirs.head + "), not " +
                             c_.model.task + " (head " + c_.model.head + "); use another --out");
+    if (theirs.task == "flow" && theirs.flowScaleInUse() != c_.model.flowScaleInUse())
+      throw Error(path, "checkpoint of flow scale " + std::to_string(theirs.flowScaleInUse()) +
+                            ", not " + std::to_string(c_.model.flowScaleInUse()) +
+                            " (--flow-scale); use another --out");
     if (configToJson(theirs.croco) != configToJson(c_.model.croco))
       throw Error(path, "checkpoint of another model (" + configToJson(theirs.croco).dump() +
                             "); use the --preset and --img-size it was trained with");
     loadStateDictStrict(*net_, ck.model, path);
+  }
+
+  nlohmann::json logAfterStep(int64_t iter, const torch::Device& device) override {
+    if (c_.evalEvery <= 0 || !eval_ || iter % c_.evalEvery != 0) return nullptr;
+    if (constantDepth_ < 0) constantDepth_ = medianDepth(data_);
+    const HeldOutFigures f = evaluateHeldOut(net_, *eval_, c_.evalPairs, constantDepth_, device);
+    return {{"heldout", summariseFigures(f.pairs)}};
   }
 
   void summarise(nlohmann::json& s) override {
@@ -192,6 +207,7 @@ class FinetuneTask : public TrainingTask {
   int64_t orderEpoch_ = -1;
   TruthBatch batch_;
   torch::Device device_{torch::kCPU};
+  double constantDepth_ = -1;  // the depth baseline, once measured
 };
 
 torch::Device deviceNamed(const std::string& name) {
@@ -229,8 +245,12 @@ DownstreamNet initialNet(const FinetuneConfig& c, std::string* initialised) {
 nlohmann::json runFinetune(const FinetuneConfig& c, Distributed* dist) {
   c.validate();
   FinetuneTask task(c);
-  return runTraining(c.train, task, dist);
+  TrainConfig train = c.train;
+  train.scheduleSpansRun = true;
+  return runTraining(train, task, dist);
 }
+
+double defaultFinetuneBlr(const std::string& task) { return task == "pose" ? 2e-3 : 1e-2; }
 
 nlohmann::json runFinetune(const FinetuneConfig& c) {
   if (c.train.device != "cpu" && c.train.device != "cuda")

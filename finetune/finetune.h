@@ -25,11 +25,18 @@ struct FinetuneConfig {
   std::vector<std::string> data;      // shards written with --save-flow --save-depth
   std::vector<std::string> evalData;  // held-out shards (other scenes); empty: no evaluation
   size_t evalPairs = 0;               // held-out pairs measured (0: all)
+  // Every this many steps, the held-out figures (the model's means) go into log.jsonl as a line
+  // {"step", "heldout"}: learning curves. 0: at the end only.
+  int64_t evalEvery = 0;
   // "random", or a pre-training checkpoint: the encoder, and the decoder of a cross-view one
   // (an mae checkpoint gives its encoder, the decoder stays random).
   std::string init = "random";
   bool colorJitter = true;
 };
+
+// finetune's base learning rate for `task` when --blr is not given, as docs/finetune.md
+// recommends at batch 16 (lr = blr * batch / 256): 1e-2 for flow and depth, 2e-3 for pose.
+double defaultFinetuneBlr(const std::string& task);
 
 // The model a fine-tune starts from: the seed's random weights (torch::manual_seed(train.seed),
 // as for a pre-training run of that seed), with `init`'s encoder, and decoder when it has one
@@ -46,14 +53,16 @@ nlohmann::json evaluateCheckpoint(const std::string& checkpoint,
                                   const std::vector<std::string>& evalData, size_t evalPairs,
                                   const std::string& device);
 
-// The loss of a task's output against a batch's truth (float32 scalar): flow with the DPT head,
-// naver/croco's LaplacianLossBounded (a = 0.25, b = 4, pixels with known flow under 1e4 px);
-// flow with the linear head, the squared error over pixels whose flow lands inside the other
-// view's crop; depth, the L1 error of
-// log-depth over pixels with depth; pose, ||R - R^||_F^2 + 100 ||t - t^||^2.
+// The loss of a task's output against a batch's truth (float32 scalar): flow, in units of
+// `flowScale` pixels (the model's DownstreamConfig::flowScaleInUse()), with the DPT head
+// naver/croco's LaplacianLossBounded (a = 0.25, b = 4, pixels with known flow under 1e4 px), with
+// the linear head the squared error over pixels whose flow lands inside the other view's crop;
+// depth, the L1 error of log-depth over pixels with depth; pose, ||R - R^||_F^2 +
+// 100 ||t - t^||^2.
 torch::Tensor finetuneLoss(const std::string& task, const std::string& head,
                            const torch::Tensor& out, const torch::Tensor& flow,
-                           const torch::Tensor& depth, const torch::Tensor& pose);
+                           const torch::Tensor& depth, const torch::Tensor& pose,
+                           double flowScale = 1.0);
 
 // A fine-tuning checkpoint's model, on `device`, in eval mode: its configuration (croco_kwargs,
 // task, head, head_kwargs) checked against its tensors before the model is built, then its

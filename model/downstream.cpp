@@ -58,8 +58,14 @@ int64_t DownstreamConfig::headParameters() const {
   return n + linear(F * 9, F / 2) + linear(F / 2 * 9, last) + linear(last, C);
 }
 
+double DownstreamConfig::flowScaleInUse() const {
+  return flowScale > 0 ? flowScale : croco.img_size / 16.0;
+}
+
 void DownstreamConfig::validate() const {
   croco.validate();
+  if (!(flowScale >= 0 && flowScale <= 1e4))
+    throw OptionError("flow_scale", "the flow scale must be in (0, 10000] pixels (0: default)");
   if (task != "flow" && task != "depth" && task != "pose")
     throw OptionError("task", "the task must be flow, depth or pose, not '" + task + "'");
   const bool ok = task == "pose" ? head == "pose" : (head == "dpt" || head == "linear");
@@ -211,10 +217,18 @@ torch::Tensor DownstreamNetImpl::forward(const torch::Tensor& img1, const torch:
   std::vector<torch::Tensor> dec = decodeBlocks(enc1.back(), enc2);
   if (dpt) {
     enc1.insert(enc1.end(), dec.begin(), dec.end());
-    return dpt_head->forward(enc1, S, S);
+    return inPixels(dpt_head->forward(enc1, S, S));
   }
-  if (config_.head == "linear") return unpatchify(prediction_head(dec.back()), p, 2);
+  if (config_.head == "linear") return inPixels(unpatchify(prediction_head(dec.back()), p, 2));
   return pose_head(dec.back());
+}
+
+torch::Tensor DownstreamNetImpl::inPixels(const torch::Tensor& flow) const {
+  const double scale = config_.flowScaleInUse();
+  if (scale == 1.0) return flow;
+  const torch::Tensor uv = flow.narrow(1, 0, 2) * scale;
+  if (flow.size(1) == 2) return uv;
+  return torch::cat({uv, flow.narrow(1, 2, flow.size(1) - 2)}, 1);
 }
 
 nlohmann::json DownstreamNetImpl::checkpointEntries() const {
@@ -223,6 +237,7 @@ nlohmann::json DownstreamNetImpl::checkpointEntries() const {
                       {"head", config_.head},
                       {"args", configToJson(config_.croco)}};
   if (config_.head == "dpt") j["head_kwargs"] = dptHeadKwargs(dpt_head->dpt->options);
+  if (config_.task == "flow") j["flow_scale"] = config_.flowScaleInUse();
   return j;
 }
 
@@ -309,6 +324,13 @@ DownstreamConfig downstreamConfigOf(const Checkpoint& ck, const std::string& sou
                        : configFromJson(ck.extra.value("croco_kwargs", nlohmann::json()), source);
   try {
     c.head = ck.extra.value("head", std::string("dpt"));
+    c.flowScale = 1.0;  // checkpoints from before the scale regressed pixels
+    if (ck.extra.contains("flow_scale")) {
+      const auto& v = ck.extra["flow_scale"];
+      if (!v.is_number() || !(v.get<double>() > 0))
+        throw Error(source, "flow_scale is not a positive number: " + v.dump().substr(0, 40));
+      c.flowScale = v.get<double>();
+    }
     if (ck.extra.contains("head_kwargs")) {
       const auto& h = ck.extra["head_kwargs"];
       c.hooks = smallInts(h.at("hooks_idx"), "hooks_idx", source);

@@ -49,6 +49,12 @@ struct DownstreamConfig {
   std::string head = "dpt";   // dpt or linear (flow, depth); pose (pose)
   std::vector<int> hooks;     // DPT hooks; empty: defaultDptHooks
   std::vector<int> layerDims{96, 192, 384, 768};
+  // Flow: the head regresses flow / flowScale, and forward() returns it times flowScale, in
+  // pixels; the loss compares both in those units (docs/finetune.md, "Flow scale"). 0: the
+  // default, img_size / 16 (4 pixels at 64, 8 at 128). A checkpoint keeps the value it was
+  // trained with ("flow_scale"); one without it regressed pixels (1).
+  double flowScale = 0;
+  double flowScaleInUse() const;
 };
 
 // The relative-pose head: each patch of the decoder's last block (normalised) through a linear
@@ -70,7 +76,8 @@ class DownstreamNetImpl : public torch::nn::Module {
  public:
   explicit DownstreamNetImpl(const DownstreamConfig& config);
 
-  // flow: [B, channels, S, S] (u, v in pixels, then the DPT head's confidence); depth:
+  // flow: [B, channels, S, S] (u, v in pixels: the head's output times flowScaleInUse(), then
+  // the DPT head's confidence); depth:
   // [B, 1, S, S] (log-depth); pose: [B, 12]. img2 is ignored by depth.
   torch::Tensor forward(const torch::Tensor& img1, const torch::Tensor& img2 = {});
 
@@ -101,6 +108,8 @@ class DownstreamNetImpl : public torch::nn::Module {
  private:
   std::vector<torch::Tensor> encodeBlocks(const torch::Tensor& img, bool all);
   std::vector<torch::Tensor> decodeBlocks(const torch::Tensor& f1, const torch::Tensor& f2);
+  // A flow head's output [B, C, S, S] with u, v times flowScaleInUse().
+  torch::Tensor inPixels(const torch::Tensor& flow) const;
 
   DownstreamConfig config_;
   std::vector<int> hooks_;

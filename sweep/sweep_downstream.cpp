@@ -35,7 +35,10 @@ nlohmann::json jobSettings(const SweepConfig& c, const FinetuneJob& job, int wor
   return {{"data", dataSettings(c)},   {"task", job.task},         {"run", job.run},
           {"seed", job.seed},          {"steps", c.finetuneSteps}, {"batch", c.finetuneBatch},
           {"blr", c.finetuneBlr},      {"preset", c.preset},       {"img_size", c.imgSize},
-          {"patch_size", c.patchSize}, {"world_size", world}};
+          {"patch_size", c.patchSize}, {"world_size", world},
+          // The flow scale (img_size / 16) and a schedule that spans the steps taken.
+          {"flow_scale", job.task == "flow" ? c.imgSize / 16.0 : 1.0},
+          {"schedule", "spans-run"}};
 }
 
 // Removes `dir` when it was made with other settings than `settings` (its settings.json differs,

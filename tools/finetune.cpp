@@ -16,6 +16,7 @@ struct Flags {
   int imgSize = 224, patchSize = 16;
   bool quiet = false, predict = false, evaluate = false, noJitter = false;
   std::string checkpoint, image1, image2, out;
+  CLI::Option* blrOpt = nullptr;
 };
 
 void addTrainingFlags(CLI::App& app, Flags& f) {
@@ -26,6 +27,9 @@ void addTrainingFlags(CLI::App& app, Flags& f) {
   app.add_option("--eval-data", f.c.evalData,
                  "Held-out shards (other scenes): figures against a trivial baseline at the end");
   app.add_option("--eval-pairs", f.c.evalPairs, "Held-out pairs measured (0: all)");
+  app.add_option("--eval-every", f.c.evalEvery,
+                 "Also measure the held-out figures every N steps, into OUT/log.jsonl (learning "
+                 "curves; 0: at the end only)");
   app.add_option("--task", f.c.model.task, "flow, depth or pose")
       ->check(CLI::IsMember({"flow", "depth", "pose"}));
   app.add_option("--head", f.c.model.head,
@@ -39,6 +43,9 @@ void addTrainingFlags(CLI::App& app, Flags& f) {
                  "random, or a pre-training checkpoint: its encoder, and its decoder when it was "
                  "trained on cross-view completion (an mae checkpoint leaves the decoder random)");
   app.add_option("--hooks", f.c.model.hooks, "The DPT head's 4 block indices (default: see docs)");
+  app.add_option("--flow-scale", f.c.model.flowScale,
+                 "Flow: the head regresses flow divided by this many pixels (default: --img-size "
+                 "/ 16; docs/finetune.md)");
   app.add_option("--preset", f.preset, "tiny, small or base")
       ->check(CLI::IsMember({"tiny", "small", "base"}));
   app.add_option("--img-size", f.imgSize, "Training crop size; prediction tiles by it");
@@ -47,6 +54,10 @@ void addTrainingFlags(CLI::App& app, Flags& f) {
                  "pose: the DPT head needs 16)")
       ->check(CLI::Range(1, 64));
   addLoopFlags(app, t);
+  f.blrOpt = app.get_option("--blr");
+  f.blrOpt->description(
+      "Base learning rate (lr = blr * effective batch / 256; default by task: 1e-2 for flow and "
+      "depth, 2e-3 for pose, docs/finetune.md)");
   app.add_flag("--no-jitter", f.noJitter, "No colour jitter");
   app.add_flag("--quiet", f.quiet, "No progress lines");
 }
@@ -72,6 +83,7 @@ int train(Flags& f) {
   c.model.croco.img_size = f.imgSize;
   c.model.croco.patch_size = f.patchSize;
   if (c.model.head.empty()) c.model.head = c.model.task == "pose" ? "pose" : "dpt";
+  if (f.blrOpt->count() == 0) c.train.blr = defaultFinetuneBlr(c.model.task);
   if (!f.quiet) logLaunch("finetune", launchRole(processEnvironment()).describe());
   std::printf("%s\n", runFinetune(c).dump().c_str());
   return 0;

@@ -63,6 +63,18 @@ inline void addPairFlags(CLI::App& app, PairOptions& o) {
       ->check(CLI::Range(1, 4));
   app.add_option("--max-attempts", o.maxAttempts, "Second views tried per reference view");
   app.add_option("--min-valid", o.minValidFraction, "Minimum fraction of pixels with depth");
+  app.add_option_function<std::string>(
+         "--motion", [&o](const std::string& v) { o.sampler.motion = parseMotion(v); },
+         "How the second view moves from the first: walk (CroCo's random walk on the floor, "
+         "looking at the first view's mean point: wide pre-training pairs; the default) or near "
+         "(a bounded motion of the first camera, as video frames move: flow-style pairs with "
+         "small, dense motions; docs/dataset.md)")
+      ->check(CLI::IsMember({"walk", "near"}));
+  app.add_option("--near-translation", o.sampler.nearTranslation,
+                 "--motion near: largest translation, metres (uniform in a ball, its vertical "
+                 "part halved; default 0.25)");
+  app.add_option("--near-rotation", o.sampler.nearRotation,
+                 "--motion near: largest pan and tilt, degrees (roll: half; default 4)");
   app.add_option("--views", o.views,
                  "Views per sample (CroCo's views_count): view 1 and views-1 others, each with "
                  "covis in the band with view 1");

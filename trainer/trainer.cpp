@@ -34,7 +34,7 @@ CroCoOutput pretrainForward(CroCoNet& model, const std::string& task, const torc
   return model->forward(img1, taskReference(task, img2), mask);
 }
 
-double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs, double e) {
+double learningRate(double baseLr, double minLr, double warmupEpochs, double epochs, double e) {
   if (e < warmupEpochs) return baseLr * e / warmupEpochs;
   const double span = std::max(1e-12, epochs - warmupEpochs);
   return minLr +

@@ -37,6 +37,14 @@ struct TrainConfig {
   int accumIter = 1;
   int epochs = 10;        // the schedule's length
   int64_t maxSteps = -1;  // stop after this many iterations (all epochs counted); -1: never
+  // true (finetune): the warm-up and the cosine span the steps the run takes, maxSteps when it
+  // comes before the last epoch's end, with the warm-up at most a tenth of them. false
+  // (pretrain): they span `epochs`, so that a run stopped by maxSteps and resumed with a larger
+  // one goes on as if it had never stopped.
+  bool scheduleSpansRun = false;
+  // Stop after this many iterations as a signal stops a run (a checkpoint, "interrupted"),
+  // leaving the schedule as it is: a run cut into parts, resumed with --resume. -1: never.
+  int64_t stopAfter = -1;
   double blr = 1.5e-4;    // lr = blr * effective batch / 256
   double minLr = 0.0;
   double warmupEpochs = 1.0;
@@ -74,7 +82,7 @@ CroCoOutput pretrainForward(CroCoNet& model, const std::string& task, const torc
                             const torch::Tensor& img2, const torch::Tensor& mask);
 
 // lr at fractional epoch `e`: linear warmup, then half-cosine to minLr (CroCo's pretrain.py).
-double learningRate(double baseLr, double minLr, double warmupEpochs, int epochs, double e);
+double learningRate(double baseLr, double minLr, double warmupEpochs, double epochs, double e);
 
 // Parameter names with and without weight decay: none on biases and 1-D parameters (norms),
 // as timm's param_groups_weight_decay, which CroCo's pretrain.py uses.

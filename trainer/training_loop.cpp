@@ -203,6 +203,12 @@ class TrainingLoop {
     PAIRCAST_CHECK(perEpoch_ > 0);
     const int64_t total = static_cast<int64_t>(c_.epochs) * perEpoch_;
     stopAt_ = c_.maxSteps >= 0 ? std::min(total, c_.maxSteps) : total;
+    scheduleEpochs_ = c_.epochs;
+    warmupEpochs_ = c_.warmupEpochs;
+    if (c_.scheduleSpansRun) {
+      scheduleEpochs_ = static_cast<double>(stopAt_) / perEpoch_;
+      warmupEpochs_ = std::min(warmupEpochs_, 0.1 * scheduleEpochs_);
+    }
     saveEvery_ = std::max<int64_t>(c_.accumIter,
                                    (c_.saveEvery + c_.accumIter - 1) / c_.accumIter * c_.accumIter);
   }
@@ -238,13 +244,16 @@ class TrainingLoop {
           interrupted_ = true;
           progress_.breakLine();
           if (lead_)
-            std::fprintf(stderr, "%s: signal: checkpoint saved at step %lld, exiting\n",
-                         tool_.c_str(), static_cast<long long>(iter_));
+            std::fprintf(stderr, "%s: %s: checkpoint saved at step %lld, exiting\n",
+                         tool_.c_str(),
+                         c_.stopAfter >= 0 && iter_ >= c_.stopAfter ? "stop after" : "signal",
+                         static_cast<long long>(iter_));
           break;
         }
       }
       if (lead_) {
         task_.afterStep(iter_, device_);
+        logTaskLine(task_.logAfterStep(iter_, device_));
         model_->train();
       }
     }
@@ -308,19 +317,20 @@ class TrainingLoop {
     std::string line, kept;
     while (std::getline(in, line)) {
       auto j = nlohmann::json::parse(line, nullptr, false);
-      const bool whole = j.is_object() && j.contains("step") && j["step"].is_number_integer() &&
-                         j.contains("loss") && j["loss"].is_number();
-      if (whole && j["step"].get<int64_t>() < iter_) {
-        kept += line + "\n";
-        curve_.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
-      }
+      if (!j.is_object() || !j.contains("step") || !j["step"].is_number_integer() ||
+          j["step"].get<int64_t>() >= iter_)
+        continue;
+      const bool lossLine = j.contains("loss") && j["loss"].is_number();
+      if (!lossLine && !j.contains("heldout")) continue;
+      kept += line + "\n";
+      if (lossLine) curve_.emplace_back(j["step"].get<int64_t>(), j["loss"].get<double>());
     }
     if (lead_) writeFileAtomic(logPath_, kept);
     if (!curve_.empty()) lastLoss_ = curve_.back().second;
   }
 
   void setLearningRate() {
-    const double l = learningRate(lr_, c_.minLr, c_.warmupEpochs, c_.epochs, epoch_);
+    const double l = learningRate(lr_, c_.minLr, warmupEpochs_, scheduleEpochs_, epoch_);
     for (auto& g : opt_->param_groups())
       static_cast<torch::optim::AdamWOptions&>(g.options()).lr(l);
   }
@@ -396,6 +406,13 @@ class TrainingLoop {
     curve_.emplace_back(iter_ - 1, stepLoss_);
   }
 
+  void logTaskLine(nlohmann::json entries) {
+    if (!entries.is_object() || entries.empty()) return;
+    entries["step"] = iter_ - 1;
+    log_ << entries.dump() << "\n";
+    log_.flush();
+  }
+
   std::string progressText() const {
     const double rate = (iter_ - firstIter_) / std::max(1e-9, since(start_));
     char line[256];
@@ -411,6 +428,7 @@ class TrainingLoop {
 
   // A signal to any rank stops them all, at the same accumulation boundary.
   bool stopRequested(const StopSignals& signals, bool boundary) {
+    if (boundary && c_.stopAfter >= 0 && iter_ >= c_.stopAfter && iter_ < stopAt_) return true;
     bool stop = signals.raised();
     if (dist_ && boundary) {
       auto flag = torch::tensor({stop ? 1.0 : 0.0}, torch::kFloat64);
@@ -475,6 +493,7 @@ class TrainingLoop {
   std::ofstream log_;
   Clock::time_point start_ = Clock::now();
   double epoch_ = 0, stepLoss_ = NAN, lastLoss_ = NAN;
+  double scheduleEpochs_ = 0, warmupEpochs_ = 0;  // the schedule's span (scheduleSpansRun)
   double waitTotal_ = 0, stepTotal_ = 0;
   int nanRun_ = 0, skipped_ = 0;
   bool interrupted_ = false;

@@ -47,6 +47,12 @@ class TrainingTask {
   virtual nlohmann::json checkpointEntries() const { return nlohmann::json::object(); }
   // After each step (iterations done so far), on the lead rank: images, evaluations.
   virtual void afterStep(int64_t /*iter*/, const torch::Device& /*device*/) {}
+  // After each step, on the lead rank: entries of a line of its own in the log (held-out figures
+  // measured during the run), or null for none. The line takes the step's "step"; on resume it
+  // is kept or cut with the loss lines.
+  virtual nlohmann::json logAfterStep(int64_t /*iter*/, const torch::Device& /*device*/) {
+    return nullptr;
+  }
   // Task entries of the run's summary.
   virtual void summarise(nlohmann::json& /*summary*/) {}
 };

@@ -8,6 +8,7 @@
 #include "dataset/viewpoint_sampler.h"
 #include "render/procedural_scene.h"
 #include "render/scan_scene.h"
+#include "test_errors.h"
 #include "test_paths.h"
 #include "util/error.h"
 #include "util/random.h"
@@ -302,6 +303,41 @@ TEST(ViewpointSampler, CamerasFollowCrocoRanges) {
     // Within the noise (3 deg pan, 10 deg tilt) of the look-at direction.
     ASSERT_GT(w.camera.R_cam2world.col(2).dot(toTarget), std::cos(11.0 * M_PI / 180));
   }
+}
+
+TEST(ViewpointSampler, NearMotionStaysWithinItsBounds) {
+  // --motion near: the second camera is the first moved by at most nearTranslation (vertical
+  // part halved) and turned by at most nearRotation in pan and tilt, half in roll. The bounds are
+  // reached: over 300 draws the largest translation and turn come within 20 % of them.
+  const Scene scene = loadBoxes(testing::roomBoxes(), false, "near");
+  RayCaster caster(scene.mesh);
+  SamplerOptions o;
+  o.motion = SamplerOptions::Motion::kNear;
+  o.nearTranslation = 0.2;
+  o.nearRotation = 5.0;
+  ViewpointSampler sampler(scene, caster, o);
+  const Camera intr = Camera::fromHfov(32, 32, 60);
+  Rng rng(7);
+  const Eigen::Vector3d up(0, 1, 0);
+  double farthest = 0, widest = 0;
+  for (int i = 0; i < 300; ++i) {
+    const Viewpoint v = sampler.sampleReference(intr, rng);
+    const Viewpoint w = sampler.sampleOther(intr, v, Eigen::Vector3d(0, 1, 0), rng);
+    const Eigen::Vector3d d = w.camera.t_cam2world - v.camera.t_cam2world;
+    ASSERT_LE(d.norm(), 0.2 + 1e-9);
+    ASSERT_LE(std::abs(d.dot(up)), 0.1 + 1e-9);
+    const Eigen::Matrix3d turn = v.camera.R_cam2world.transpose() * w.camera.R_cam2world;
+    const double angle = Eigen::AngleAxisd(turn).angle() * 180 / M_PI;
+    // pan, tilt <= 5 and roll <= 2.5 degrees compose to at most sqrt(5^2 + 5^2 + 2.5^2).
+    ASSERT_LE(angle, 7.5 + 1e-6);
+    ASSERT_TRUE((w.camera.R_cam2world.transpose() * w.camera.R_cam2world).isIdentity(1e-9));
+    farthest = std::max(farthest, d.norm());
+    widest = std::max(widest, angle);
+  }
+  EXPECT_GT(farthest, 0.16);
+  EXPECT_GT(widest, 5.0);
+  EXPECT_EQ(parseMotion("near"), SamplerOptions::Motion::kNear);
+  EXPECT_ERROR_CONTAINS(parseMotion("jump"), "walk or near, not 'jump'");
 }
 
 TEST(ViewpointSampler, OrientationNoiseAxes) {

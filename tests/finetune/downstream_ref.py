@@ -97,7 +97,10 @@ def forward(ck, inputs):
     enc = encoder_blocks(sd, a, torch.cat([img1, inputs["img2"]]))
     enc1 = [t[:b] for t in enc]
     dec = decoder_blocks(sd, a, enc1[-1], enc[-1][b:])
-    return dpt(sd, enc1 + dec, hooks, img1.shape[-1])
+    out = dpt(sd, enc1 + dec, hooks, img1.shape[-1])
+    # The head regresses flow / flow_scale: pixels are its u, v times the checkpoint's scale.
+    scale = float(ck.get("flow_scale", 1.0))
+    return torch.cat([out[:, :2] * scale, out[:, 2:]], 1)
 
 
 def main():

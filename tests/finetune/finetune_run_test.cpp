@@ -166,9 +166,9 @@ TEST(FinetuneRun, ResumesExactly) {
   runFinetune(whole);
   FinetuneConfig half = whole;
   half.train.out = testing::scratchDir("half");
-  half.train.maxSteps = 3;
-  runFinetune(half);
-  half.train.maxSteps = 6;
+  half.train.stopAfter = 3;  // as a kill would: the schedule still spans the 6 steps
+  EXPECT_TRUE(runFinetune(half)["interrupted"].get<bool>());
+  half.train.stopAfter = -1;
   half.train.resume = true;
   EXPECT_EQ(runFinetune(half)["steps"], 6);
   const Checkpoint a = loadCheckpoint(whole.train.out + "/checkpoint-last.pth");
