@@ -103,7 +103,8 @@ PoseHeadImpl::PoseHeadImpl(int dim, int patches, int hidden) {
 torch::Tensor PoseHeadImpl::forward(const torch::Tensor& tokens) {
   // Each patch's features keep their place: where the content moved is what the pose is.
   auto features = torch::gelu(fc1(tokens)).flatten(1);  // [B, N hidden]
-  auto out = fc2(features);                             // [B, 12]
+  // [B, 12], in float32 under bf16 autocast too: torch::eye and the SVD take no bfloat16.
+  auto out = fc2(features).to(torch::kFloat32);
   // 2 I + the output: the head starts near the identity, with singular values apart (the SVD's
   // gradient divides by their differences).
   auto m = out.narrow(1, 0, 9).reshape({-1, 3, 3}) + 2.0 * torch::eye(3, out.options());

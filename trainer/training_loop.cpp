@@ -273,6 +273,13 @@ class TrainingLoop {
         {"interrupted", interrupted_},
         {"checkpoint", ckptPath_}};
     s["world_size"] = world_;
+    // The schedule: blr, the peak lr it gives, and the epochs (and steps) its warm-up and
+    // cosine span.
+    s["schedule"] = {{"blr", c_.blr},
+                     {"peak_lr", lr_},
+                     {"epochs", scheduleEpochs_},
+                     {"warmup_epochs", warmupEpochs_},
+                     {"steps", stopAt_}};
     s["fused_adamw"] = c_.fusedAdamW && device_.is_cuda() && fusedAdamWCompiled();
     if (scaler_->enabled()) s["loss_scale"] = scaler_->scale();
     s["precision"] = precision_.toJson();

@@ -225,13 +225,40 @@ TEST(Tiling, APredictionOfOneTileIsTheForwardPass) {
   const auto a = torch::randn({1, 3, 64, 64}), b = torch::randn({1, 3, 64, 64});
   torch::NoGradGuard ng;
   EXPECT_TRUE(torch::equal(predict(net, a, b), net->forward(a, b)));
-  // Larger images: each pixel's value comes from the tile that owns it.
-  const auto big1 = torch::randn({1, 3, 96, 64}), big2 = torch::randn({1, 3, 96, 64});
+  // Images larger than the tile both ways, 96 x 128: tiles at rows 0, 32 and columns 0, 32, 64,
+  // whose centres put the boundaries at row 48 and columns 48 and 80. Each block, up to and
+  // including the rows and columns on either side of a boundary, is its own tile's forward pass.
+  const auto big1 = torch::randn({1, 3, 96, 128}), big2 = torch::randn({1, 3, 96, 128});
+  const TileAxis rows = tileAxis(96, 64), cols = tileAxis(128, 64);
+  ASSERT_EQ(rows.origins, (std::vector<int64_t>{0, 32}));
+  ASSERT_EQ(cols.origins, (std::vector<int64_t>{0, 32, 64}));
+  EXPECT_EQ(rows.owner[47], 0);
+  EXPECT_EQ(rows.owner[48], 1);
+  EXPECT_EQ(cols.owner[47], 0);
+  EXPECT_EQ(cols.owner[48], 1);
+  EXPECT_EQ(cols.owner[79], 1);
+  EXPECT_EQ(cols.owner[80], 2);
   const auto full = predict(net, big1, big2);
-  const auto top = net->forward(big1.narrow(2, 0, 64), big2.narrow(2, 0, 64));
-  const auto bottom = net->forward(big1.narrow(2, 32, 64), big2.narrow(2, 32, 64));
-  EXPECT_TRUE(torch::equal(full.narrow(2, 0, 40), top.narrow(2, 0, 40)));
-  EXPECT_TRUE(torch::equal(full.narrow(2, 56, 40), bottom.narrow(2, 24, 40)));
+  ASSERT_EQ(full.sizes(), (std::vector<int64_t>{1, 2, 96, 128}));
+  const std::vector<std::pair<int64_t, int64_t>> rowBlocks = {{0, 48}, {48, 96}};
+  const std::vector<std::pair<int64_t, int64_t>> colBlocks = {{0, 48}, {48, 80}, {80, 128}};
+  for (size_t i = 0; i < 2; ++i)
+    for (size_t j = 0; j < 3; ++j) {
+      const int64_t top = rows.origins[i], left = cols.origins[j];
+      const auto [y0, y1] = rowBlocks[i];
+      const auto [x0, x1] = colBlocks[j];
+      const auto tile = net->forward(big1.narrow(2, top, 64).narrow(3, left, 64),
+                                     big2.narrow(2, top, 64).narrow(3, left, 64));
+      EXPECT_TRUE(torch::equal(full.narrow(2, y0, y1 - y0).narrow(3, x0, x1 - x0),
+                               tile.narrow(2, y0 - top, y1 - y0).narrow(3, x0 - left, x1 - x0)))
+          << "tile " << i << ", " << j;
+    }
+  // Across a boundary the tiles disagree (they see different context), so the check above
+  // would fail for a block taken from the wrong tile.
+  const auto second = net->forward(big1.narrow(2, 32, 64).narrow(3, 0, 64),
+                                   big2.narrow(2, 32, 64).narrow(3, 0, 64));
+  EXPECT_FALSE(torch::equal(full.narrow(2, 40, 8).narrow(3, 0, 48),
+                            second.narrow(2, 8, 8).narrow(3, 0, 48)));
   EXPECT_ERROR_CONTAINS(predict(net, torch::randn({1, 3, 32, 64}), torch::randn({1, 3, 32, 64})),
                         "smaller than the model's tiles of 64");
 }

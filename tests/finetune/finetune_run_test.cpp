@@ -9,6 +9,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
+#include <sstream>
+#include <tuple>
 
 #include "finetune/finetune_data.h"
 #include "model/checkpoint.h"
@@ -112,17 +114,25 @@ TEST(FinetuneRun, FlowBeatsZeroFlowOnHeldOutPairs) {
   const nlohmann::json s = runFinetune(smallRun("flow", testing::scratchDir("flow")));
   std::printf("held-out flow %s\n", s["heldout"].dump().c_str());
   EXPECT_EQ(heldOut(s, "model", "pairs"), 16);
-  EXPECT_LT(heldOut(s, "model", "aepe"), heldOut(s, "baseline", "aepe"));
-  // 9.05 against 9.79 px when measured: the covisible pixels are where flow can be learnt.
-  EXPECT_LT(heldOut(s, "model", "aepe_covisible"), 0.97 * heldOut(s, "baseline", "aepe_covisible"));
+  // Measured with seeds 0, 1, 2: AEPE 8.875, 8.845, 8.800 px against zero flow's 9.836 (ratios
+  // 0.894-0.902, a spread of 0.008); covisible 8.787, 8.736, 8.666 against 9.794. The bound,
+  // 0.93, lies 3.5 spreads above the worst seed. Pairs of one scene: part of what is learnt is
+  // the scene's typical flow (flow-style pairs, whose motions have no typical direction, are
+  // not learnt at this budget: docs/finetune.md).
+  EXPECT_LT(heldOut(s, "model", "aepe"), 0.93 * heldOut(s, "baseline", "aepe"));
+  EXPECT_LT(heldOut(s, "model", "aepe_covisible"), 0.93 * heldOut(s, "baseline", "aepe_covisible"));
+  EXPECT_LT(heldOut(s, "model", "px5"), 0.93 * heldOut(s, "baseline", "px5"));  // 0.72-0.74 / 0.84
 }
 
 TEST(FinetuneRun, DepthBeatsAConstantOnHeldOutPairs) {
   const nlohmann::json s = runFinetune(smallRun("depth", testing::scratchDir("depth")));
   std::printf("held-out depth %s\n", s["heldout"].dump().c_str());
-  EXPECT_LT(heldOut(s, "model", "absrel"), heldOut(s, "baseline", "absrel"));
-  EXPECT_LT(heldOut(s, "model", "rmse"), heldOut(s, "baseline", "rmse"));
-  EXPECT_GT(heldOut(s, "model", "delta1"), heldOut(s, "baseline", "delta1"));
+  // Measured with seeds 0, 1, 2: delta1 0.364, 0.371, 0.361 against the constant's 0.243 (a
+  // spread of 0.010; the bound, 0.243 + 0.09, lies 3 spreads below the worst seed); RMSE 0.890,
+  // 0.868, 0.903 m against 1.186 (bound 0.85 x 1.186 = 1.008, 3 spreads above). AbsRel, 0.827,
+  // 0.767, 0.856 against 0.870, varies more between seeds than it gains, and is not asserted.
+  EXPECT_GT(heldOut(s, "model", "delta1"), heldOut(s, "baseline", "delta1") + 0.09);
+  EXPECT_LT(heldOut(s, "model", "rmse"), 0.85 * heldOut(s, "baseline", "rmse"));
 }
 
 double median(std::vector<double> v) {
@@ -153,10 +163,13 @@ TEST(FinetuneRun, PoseBeatsTheIdentityOnHeldOutPairs) {
   }
   EXPECT_NEAR(heldOut(s, "baseline", "median_rot_err"), median(angles), 1e-3);
   EXPECT_NEAR(heldOut(s, "baseline", "median_trans_err"), median(baselines), 1e-5);
-  // Measured (seeds 0 and 1): 23.75 and 21.88 degrees against the identity's 28.29, 0.819 and
-  // 0.771 m against its 0.904. From 400 pairs of the scene the translation was fitted, not learnt.
-  EXPECT_LT(heldOut(s, "model", "median_rot_err"), 0.9 * heldOut(s, "baseline", "median_rot_err"));
-  EXPECT_LT(heldOut(s, "model", "median_trans_err"), heldOut(s, "baseline", "median_trans_err"));
+  // Measured with seeds 0, 1, 2: 23.75, 21.88 and 26.72 degrees against the identity's 28.29,
+  // 0.819, 0.771 and 0.798 m against its 0.904. The seeds spread over 4.8 degrees and 0.048 m,
+  // as much as the worst seed gains: pose learns weakly at this budget, and the bounds (0.97 and
+  // 0.95 of the identity's) lie about a third of a spread beyond the worst seed.
+  EXPECT_LT(heldOut(s, "model", "median_rot_err"), 0.97 * heldOut(s, "baseline", "median_rot_err"));
+  EXPECT_LT(heldOut(s, "model", "median_trans_err"),
+            0.95 * heldOut(s, "baseline", "median_trans_err"));
 }
 
 TEST(FinetuneRun, ResumesExactly) {
@@ -175,6 +188,42 @@ TEST(FinetuneRun, ResumesExactly) {
   const Checkpoint b = loadCheckpoint(half.train.out + "/checkpoint-last.pth");
   ASSERT_EQ(a.model.size(), b.model.size());
   for (const auto& [k, t] : a.model) EXPECT_TRUE(torch::equal(t, b.model.at(k))) << k;
+}
+
+TEST(FinetuneRun, TheScheduleSpansTheStepsTakenAndCurvesGoIntoTheLog) {
+  // 12 steps of a 40-epoch configuration (8 steps an epoch): the warm-up (1 epoch asked, at most
+  // a tenth of the run: 1.2 steps) and the cosine fit into the 12 steps, so the peak lr is
+  // reached and the last step runs near 0. Every 4 steps the held-out figures go into log.jsonl.
+  FinetuneConfig c = smallRun("flow", testing::scratchDir("curves"));
+  c.train.maxSteps = 12;
+  c.evalEvery = 4;
+  c.evalPairs = 4;
+  const nlohmann::json s = runFinetune(c);
+  EXPECT_DOUBLE_EQ(s["schedule"]["epochs"].get<double>(), 1.5);
+  EXPECT_DOUBLE_EQ(s["schedule"]["warmup_epochs"].get<double>(), 0.15);
+  const double peak = 1e-2 * 8 / 256;
+  EXPECT_DOUBLE_EQ(s["schedule"]["peak_lr"].get<double>(), peak);
+  std::vector<double> lr;
+  std::vector<std::pair<int64_t, nlohmann::json>> curve;
+  std::istringstream log(readFile(c.train.out + "/log.jsonl"));
+  for (std::string line; std::getline(log, line);) {
+    const auto j = nlohmann::json::parse(line);
+    if (j.contains("loss")) lr.push_back(j["lr"].get<double>());
+    if (j.contains("heldout")) curve.emplace_back(j["step"].get<int64_t>(), j["heldout"]);
+  }
+  ASSERT_EQ(lr.size(), 12u);
+  EXPECT_GT(*std::max_element(lr.begin(), lr.end()), 0.9 * peak);
+  // Step 11 of 12: (11/8 - 0.15) / 1.35 of the cosine, 0.021 of the peak.
+  EXPECT_NEAR(lr.back(), peak * 0.5 * (1 + std::cos(M_PI * (11.0 / 8 - 0.15) / 1.35)), 1e-12);
+  EXPECT_LT(lr.back(), 0.03 * peak);
+  ASSERT_EQ(curve.size(), 3u);
+  EXPECT_EQ(curve[0].first, 3);
+  EXPECT_EQ(curve[2].first, 11);
+  for (const auto& [step, figures] : curve) EXPECT_EQ(figures["pairs"], 4) << step;
+  // The last point is measured on the final weights, as the summary's.
+  EXPECT_DOUBLE_EQ(curve[2].second["aepe"].get<double>(), heldOut(s, "model", "aepe"));
+  c.evalData.clear();
+  EXPECT_ERROR_CONTAINS(runFinetune(c), "--eval-every needs --eval-data");
 }
 
 TEST(FinetuneRun, RefusesCheckpointsOfAnotherTaskOrModel) {
@@ -285,6 +334,28 @@ TEST(FinetuneCli, BadFlagsExit2WithOneLine) {
   EXPECT_EQ(runTool({"--predict", "--out", out + "/x.flo"}, &err), 2);
   EXPECT_NE(err.find("--checkpoint is required"), std::string::npos) << err;
   EXPECT_EQ(runTool({"--batch-size", "0", "--out", out}, &err), 2);
+}
+
+TEST(FinetuneCli, EachTaskHasTheRateTheDocsRecommend) {
+  // Without --blr, flow and depth train at blr 1e-2 and pose at 2e-3 (docs/finetune.md); --blr
+  // still sets it. The summary gives the peak lr: blr x batch / 256.
+  const std::string data = truthShards("apartment", 1);
+  for (const auto& [task, head, flags, blr] :
+       {std::tuple{"flow", "linear", std::vector<std::string>{}, 1e-2},
+        std::tuple{"pose", "pose", std::vector<std::string>{}, 2e-3},
+        std::tuple{"pose", "pose", std::vector<std::string>{"--blr", "5e-4"}, 5e-4}}) {
+    const std::string out = testing::scratchDir(std::string("rate-") + task + head);
+    std::vector<std::string> args = {"--data",       data,   "--out",        out,  "--task",
+                                     task,           "--head", head,          "--img-size",
+                                     "64",           "--batch-size", "4",     "--max-steps",
+                                     "1",            "--quiet"};
+    args.insert(args.end(), flags.begin(), flags.end());
+    std::string err;
+    ASSERT_EQ(runTool(args, &err), 0) << err;
+    const auto s = nlohmann::json::parse(readFile(out + "/summary.json"))["schedule"];
+    EXPECT_DOUBLE_EQ(s["blr"].get<double>(), blr) << task;
+    EXPECT_DOUBLE_EQ(s["peak_lr"].get<double>(), blr * 4 / 256) << task;
+  }
 }
 
 TEST(FinetuneCli, PredictWritesFloAndAPicture) {

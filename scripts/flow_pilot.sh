@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# The flow pilot: in which regime does a small CroCo learn optical flow, and does cross-view
+# pre-training help it? For each patch size and flow scale, the tiny preset at 64 pixels is
+# fine-tuned for flow (linear head) from random weights, from an mae checkpoint and from a
+# cross-view checkpoint, on flow-style pairs (generate_pairs --motion near), and measured on
+# held-out flow-style pairs of another scene against zero flow, with curves (--eval-every).
+#
+#   scripts/flow_pilot.sh OUT
+#
+# Steps (each skipped when its output exists, so a killed run continues): wide pre-training pairs
+# of the shipped room and apartment (covis >= 0.5, as finetune_table.sh); flow-style pairs of
+# the same scenes (training) and of the studio (held out); pre-training on cross-view completion
+# and on auto-completion (mae) for each patch size; the fine-tunes; last, OUT/pilot.md (the table)
+# and OUT/curves.json (held-out AEPE against steps, from each fine-tune's log.jsonl).
+# Environment: BUILD_DIR (default build), PATCHES (default "8 16"), SCALES (default "0 1": 0 is
+# finetune's default flow scale, img_size / 16; 1 regresses pixels), PRETRAIN_STEPS (default
+# 1000, of 16 pairs), FINETUNE_STEPS (default 800, of 8 pairs), EVAL_EVERY (default 100),
+# SEED (default 0), INITS (default "random mae croco").
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out=${1:?usage: scripts/flow_pilot.sh OUT}
+bin=${BUILD_DIR:-build}/tools
+read -r -a patches <<< "${PATCHES:-8 16}"
+read -r -a scales <<< "${SCALES:-0 1}"
+read -r -a inits <<< "${INITS:-random mae croco}"
+pretrain_steps=${PRETRAIN_STEPS:-1000}
+finetune_steps=${FINETUNE_STEPS:-800}
+eval_every=${EVAL_EVERY:-100}
+seed=${SEED:-0}
+mkdir -p "$out"
+export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
+
+pairs() {  # OUT/NAME PAIRS-PER-SCENE [generate_pairs flags] -- SCENES...
+  local name=$1 n=$2
+  shift 2
+  local flags=()
+  while [[ $1 != -- ]]; do flags+=("$1"); shift; done
+  shift
+  [[ -f "$out/$name/summary.json" ]] ||
+    "$bin/generate_pairs" --scenes "$@" --out "$out/$name" --pairs-per-scene "$n" \
+      --resolution 64 --save-flow --save-depth --seed 7 --quiet "${flags[@]}" > /dev/null
+}
+pairs wide 400 -- scenes/room scenes/apartment
+pairs flow-train 400 --motion near --min-covis 0.6 -- scenes/room scenes/apartment
+pairs flow-heldout 100 --motion near --min-covis 0.6 -- scenes/studio
+
+for patch in "${patches[@]}"; do
+  for task in croco mae; do
+    run="$out/pretrain-$task-p$patch"
+    [[ -f "$run/summary.json" ]] ||
+      "$bin/pretrain" --data "$out/wide/pairs-*.tar" --task "$task" --preset tiny --img-size 64 \
+        --patch-size "$patch" --batch-size 16 --epochs $((pretrain_steps / 50)) \
+        --max-steps "$pretrain_steps" --blr 6e-3 --seed 0 --out "$run" --quiet > /dev/null
+    echo "flow_pilot: pre-trained $task with $patch-pixel patches" >&2
+  done
+done
+
+for patch in "${patches[@]}"; do
+  for scale in "${scales[@]}"; do
+    for init in "${inits[@]}"; do
+      run="$out/finetune/p$patch-s$scale-$init"
+      [[ -f "$run/heldout.json" ]] && continue
+      ckpt=random
+      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch/checkpoint-last.pth"
+      "$bin/finetune" --task flow --head linear --init "$ckpt" --preset tiny --img-size 64 \
+        --patch-size "$patch" --flow-scale "$scale" \
+        --data "$out/flow-train/pairs-*.tar" --eval-data "$out/flow-heldout/pairs-*.tar" \
+        --batch-size 8 --epochs $((finetune_steps / 100)) --max-steps "$finetune_steps" \
+        --eval-every "$eval_every" --seed "$seed" --out "$run" --quiet > /dev/null
+      echo "flow_pilot: fine-tuned p$patch-s$scale-$init" >&2
+    done
+  done
+done
+python3 scripts/flow_pilot.py "$out"
