@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """The flow pilot's table and curves (scripts/flow_pilot.sh): for each fine-tune under
 OUT/finetune, its held-out flow figures against zero flow, and its held-out AEPE every
---eval-every steps from its log.jsonl. Writes OUT/pilot.md and OUT/curves.json.
+--eval-every steps from its log.jsonl. Writes OUT/pilot.md, OUT/curves.json and OUT/curves.svg
+(held-out AEPE over zero flow's against steps; RUNS, a comma-separated list of substrings,
+picks the runs plotted).
 
-    scripts/flow_pilot.py OUT
+    scripts/flow_pilot.py OUT [RUNS]
 """
 
 import json
@@ -21,20 +23,62 @@ def curve(run):
     return points
 
 
+COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
+
+
+def svg_plot(curves, zero, path):
+    """A line per run: held-out AEPE / zero flow's against steps done, and the line y = 1."""
+    width, height, left, right, top, bottom = 640, 360, 60, 190, 20, 40
+    xs = [x for points in curves.values() for x, _ in points] or [1]
+    ys = [y / zero for points in curves.values() for _, y in points] + [1.0]
+    x_max, y_lo, y_hi = max(xs), min(ys) - 0.01, max(ys) + 0.01
+    px = lambda x: left + (width - left - right) * x / x_max
+    py = lambda y: top + (height - top - bottom) * (y_hi - y) / (y_hi - y_lo)
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
+           f'font-family="sans-serif" font-size="11">',
+           f'<rect width="{width}" height="{height}" fill="white"/>',
+           f'<line x1="{left}" y1="{py(1):.1f}" x2="{width - right}" y2="{py(1):.1f}" '
+           f'stroke="black" stroke-dasharray="4 3"/>',
+           f'<text x="{width - right + 4}" y="{py(1) + 4:.1f}">zero flow</text>',
+           f'<line x1="{left}" y1="{height - bottom}" x2="{width - right}" y2="{height - bottom}" '
+           f'stroke="black"/>',
+           f'<line x1="{left}" y1="{top}" x2="{left}" y2="{height - bottom}" stroke="black"/>',
+           f'<text x="{(left + width - right) / 2}" y="{height - 8}" text-anchor="middle">'
+           f'fine-tuning steps</text>',
+           f'<text x="14" y="{(top + height - bottom) / 2}" text-anchor="middle" '
+           f'transform="rotate(-90 14 {(top + height - bottom) / 2})">held-out AEPE / zero flow'
+           f'</text>']
+    for k in range(5):
+        y = y_lo + (y_hi - y_lo) * k / 4
+        out.append(f'<text x="{left - 4}" y="{py(y) + 4:.1f}" text-anchor="end">{y:.3f}</text>')
+        x = x_max * k / 4
+        out.append(f'<text x="{px(x):.1f}" y="{height - bottom + 14}" text-anchor="middle">'
+                   f'{x:.0f}</text>')
+    for i, (name, points) in enumerate(sorted(curves.items())):
+        colour = COLOURS[i % len(COLOURS)]
+        line = " ".join(f"{px(x):.1f},{py(y / zero):.1f}" for x, y in points)
+        out.append(f'<polyline points="{line}" fill="none" stroke="{colour}" stroke-width="1.5"/>')
+        out.append(f'<text x="{width - right + 4}" y="{top + 14 * (i + 2)}" fill="{colour}">'
+                   f'{name}</text>')
+    out.append("</svg>")
+    path.write_text("\n".join(out) + "\n")
+
+
 def main():
-    if len(sys.argv) != 2:
+    if len(sys.argv) not in (2, 3):
         print(__doc__, file=sys.stderr)
         return 2
     out = Path(sys.argv[1])
-    rows, curves = [], {}
+    rows, curves, zero = [], {}, None
     for run in sorted((out / "finetune").iterdir()):
         heldout = run / "heldout.json"
         if not heldout.exists():
             continue
         report = json.loads(heldout.read_text())
-        model, zero = report["model"], report["baseline"]
+        model, baseline = report["model"], report["baseline"]
+        zero = baseline["aepe"]
         summary = json.loads((run / "summary.json").read_text())
-        rows.append((run.name, model["aepe"], zero["aepe"], model["aepe"] / zero["aepe"],
+        rows.append((run.name, model["aepe"], zero, model["aepe"] / zero,
                      model["aepe_covisible"], model["aepe_all_known"], model["px3"],
                      summary.get("seconds", float("nan"))))
         curves[run.name] = curve(run)
@@ -45,6 +89,11 @@ def main():
                      f"| {r[6]:.3f} | {r[7]:.0f} |")
     (out / "pilot.md").write_text("\n".join(lines) + "\n")
     (out / "curves.json").write_text(json.dumps(curves, indent=1) + "\n")
+    picked = sys.argv[2].split(",") if len(sys.argv) == 3 else None
+    if zero is not None:
+        shown = {name: points for name, points in curves.items()
+                 if picked is None or any(p in name for p in picked)}
+        svg_plot(shown, zero, out / "curves.svg")
     print("\n".join(lines))
     return 0
 

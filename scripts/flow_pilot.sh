@@ -15,7 +15,9 @@
 # Environment: BUILD_DIR (default build), PATCHES (default "8 16"), SCALES (default "0 1": 0 is
 # finetune's default flow scale, img_size / 16; 1 regresses pixels), PRETRAIN_STEPS (default
 # 1000, of 16 pairs), FINETUNE_STEPS (default 800, of 8 pairs), EVAL_EVERY (default 100),
-# SEED (default 0), INITS (default "random mae croco").
+# SEED (default 0), INITS (default "random mae croco"), FLOORPLANS (default 0: also train on
+# this many random floor plans of make_scenes), FLOW_PAIRS (default 400: flow-style pairs a
+# training scene).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/flow_pilot.sh OUT}
@@ -27,6 +29,8 @@ pretrain_steps=${PRETRAIN_STEPS:-1000}
 finetune_steps=${FINETUNE_STEPS:-800}
 eval_every=${EVAL_EVERY:-100}
 seed=${SEED:-0}
+floorplans=${FLOORPLANS:-0}
+flow_pairs=${FLOW_PAIRS:-400}
 mkdir -p "$out"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 
@@ -40,32 +44,42 @@ pairs() {  # OUT/NAME PAIRS-PER-SCENE [generate_pairs flags] -- SCENES...
     "$bin/generate_pairs" --scenes "$@" --out "$out/$name" --pairs-per-scene "$n" \
       --resolution 64 --save-flow --save-depth --seed 7 --quiet "${flags[@]}" > /dev/null
 }
+train_scenes=(scenes/room scenes/apartment)
+if ((floorplans > 0)); then
+  [[ -d "$out/floorplans-$floorplans" ]] ||
+    "$bin/make_scenes" --random "$floorplans" --seed 5 --out "$out/floorplans-$floorplans" > /dev/null
+  train_scenes+=("$out/floorplans-$floorplans")
+fi
+flow_train=flow-train-f$floorplans-n$flow_pairs
 pairs wide 400 -- scenes/room scenes/apartment
-pairs flow-train 400 --motion near --min-covis 0.6 -- scenes/room scenes/apartment
+pairs "$flow_train" "$flow_pairs" --motion near --min-covis 0.6 -- "${train_scenes[@]}"
 pairs flow-heldout 100 --motion near --min-covis 0.6 -- scenes/studio
 
 for patch in "${patches[@]}"; do
   for task in croco mae; do
-    run="$out/pretrain-$task-p$patch"
+    run="$out/pretrain-$task-p$patch-s$pretrain_steps"
     [[ -f "$run/summary.json" ]] ||
       "$bin/pretrain" --data "$out/wide/pairs-*.tar" --task "$task" --preset tiny --img-size 64 \
-        --patch-size "$patch" --batch-size 16 --epochs $((pretrain_steps / 50)) \
+        --patch-size "$patch" --batch-size 16 --epochs $(((pretrain_steps + 49) / 50)) \
         --max-steps "$pretrain_steps" --blr 6e-3 --seed 0 --out "$run" --quiet > /dev/null
     echo "flow_pilot: pre-trained $task with $patch-pixel patches" >&2
   done
 done
 
+pairs_n=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["pairs"])' \
+  "$out/$flow_train/summary.json")
 for patch in "${patches[@]}"; do
   for scale in "${scales[@]}"; do
     for init in "${inits[@]}"; do
-      run="$out/finetune/p$patch-s$scale-$init"
+      run="$out/finetune/p$patch-scale$scale-$init-s$pretrain_steps-f$floorplans-n$flow_pairs-$finetune_steps"
       [[ -f "$run/heldout.json" ]] && continue
       ckpt=random
-      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch/checkpoint-last.pth"
+      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch-s$pretrain_steps/checkpoint-last.pth"
       "$bin/finetune" --task flow --head linear --init "$ckpt" --preset tiny --img-size 64 \
         --patch-size "$patch" --flow-scale "$scale" \
-        --data "$out/flow-train/pairs-*.tar" --eval-data "$out/flow-heldout/pairs-*.tar" \
-        --batch-size 8 --epochs $((finetune_steps / 100)) --max-steps "$finetune_steps" \
+        --data "$out/$flow_train/pairs-*.tar" --eval-data "$out/flow-heldout/pairs-*.tar" \
+        --batch-size 8 --epochs $(((finetune_steps * 8 + pairs_n - 1) / pairs_n)) \
+        --max-steps "$finetune_steps" \
         --eval-every "$eval_every" --seed "$seed" --out "$run" --quiet > /dev/null
       echo "flow_pilot: fine-tuned p$patch-s$scale-$init" >&2
     done

@@ -87,6 +87,33 @@ TEST(GeneratePairs, KeptPairsSatisfyTheCovisBand) {
   EXPECT_EQ(samples, 4u);
 }
 
+// --motion near: the second camera is the first moved by at most --near-translation, so every
+// pair's baseline is that short; index.json records the motion, and out-of-range settings are
+// refused naming the option.
+TEST(GeneratePairs, NearMotionPairsMoveLittleAndRecordTheirMotion) {
+  const std::string dir = testing::scratchDir("near");
+  GenerateConfig c = smallConfig({writeRoom(dir)}, dir + "/out");
+  c.pair.sampler.motion = SamplerOptions::Motion::kNear;
+  c.pair.sampler.nearTranslation = 0.1;
+  c.pair.minCovis = 0.6;
+  const nlohmann::json summary = runGenerate(c);
+  EXPECT_EQ(summary["pairs"].get<int>(), 6);
+  size_t samples = 0;
+  for (const char* shard : {"/out/pairs-000000.tar", "/out/pairs-000001.tar"})
+    samples += readShard(dir + shard, [&](ShardSample&& s) {
+      const Camera a = cameraFromJson(s.record["camera1"], "record");
+      const Camera b = cameraFromJson(s.record["camera2"], "record");
+      EXPECT_LE((a.t_cam2world - b.t_cam2world).norm(), 0.1 + 1e-6);
+      EXPECT_GE(s.record["covis"].get<double>(), 0.6);
+    });
+  EXPECT_EQ(samples, 6u);
+  const auto index = nlohmann::json::parse(readFile(dir + "/out/index.json"));
+  EXPECT_EQ(index["motion"],
+            (nlohmann::json{{"kind", "near"}, {"translation", 0.1}, {"rotation", 4.0}}));
+  c.pair.sampler.nearRotation = 120;
+  EXPECT_ERROR_CONTAINS(runGenerate(c), "near motion's rotation must be in [0, 90] degrees");
+}
+
 // The summary splits the full-resolution renders into those of views kept in a sample and those
 // wasted, and the seconds add up. With screening (64 px and more) each kept view is rendered once
 // in full, colour with depth; without it (48 px), depth first and colour once kept: two each. A
