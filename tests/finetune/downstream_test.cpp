@@ -108,6 +108,43 @@ TEST(Downstream, OutputsHaveTheirShapes) {
       "image 2 must be [B, 3, 64, 64]");
 }
 
+TEST(Downstream, FlowHeadsRegressInUnitsOfTheFlowScale) {
+  // The same weights at flow scale 1 and 4: u and v come out 4 times larger, the DPT head's
+  // confidence as it was. The default is img_size / 16; checkpoints keep the scale, and one
+  // without it regressed pixels.
+  torch::NoGradGuard ng;
+  for (const std::string head : {"linear", "dpt"}) {
+    SCOPED_TRACE(head);
+    const int size = head == "dpt" ? 128 : 64;
+    const auto x1 = torch::randn({1, 3, size, size}), x2 = torch::randn({1, 3, size, size});
+    DownstreamConfig c = tinyConfig("flow", head, size);
+    c.flowScale = 1;
+    torch::manual_seed(5);
+    const auto pixels = DownstreamNet(c)->forward(x1, x2);
+    c.flowScale = 4;
+    torch::manual_seed(5);
+    const auto scaled = DownstreamNet(c)->forward(x1, x2);
+    EXPECT_TRUE(torch::allclose(scaled.narrow(1, 0, 2), 4 * pixels.narrow(1, 0, 2)));
+    if (head == "dpt") EXPECT_TRUE(torch::equal(scaled.narrow(1, 2, 1), pixels.narrow(1, 2, 1)));
+  }
+  DownstreamConfig c = tinyConfig("flow", "linear", 64);
+  EXPECT_EQ(c.flowScaleInUse(), 4.0);
+  DownstreamNet net(c);
+  EXPECT_EQ(net->checkpointEntries()["flow_scale"], 4.0);
+  const std::string dir = testing::scratchDir("scale");
+  saveCheckpoint(dir + "/with.pth", net->state(), 0, net->checkpointEntries());
+  EXPECT_EQ(downstreamConfigOf(loadCheckpoint(dir + "/with.pth"), "with").flowScaleInUse(), 4.0);
+  nlohmann::json old = net->checkpointEntries();
+  old.erase("flow_scale");
+  saveCheckpoint(dir + "/without.pth", net->state(), 0, old);
+  EXPECT_EQ(downstreamConfigOf(loadCheckpoint(dir + "/without.pth"), "without").flowScaleInUse(),
+            1.0);
+  old["flow_scale"] = -2;
+  saveCheckpoint(dir + "/bad.pth", net->state(), 0, old);
+  EXPECT_ERROR_CONTAINS(downstreamConfigOf(loadCheckpoint(dir + "/bad.pth"), "bad.pth"),
+                        "bad.pth: flow_scale is not a positive number: -2");
+}
+
 TEST(Downstream, MatchesAnIndependentPythonForwardThroughTorchLoad) {
   if (std::system("/usr/bin/python3 -c 'import torch' > /dev/null 2>&1") != 0)
     GTEST_SKIP() << "python3-torch not installed";
