@@ -105,14 +105,14 @@ Image<T> readMemImage(const void* data, size_t size, const std::string& name, in
   // By the format's name: given a file name, create() looks for that file.
   const std::string ext = lowerExtension(name);
   auto in = ext.empty() ? nullptr : ImageInput::create(ext);
-  if (!in) {
+  if (in) {
+    ImageSpec spec;
+    if (!in->set_ioproxy(&proxy) || !in->open(name, spec))
+      throw Error(name, "cannot decode image: " + in->geterror());
+  } else {
     in = ImageInput::open(name, nullptr, &proxy);
     if (!in) throw Error(name, "cannot decode image: " + OIIO::geterror());
-    return decode<T>(std::move(in), name, channels, size);
   }
-  ImageSpec spec;
-  if (!in->set_ioproxy(&proxy) || !in->open(name, spec))
-    throw Error(name, "cannot decode image: " + in->geterror());
   return decode<T>(std::move(in), name, channels, size);
 }
 
