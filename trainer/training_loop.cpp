@@ -246,7 +246,7 @@ class TrainingLoop {
           if (lead_)
             std::fprintf(stderr, "%s: %s: checkpoint saved at step %lld, exiting\n",
                          tool_.c_str(),
-                         c_.stopAfter >= 0 && iter_ >= c_.stopAfter ? "stop after" : "signal",
+                         stopAfterReached() ? "stop after" : "signal",
                          static_cast<long long>(iter_));
           break;
         }
@@ -433,9 +433,14 @@ class TrainingLoop {
     return line;
   }
 
+  // TrainConfig::stopAfter: the run has taken its part's steps, short of its last one.
+  bool stopAfterReached() const {
+    return c_.stopAfter >= 0 && iter_ >= c_.stopAfter && iter_ < stopAt_;
+  }
+
   // A signal to any rank stops them all, at the same accumulation boundary.
   bool stopRequested(const StopSignals& signals, bool boundary) {
-    if (boundary && c_.stopAfter >= 0 && iter_ >= c_.stopAfter && iter_ < stopAt_) return true;
+    if (boundary && stopAfterReached()) return true;
     bool stop = signals.raised();
     if (dist_ && boundary) {
       auto flag = torch::tensor({stop ? 1.0 : 0.0}, torch::kFloat64);
