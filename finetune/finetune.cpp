@@ -165,8 +165,7 @@ class FinetuneTask : public TrainingTask {
 
   nlohmann::json logAfterStep(int64_t iter, const torch::Device& device) override {
     if (c_.evalEvery <= 0 || !eval_ || iter % c_.evalEvery != 0) return nullptr;
-    if (constantDepth_ < 0) constantDepth_ = medianDepth(data_);
-    const HeldOutFigures f = evaluateHeldOut(net_, *eval_, c_.evalPairs, constantDepth_, device);
+    const HeldOutFigures f = evaluateHeldOut(net_, *eval_, c_.evalPairs, constantDepth(), device);
     return {{"heldout", summariseFigures(f.pairs)}};
   }
 
@@ -177,13 +176,20 @@ class FinetuneTask : public TrainingTask {
     s["initialised"] = initialised_;
     if (c_.model.head == "dpt") s["hooks"] = net_->hooks();
     if (!eval_ || rank_ != 0 || s.value("interrupted", false)) return;
-    nlohmann::json report = heldOutReport(net_, *eval_, c_.evalPairs, medianDepth(data_), device_);
+    nlohmann::json report = heldOutReport(net_, *eval_, c_.evalPairs, constantDepth(), device_);
     writeFileAtomic((fs::path(c_.train.out) / "heldout.json").string(), report.dump(1) + "\n");
     report.erase("per_pair");
     s["heldout"] = report;
   }
 
  private:
+  // The depth baseline (medianDepth of the training pairs), measured once for the curve's
+  // points and the final figures.
+  double constantDepth() {
+    if (constantDepth_ < 0) constantDepth_ = medianDepth(data_);
+    return constantDepth_;
+  }
+
   // The permutation of the pairs in epoch `epoch`, from the run's seed.
   const std::vector<size_t>& epochOrder(int64_t epoch) {
     if (epoch != orderEpoch_) {
@@ -250,7 +256,9 @@ nlohmann::json runFinetune(const FinetuneConfig& c, Distributed* dist) {
   return runTraining(train, task, dist);
 }
 
-double defaultFinetuneBlr(const std::string& task) { return task == "pose" ? 2e-3 : 1e-2; }
+double defaultFinetuneBlr(const std::string& task) {
+  return task == "pose" ? 2e-3 : 1e-2;
+}
 
 nlohmann::json runFinetune(const FinetuneConfig& c) {
   if (c.train.device != "cpu" && c.train.device != "cuda")

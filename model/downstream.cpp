@@ -58,8 +58,12 @@ int64_t DownstreamConfig::headParameters() const {
   return n + linear(F * 9, F / 2) + linear(F / 2 * 9, last) + linear(last, C);
 }
 
+double defaultFlowScale(int imgSize) {
+  return imgSize / 16.0;
+}
+
 double DownstreamConfig::flowScaleInUse() const {
-  return flowScale > 0 ? flowScale : croco.img_size / 16.0;
+  return flowScale > 0 ? flowScale : defaultFlowScale(croco.img_size);
 }
 
 void DownstreamConfig::validate() const {

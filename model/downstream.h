@@ -57,6 +57,9 @@ struct DownstreamConfig {
   double flowScaleInUse() const;
 };
 
+// The flow scale a model of `imgSize` pixels takes by default: imgSize / 16.
+double defaultFlowScale(int imgSize);
+
 // The relative-pose head: each patch of the decoder's last block (normalised) through a linear
 // layer and a GELU, then all patches' features in their order through a second linear layer, to
 // a 3x3 matrix M (plus 2 I, so that it starts near the identity) and a translation; R is the

@@ -32,12 +32,19 @@ nlohmann::json dataSettings(const SweepConfig& c) {
 // What a fine-tune is made with: one made otherwise is made again. The world size sets the
 // epochs' length, and so the data order and the schedule.
 nlohmann::json jobSettings(const SweepConfig& c, const FinetuneJob& job, int world) {
-  return {{"data", dataSettings(c)},   {"task", job.task},         {"run", job.run},
-          {"seed", job.seed},          {"steps", c.finetuneSteps}, {"batch", c.finetuneBatch},
-          {"blr", c.finetuneBlr},      {"preset", c.preset},       {"img_size", c.imgSize},
-          {"patch_size", c.patchSize}, {"world_size", world},
-          // The flow scale (img_size / 16) and a schedule that spans the steps taken.
-          {"flow_scale", job.task == "flow" ? c.imgSize / 16.0 : 1.0},
+  return {{"data", dataSettings(c)},
+          {"task", job.task},
+          {"run", job.run},
+          {"seed", job.seed},
+          {"steps", c.finetuneSteps},
+          {"batch", c.finetuneBatch},
+          {"blr", c.finetuneBlr},
+          {"preset", c.preset},
+          {"img_size", c.imgSize},
+          {"patch_size", c.patchSize},
+          {"world_size", world},
+          // The flow scale the fine-tune takes and a schedule that spans the steps taken.
+          {"flow_scale", job.task == "flow" ? defaultFlowScale(c.imgSize) : 1.0},
           {"schedule", "spans-run"}};
 }
 

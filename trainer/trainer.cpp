@@ -122,8 +122,7 @@ class PretrainTask : public TrainingTask {
   }
 
   void afterStep(int64_t iter, const torch::Device& device) override {
-    if (c_.reconEvery > 0 && iter % c_.reconEvery == 0 && reconData_)
-      writeReconstruction(device);
+    if (c_.reconEvery > 0 && iter % c_.reconEvery == 0 && reconData_) writeReconstruction(device);
   }
 
   void summarise(nlohmann::json& s) override {

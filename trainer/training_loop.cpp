@@ -244,8 +244,7 @@ class TrainingLoop {
           interrupted_ = true;
           progress_.breakLine();
           if (lead_)
-            std::fprintf(stderr, "%s: %s: checkpoint saved at step %lld, exiting\n",
-                         tool_.c_str(),
+            std::fprintf(stderr, "%s: %s: checkpoint saved at step %lld, exiting\n", tool_.c_str(),
                          stopAfterReached() ? "stop after" : "signal",
                          static_cast<long long>(iter_));
           break;

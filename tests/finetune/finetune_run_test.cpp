@@ -345,10 +345,9 @@ TEST(FinetuneCli, EachTaskHasTheRateTheDocsRecommend) {
         std::tuple{"pose", "pose", std::vector<std::string>{}, 2e-3},
         std::tuple{"pose", "pose", std::vector<std::string>{"--blr", "5e-4"}, 5e-4}}) {
     const std::string out = testing::scratchDir(std::string("rate-") + task + head);
-    std::vector<std::string> args = {"--data",       data,   "--out",        out,  "--task",
-                                     task,           "--head", head,          "--img-size",
-                                     "64",           "--batch-size", "4",     "--max-steps",
-                                     "1",            "--quiet"};
+    std::vector<std::string> args = {"--data",      data, "--out",      out,  "--task",       task,
+                                     "--head",      head, "--img-size", "64", "--batch-size", "4",
+                                     "--max-steps", "1",  "--quiet"};
     args.insert(args.end(), flags.begin(), flags.end());
     std::string err;
     ASSERT_EQ(runTool(args, &err), 0) << err;

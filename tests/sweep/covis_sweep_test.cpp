@@ -604,8 +604,7 @@ void expectColumnsFromThePairs(const nlohmann::json& row, const std::string& out
                                const std::string& runDir) {
   const auto covis = heldoutCovis(out);
   for (const auto& [task, figure, column] :
-       {std::tuple{"flow", "aepe", "ft_flow_aepe"},
-        std::tuple{"flow", "px3", "ft_flow_px3"},
+       {std::tuple{"flow", "aepe", "ft_flow_aepe"}, std::tuple{"flow", "px3", "ft_flow_px3"},
         std::tuple{"depth", "delta1", "ft_depth_delta1"},
         std::tuple{"flow", "aepe_covisible", "ft_flow_aepe_covisible"}}) {
     const auto h = nlohmann::json::parse(readFile(runDir + "/finetune-" + task + "/heldout.json"));
