@@ -538,8 +538,13 @@ TEST(GeneratePairs, PartsStartedApartIntoOneFolderMakeOneMachinesOutput) {
   // Part 1 starts while part 0 writes a shard: it must leave part 0's temporaries alone.
   ASSERT_TRUE(waitWhileRunning(part0, [&] { return testing::hasTemporary(out, "pairs-0-"); }))
       << "part 0 ended before it wrote a shard";
+  // Part 0 is held in the middle of its shard, so part 1 runs whole beside its temporary however
+  // the machine schedules the two.
+  kill(part0, SIGSTOP);
   const pid_t part1 = testing::spawnProcess(partArgs(out, 1));
   EXPECT_EQ(testing::waitProcess(part1), 0);
+  EXPECT_TRUE(testing::hasTemporary(out, "pairs-0-")) << "part 1 removed part 0's temporary";
+  kill(part0, SIGCONT);
   EXPECT_EQ(testing::waitProcess(part0), 0) << "part 0 failed while part 1 ran";
   expectSameAsOneMachine(out);
 }
@@ -549,8 +554,10 @@ TEST(GeneratePairs, APartKilledAndRerunBesideAnotherMakesOneMachinesOutput) {
   const std::string out = testing::scratchDir("parts") + "/out";
   const pid_t part0 = testing::spawnProcess(partArgs(out, 0));
   ASSERT_TRUE(waitWhileRunning(part0, [&] { return testing::hasTemporary(out, "pairs-0-"); }));
-  // Part 1 is killed while it writes a shard, leaving its temporary, and rerun while part 0 goes
-  // on: the rerun removes its own leftovers and none of part 0's.
+  // Part 0 is held in the middle of its shard. Part 1 is killed while it writes a shard, leaving
+  // its temporary, and rerun beside part 0's: the rerun removes its own leftovers and none of
+  // part 0's. Holding part 0 makes the overlap certain on a busy machine.
+  kill(part0, SIGSTOP);
   const pid_t part1 = testing::spawnProcess(partArgs(out, 1));
   const bool writing =
       waitWhileRunning(part1, [&] { return testing::hasTemporary(out, "pairs-1-"); });
@@ -558,8 +565,9 @@ TEST(GeneratePairs, APartKilledAndRerunBesideAnotherMakesOneMachinesOutput) {
   EXPECT_EQ(testing::waitProcess(part1), -SIGKILL);
   EXPECT_TRUE(writing && testing::hasTemporary(out, "pairs-1-"))
       << "part 1 was not killed while writing a shard: the test did not test its cleanup";
-  EXPECT_TRUE(running(part0)) << "part 0 ended before part 1 was rerun: the parts did not overlap";
   EXPECT_EQ(testing::runProcess(partArgs(out, 1)), 0);
+  EXPECT_TRUE(testing::hasTemporary(out, "pairs-0-")) << "part 1's rerun removed part 0's temporary";
+  kill(part0, SIGCONT);
   EXPECT_EQ(testing::waitProcess(part0), 0) << "part 0 failed while part 1 was killed and rerun";
   expectSameAsOneMachine(out);
 }
