@@ -88,7 +88,26 @@ TileAxis tileAxis(int64_t length, int64_t tile) {
   return a;
 }
 
-torch::Tensor predict(DownstreamNet& net, const torch::Tensor& img1, const torch::Tensor& img2) {
+Tiling parseTiling(const std::string& name) {
+  if (name == "nearest") return Tiling::kNearest;
+  if (name == "confidence") return Tiling::kConfidence;
+  throw OptionError("tiling", "tiling is 'nearest' or 'confidence', not '" + name + "'");
+}
+
+namespace {
+
+// Each tile's weight per pixel under kConfidence: [1, 1, S, S].
+torch::Tensor tileWeight(const DownstreamNet& net, const torch::Tensor& tile) {
+  const auto& c = net->config();
+  if (c.task == "flow" && tile.size(1) == 3)
+    return 1.0 / (3.75 * torch::sigmoid(tile.narrow(1, 2, 1)) + 0.25);
+  return torch::ones_like(tile.narrow(1, 0, 1));
+}
+
+}  // namespace
+
+torch::Tensor predict(DownstreamNet& net, const torch::Tensor& img1, const torch::Tensor& img2,
+                      Tiling tiling) {
   torch::NoGradGuard noGrad;
   net->eval();
   const int64_t S = net->config().croco.img_size, H = img1.size(2), W = img1.size(3);
@@ -100,7 +119,7 @@ torch::Tensor predict(DownstreamNet& net, const torch::Tensor& img1, const torch
     return net->forward(box(img1, top, left, S), box(img2, top, left, S));
   }
   const TileAxis rows = tileAxis(H, S), cols = tileAxis(W, S);
-  torch::Tensor out;
+  torch::Tensor out, weights;
   for (size_t i = 0; i < rows.origins.size(); ++i) {
     for (size_t j = 0; j < cols.origins.size(); ++j) {
       const int64_t top = rows.origins[i], left = cols.origins[j];
@@ -108,6 +127,13 @@ torch::Tensor predict(DownstreamNet& net, const torch::Tensor& img1, const torch
       const torch::Tensor tile = net->forward(
           box(img1, top, left, S), img2.defined() ? box(img2, top, left, S) : torch::Tensor());
       if (!out.defined()) out = torch::zeros({1, tile.size(1), H, W}, tile.options());
+      if (tiling == Tiling::kConfidence) {
+        if (!weights.defined()) weights = torch::zeros({1, 1, H, W}, tile.options());
+        const torch::Tensor w = tileWeight(net, tile);
+        box(out, top, left, S).add_(tile * w);
+        box(weights, top, left, S).add_(w);
+        continue;
+      }
       const auto [y0, y1] = ownedRange(rows, i);
       const auto [x0, x1] = ownedRange(cols, j);
       out.narrow(2, y0, y1 - y0)
@@ -115,7 +141,7 @@ torch::Tensor predict(DownstreamNet& net, const torch::Tensor& img1, const torch
           .copy_(tile.narrow(2, y0 - top, y1 - y0).narrow(3, x0 - left, x1 - x0));
     }
   }
-  return out;
+  return weights.defined() ? out / weights : out;
 }
 
 torch::Tensor landsInFrame(const torch::Tensor& flow) {

@@ -280,7 +280,7 @@ nlohmann::json evaluateCheckpoint(const std::string& checkpoint,
 
 nlohmann::json predictToFile(const std::string& checkpoint, const std::string& image1,
                              const std::string& image2, const std::string& out,
-                             const std::string& deviceName) {
+                             const std::string& deviceName, Tiling tiling) {
   const torch::Device device = deviceNamed(deviceName);
   DownstreamNet net = loadFinetuned(checkpoint, device);
   const std::string& task = net->config().task;
@@ -293,7 +293,7 @@ nlohmann::json predictToFile(const std::string& checkpoint, const std::string& i
     b = normalizedImage(second).to(device);
   }
   const torch::Tensor pred =
-      predict(net, normalizedImage(a).to(device), b).to(torch::kCPU).to(torch::kFloat32);
+      predict(net, normalizedImage(a).to(device), b, tiling).to(torch::kCPU).to(torch::kFloat32);
   nlohmann::json wrote = {{"task", task}, {"out", out}};
   if (task == "pose") {
     const auto v = pred[0];

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "finetune/evaluate.h"
 #include "model/downstream.h"
 #include "trainer/trainer.h"
 
@@ -72,9 +73,10 @@ DownstreamNet loadFinetuned(const std::string& checkpoint,
 
 // finetune --predict: the model of `checkpoint` on one pair (depth: image 1 alone), written to
 // `out`: flow .flo (and a colour-wheel PNG beside it, same name with .png), depth .exr (metres),
-// pose .json. Returns what was written.
+// pose .json; images larger than the training size are tiled by `tiling`. Returns what was
+// written.
 nlohmann::json predictToFile(const std::string& checkpoint, const std::string& image1,
                              const std::string& image2, const std::string& out,
-                             const std::string& device);
+                             const std::string& device, Tiling tiling = Tiling::kNearest);
 
 }  // namespace paircast

@@ -15,7 +15,7 @@ struct Flags {
   std::string preset = "tiny";
   int imgSize = 224, patchSize = 16;
   bool quiet = false, predict = false, evaluate = false, noJitter = false;
-  std::string checkpoint, image1, image2, out;
+  std::string checkpoint, image1, image2, out, tiling = "nearest";
   CLI::Option* blrOpt = nullptr;
 };
 
@@ -72,6 +72,11 @@ void addPredictFlags(CLI::App& app, Flags& f) {
   app.add_option("--image1", f.image1, "The first image (--predict)");
   app.add_option("--image2", f.image2, "The second image (--predict; not for depth)");
   app.add_option("--out", f.out, "Output folder (training) or file (--predict)");
+  app.add_option("--tiling", f.tiling,
+                 "How --predict combines overlapping tiles of images larger than --img-size: "
+                 "nearest (each pixel from the tile whose centre is nearest, the paper's) or "
+                 "confidence (weighted by the flow head's confidence, as naver/croco's tiled_pred)")
+      ->check(CLI::IsMember({"nearest", "confidence"}));
 }
 
 int train(Flags& f) {
@@ -103,7 +108,9 @@ int predictOrEvaluate(const Flags& f) {
     throw OptionError("image1", "--predict needs --image1 (and --image2) and --out");
   std::printf(
       "%s\n",
-      predictToFile(f.checkpoint, f.image1, f.image2, f.out, f.c.train.device).dump().c_str());
+      predictToFile(f.checkpoint, f.image1, f.image2, f.out, f.c.train.device, parseTiling(f.tiling))
+          .dump()
+          .c_str());
   return 0;
 }
 

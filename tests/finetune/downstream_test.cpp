@@ -125,7 +125,9 @@ TEST(Downstream, FlowHeadsRegressInUnitsOfTheFlowScale) {
     torch::manual_seed(5);
     const auto scaled = DownstreamNet(c)->forward(x1, x2);
     EXPECT_TRUE(torch::allclose(scaled.narrow(1, 0, 2), 4 * pixels.narrow(1, 0, 2)));
-    if (head == "dpt") EXPECT_TRUE(torch::equal(scaled.narrow(1, 2, 1), pixels.narrow(1, 2, 1)));
+    if (head == "dpt") {
+      EXPECT_TRUE(torch::equal(scaled.narrow(1, 2, 1), pixels.narrow(1, 2, 1)));
+    }
   }
   DownstreamConfig c = tinyConfig("flow", "linear", 64);
   EXPECT_EQ(c.flowScaleInUse(), 4.0);
@@ -298,6 +300,46 @@ TEST(Tiling, APredictionOfOneTileIsTheForwardPass) {
                             second.narrow(2, 8, 8).narrow(3, 0, 48)));
   EXPECT_ERROR_CONTAINS(predict(net, torch::randn({1, 3, 32, 64}), torch::randn({1, 3, 32, 64})),
                         "smaller than the model's tiles of 64");
+}
+
+TEST(Tiling, ConfidenceTilingWeighsOverlappingTilesByTheHeadsConfidence) {
+  torch::manual_seed(5);
+  const auto config = tinyConfig("flow", "dpt", 64);
+  DownstreamNet net(config);
+  net->eval();
+  torch::NoGradGuard ng;
+  // 64 x 96: tiles at columns 0 and 32. Columns 32 to 63 lie in both, the others in one.
+  const auto a = torch::randn({1, 3, 64, 96}), b = torch::randn({1, 3, 64, 96});
+  const auto left = net->forward(a.narrow(3, 0, 64), b.narrow(3, 0, 64));
+  const auto right = net->forward(a.narrow(3, 32, 64), b.narrow(3, 32, 64));
+  const auto out = predict(net, a, b, Tiling::kConfidence);
+  ASSERT_EQ(out.sizes(), (std::vector<int64_t>{1, 3, 64, 96}));
+  EXPECT_TRUE(torch::allclose(out.narrow(3, 0, 32), left.narrow(3, 0, 32)));
+  EXPECT_TRUE(torch::allclose(out.narrow(3, 64, 32), right.narrow(3, 32, 32)));
+  // In the overlap: the tiles' outputs weighted by 1 / the Laplacian scale of each.
+  const auto l = left.narrow(3, 32, 32), r = right.narrow(3, 0, 32);
+  const auto wl = 1.0 / (3.75 * torch::sigmoid(l.narrow(1, 2, 1)) + 0.25);
+  const auto wr = 1.0 / (3.75 * torch::sigmoid(r.narrow(1, 2, 1)) + 0.25);
+  const auto expected = (l * wl + r * wr) / (wl + wr);
+  EXPECT_TRUE(torch::allclose(out.narrow(3, 32, 32), expected, 1e-5, 1e-6));
+  // The weights differ from an even mean there, so the check above tells the two apart.
+  EXPECT_FALSE(torch::allclose(out.narrow(3, 32, 32), 0.5 * (l + r), 1e-5, 1e-6));
+  // Nearest tiling takes column 47 from the left tile and 48 from the right one.
+  const auto nearest = predict(net, a, b);
+  EXPECT_TRUE(torch::equal(nearest.select(3, 47), left.select(3, 47)));
+  EXPECT_TRUE(torch::equal(nearest.select(3, 48), right.select(3, 16)));
+  // Without a confidence channel (depth) the overlap is the plain mean.
+  auto depthConfig = config;
+  depthConfig.task = "depth";
+  DownstreamNet depth(depthConfig);
+  depth->eval();
+  const auto dl = depth->forward(a.narrow(3, 0, 64), torch::Tensor());
+  const auto dr = depth->forward(a.narrow(3, 32, 64), torch::Tensor());
+  EXPECT_TRUE(torch::allclose(predict(depth, a, torch::Tensor(), Tiling::kConfidence).narrow(3, 32, 32),
+                              0.5 * (dl.narrow(3, 32, 32) + dr.narrow(3, 0, 32)), 1e-5, 1e-6));
+  EXPECT_EQ(parseTiling("confidence"), Tiling::kConfidence);
+  EXPECT_EQ(parseTiling("nearest"), Tiling::kNearest);
+  EXPECT_ERROR_CONTAINS(parseTiling("mean"), "tiling is 'nearest' or 'confidence', not 'mean'");
 }
 
 }  // namespace
