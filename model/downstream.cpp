@@ -109,20 +109,49 @@ torch::Tensor PoseHeadImpl::forward(const torch::Tensor& tokens) {
   auto features = torch::gelu(fc1(tokens)).flatten(1);  // [B, N hidden]
   // [B, 12], in float32 under bf16 autocast too: torch::eye and the SVD take no bfloat16.
   auto out = fc2(features).to(torch::kFloat32);
-  // 2 I + the output: the head starts near the identity, with singular values apart (the SVD's
-  // gradient divides by their differences).
+  // 2 I + the output: the head starts near the identity.
   auto m = out.narrow(1, 0, 9).reshape({-1, 3, 3}) + 2.0 * torch::eye(3, out.options());
   auto rotation = procrustesRotation(m);
   return torch::cat({rotation.reshape({-1, 9}), out.narrow(1, 9, 3)}, 1);
 }
 
+namespace {
+
+// R = U diag(1, 1, d) V^T with d = det(U V^T), and its gradient in closed form. Write U' for U
+// with its last column times d and s' for the singular values with the last times d, so that
+// M = U' diag(s') V^T and R = U' V^T. Then dR = U' W V^T, W skew with
+// W_ij = (X_ij - X_ji) / (s'_i + s'_j), X = U'^T dM V; so dL/dM = U' K V^T with
+// K_ij = (H_ij - H_ji) / (s'_i + s'_j), H = U'^T dL/dR V. The sums s'_i + s'_j stay near 4 where
+// the head starts (M near 2 I), whereas LibTorch's SVD gradient divides by differences of
+// squared singular values, which vanish there (and is NaN at M = c I).
+struct ProcrustesFunction : torch::autograd::Function<ProcrustesFunction> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& m) {
+    auto [u, s, vh] = torch::linalg_svd(m.to(torch::kFloat64), /*full_matrices=*/false);
+    const auto d = torch::det(torch::matmul(u, vh));  // +-1
+    const auto ones = torch::ones_like(d);
+    const auto flip = torch::stack({ones, ones, d}, 1);  // [B, 3]
+    const auto uFlipped = u * flip.unsqueeze(1);
+    ctx->save_for_backward({uFlipped, s * flip, vh});
+    return torch::matmul(uFlipped, vh).to(m.scalar_type());
+  }
+
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grads) {
+    const auto saved = ctx->get_saved_variables();
+    const auto &u = saved[0], &s = saved[1], &vh = saved[2];
+    const auto h = torch::matmul(torch::matmul(u.transpose(1, 2), grads[0].to(torch::kFloat64)),
+                                 vh.transpose(1, 2));
+    // s'_i + s'_j >= 0; it is 0 only where the nearest rotation is not unique.
+    const auto sums = (s.unsqueeze(2) + s.unsqueeze(1)).clamp_min(1e-12);
+    const auto k = (h - h.transpose(1, 2)) / sums;
+    return {torch::matmul(torch::matmul(u, k), vh).to(grads[0].scalar_type())};
+  }
+};
+
+}  // namespace
+
 torch::Tensor procrustesRotation(const torch::Tensor& m) {
-  // In float64: the SVD's gradient divides by differences of singular values.
-  auto [u, s, vh] = torch::linalg_svd(m.to(torch::kFloat64), /*full_matrices=*/false);
-  auto d = torch::det(torch::matmul(u, vh));  // +-1
-  auto ones = torch::ones_like(d);
-  auto fix = torch::diag_embed(torch::stack({ones, ones, d}, 1));
-  return torch::matmul(torch::matmul(u, fix), vh).to(m.scalar_type());
+  return ProcrustesFunction::apply(m);
 }
 
 DownstreamNetImpl::DownstreamNetImpl(const DownstreamConfig& c) : config_(c) {

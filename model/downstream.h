@@ -72,7 +72,9 @@ struct PoseHeadImpl : torch::nn::Module {
 };
 TORCH_MODULE(PoseHead);
 
-// The rotation nearest each [B, 3, 3] matrix in the Frobenius norm (the Procrustes solution).
+// The rotation nearest each [B, 3, 3] matrix in the Frobenius norm (the Procrustes solution),
+// computed in float64 and returned in m's type. Its gradient is the closed form, finite where
+// singular values repeat (LibTorch's SVD gradient is NaN at M = c I).
 torch::Tensor procrustesRotation(const torch::Tensor& m);
 
 class DownstreamNetImpl : public torch::nn::Module {

@@ -182,6 +182,51 @@ TEST(Procrustes, GivesTheNearestRotationWithDeterminantOne) {
   EXPECT_TRUE(torch::allclose(fixed, torch::eye(3, torch::kFloat64)));
 }
 
+// The rotation of an SVD, d = det(U V^T) fixing the sign: what LibTorch's SVD gradient goes through.
+torch::Tensor svdRotation(const torch::Tensor& m) {
+  auto [u, s, vh] = torch::linalg_svd(m, /*full_matrices=*/false);
+  const auto d = torch::det(torch::matmul(u, vh));
+  const auto ones = torch::ones_like(d);
+  return torch::matmul(torch::matmul(u, torch::diag_embed(torch::stack({ones, ones, d}, 1))), vh);
+}
+
+TEST(Procrustes, ItsGradientIsLibTorchsWhereThatIsDefinedAndFiniteWhereItIsNot) {
+  torch::manual_seed(3);
+  // Near the head's start (2 I + small), one reflection among them (det < 0).
+  auto m = 2 * torch::eye(3, torch::kFloat64) + 0.3 * torch::randn({6, 3, 3}, torch::kFloat64);
+  m[5] = torch::diag(torch::tensor({3.0, 2.0, -1.0}, torch::kFloat64)) +
+         0.1 * torch::randn({3, 3}, torch::kFloat64);
+  const auto g = torch::randn({6, 3, 3}, torch::kFloat64);
+  auto ours = m.clone().requires_grad_(), theirs = m.clone().requires_grad_();
+  (procrustesRotation(ours) * g).sum().backward();
+  (svdRotation(theirs) * g).sum().backward();
+  EXPECT_LT((ours.grad() - theirs.grad()).abs().max().item<double>(), 1e-10);
+  EXPECT_GT(ours.grad().abs().max().item<double>(), 0.05);
+  // In float32 (the head's type) the same gradient, the SVD still taken in float64.
+  auto single = m.to(torch::kFloat32).requires_grad_();
+  (procrustesRotation(single) * g.to(torch::kFloat32)).sum().backward();
+  EXPECT_EQ(single.grad().scalar_type(), torch::kFloat32);
+  EXPECT_LT((single.grad().to(torch::kFloat64) - theirs.grad()).abs().max().item<double>(), 1e-5);
+  // At M = 2 I the singular values repeat: LibTorch's gradient is NaN, the closed form is the
+  // derivative, as central differences give it.
+  const auto twoI = (2 * torch::eye(3, torch::kFloat64)).unsqueeze(0);
+  auto at = twoI.clone().requires_grad_(), svdAt = twoI.clone().requires_grad_();
+  (procrustesRotation(at) * g[0]).sum().backward();
+  (svdRotation(svdAt) * g[0]).sum().backward();
+  EXPECT_FALSE(torch::isfinite(svdAt.grad()).all().item<bool>());
+  const double h = 1e-6;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      auto step = torch::zeros_like(twoI);
+      step[0][i][j] = h;
+      const double numeric = ((procrustesRotation(twoI + step) * g[0]).sum() -
+                              (procrustesRotation(twoI - step) * g[0]).sum())
+                                 .item<double>() /
+                             (2 * h);
+      EXPECT_NEAR(at.grad()[0][i][j].item<double>(), numeric, 1e-6) << i << ", " << j;
+    }
+}
+
 TEST(FinetuneLoss, LaplacianLossBoundedOverKnownFlowOnly) {
   auto gt = torch::zeros({1, 2, 1, 3});
   gt[0][0][0][1] = 2.0f;
