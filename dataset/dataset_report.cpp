@@ -269,6 +269,49 @@ std::string perSceneTable(const PerScene& perScene) {
   return s + html::tableEnd();
 }
 
+// The models that furnished scenes used, from the credits*.json files generate_pairs wrote:
+// (catalogue, id) -> their row, and the scenes that have credits. A file that cannot be read is
+// left out; the table says so.
+struct Credits {
+  std::map<std::pair<std::string, std::string>, std::vector<std::string>> models;
+  std::set<std::string> scenes;
+  std::vector<std::string> unreadable;
+};
+
+Credits readCredits(const std::string& dir) {
+  Credits c;
+  for (const std::string& file : globFiles((fs::path(dir) / "credits*.json").string())) {
+    try {
+      const auto j = nlohmann::json::parse(readFile(file));
+      for (const auto& [scene, credits] : j.at("scenes").items()) {
+        c.scenes.insert(scene);
+        for (const auto& m : credits.value("models", nlohmann::json::array()))
+          c.models[{m.value("catalogue", ""), m.value("id", "")}] = {
+              m.value("name", ""), m.value("creator", ""), m.value("catalogue_name", ""),
+              m.value("license", "")};
+      }
+    } catch (const std::exception&) {
+      c.unreadable.push_back(file);
+    }
+  }
+  return c;
+}
+
+std::string creditsTable(const Credits& c) {
+  if (c.models.empty() && c.unreadable.empty()) return "";
+  std::string s = html::heading(2, "Credits") +
+                  html::paragraph(std::to_string(c.models.size()) + " models in " +
+                                  std::to_string(c.scenes.size()) +
+                                  " furnished scene(s), from Sweet Home 3D's catalogues.");
+  for (const std::string& f : c.unreadable)
+    s += html::paragraph("Unreadable: <code>" + plot::escape(f) + "</code>");
+  s += html::tableStart({"model", "creator", "catalogue", "licence"});
+  for (const auto& [key, row] : c.models)
+    s += html::labelledRow(plot::escape(row[0]),
+                           {plot::escape(row[1]), plot::escape(row[2]), plot::escape(row[3])});
+  return s + html::tableEnd();
+}
+
 // The sample grid: a row per covis bin, a cell per sample pair with its two views, whose JPEGs
 // it writes into `files` (sample_<i>_<view>.jpg). Counts the pairs shown in `images`.
 std::string sampleGrid(const Samples& samples, const fs::path& files, int* images) {
@@ -356,7 +399,8 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
           plot::escape(o.dir) + "</code>" +
           (o.keysFile.empty() ? "" : " (keys from <code>" + plot::escape(o.keysFile) + "</code>)") +
           ".");
-  page += figures() + perSceneTable(perScene);
+  const Credits credits = readCredits(o.dir);
+  page += figures() + perSceneTable(perScene) + creditsTable(credits);
   int image = 0;
   page += sampleGrid(samples, files, &image) + kImagesLoadedScript + html::pageEnd();
   writeFileAtomic((fs::path(out) / "report.html").string(), page);
@@ -368,7 +412,8 @@ nlohmann::json writeDatasetReport(const ReportOptions& o) {
           {"mean_covis", covisSum / pairs.size()},
           {"covis_histogram", counts},
           {"pairs_per_scene", scenes},
-          {"sample_pairs", image}};
+          {"sample_pairs", image},
+          {"credited_models", credits.models.size()}};
 }
 
 }  // namespace paircast

@@ -241,6 +241,7 @@ class GenerateRun {
   void addToShard(const EncodedPair& pair);
   void closeShard();
   // Summary.
+  void writeCredits(const std::set<std::string>& skippedPaths);
   void writeShardIndex(const nlohmann::json& perScene);
   void summariseScene(const SceneJob& job, nlohmann::json& perScene, std::string& pairsTxt);
   void writeSceneMetadata(const SceneJob& job, const std::string& up,
@@ -314,7 +315,7 @@ void GenerateRun::openOutputs() {
 
 bool GenerateRun::ownsFile(const std::string& name) const {
   if (name == "index" + part_ + ".json" || name == "pairs" + part_ + ".txt" ||
-      name == "summary" + part_ + ".json")
+      name == "summary" + part_ + ".json" || name == "credits" + part_ + ".json")
     return true;
   // pairs<part>-NNNNNN.tar
   const std::string prefix = "pairs" + part_ + "-", suffix = ".tar";
@@ -656,9 +657,32 @@ nlohmann::json GenerateRun::summarise() {
     if (!skippedPaths.count(job->path)) summariseScene(*job, perScene, pairsTxt);
   if (cfg_.croco) writeFileAtomic(outPath("pairs", ".txt"), pairsTxt);
   if (cfg_.shards) writeShardIndex(perScene);
+  writeCredits(skippedPaths);
   const nlohmann::json summary = summaryJson(since(start_));
   writeFileAtomic(outPath("summary", ".json"), summary.dump(1) + "\n");
   return summary;
+}
+
+// credits.json: the credits.json found beside each scene used (make_scenes --furnish writes
+// them), by scene name, so that data rendered from CC-BY models carries its attributions. None
+// when no scene has credits. A credits file that cannot be read is a warning, and its entry
+// says why.
+void GenerateRun::writeCredits(const std::set<std::string>& skippedPaths) {
+  nlohmann::json scenes = nlohmann::json::object();
+  for (const auto& job : scenes_) {
+    const fs::path file = fs::path(job->path).parent_path() / "credits.json";
+    std::error_code ec;
+    if (skippedPaths.count(job->path) || !fs::is_regular_file(file, ec)) continue;
+    try {
+      scenes[job->name] = nlohmann::json::parse(readFile(file.string()));
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "generate_pairs: warning: %s: unreadable credits: %s\n",
+                   file.string().c_str(), e.what());
+      scenes[job->name] = {{"unreadable", file.string()}};
+    }
+  }
+  if (scenes.empty()) return;
+  writeFileAtomic(outPath("credits", ".json"), nlohmann::json{{"scenes", scenes}}.dump(1) + "\n");
 }
 
 // index.json: the shards, and what every pair in them has in common.

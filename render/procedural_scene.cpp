@@ -330,8 +330,6 @@ void lamp(Builder& b, const Placement& p, int metal, int shade) {
 
 // ---- the stages of buildLayout ----
 
-constexpr float kWallThickness = 0.1f;
-
 // The materials the rooms share, made first and in this order (their textures' indices and
 // seeds are part of the mesh).
 struct Materials {
@@ -356,6 +354,12 @@ Materials sharedMaterials(Builder& b) {
   return m;
 }
 
+// A light tint, drawn per room: furnished shells vary their textures' colours.
+V3 roomTint(Builder& b, size_t room, uint64_t salt) {
+  return V3(0.75f + 0.25f * b.rnd(room, salt), 0.75f + 0.25f * b.rnd(room, salt + 1),
+            0.75f + 0.25f * b.rnd(room, salt + 2));
+}
+
 // A floor per room, of its kind's texture, and one ceiling slab over the whole plan.
 void addFloorsAndCeiling(Builder& b, const LayoutSpec& L, int ceiling) {
   const float H = L.height, T = kWallThickness;
@@ -366,10 +370,14 @@ void addFloorsAndCeiling(Builder& b, const LayoutSpec& L, int ceiling) {
     minX = std::min(minX, r.x0), minZ = std::min(minZ, r.z0);
     maxX = std::max(maxX, r.x1), maxZ = std::max(maxZ, r.z1);
   }
+  const std::string furnishedKinds[5] = {"wood", "tiles", "carpet", "marble", "wood"};
   for (size_t i = 0; i < L.rooms.size(); ++i) {
     const RoomSpec& r = L.rooms[i];
     const int kind = static_cast<int>(r.kind);
-    const int floorMat = b.textured(floorKinds[kind], 20 + i);
+    const int floorMat = L.furnished
+                             ? b.textured(furnishedKinds[static_cast<int>(b.rnd(i, 31) * 5) % 5],
+                                          200 + i, roomTint(b, i, 32))
+                             : b.textured(floorKinds[kind], 20 + i);
     addBox(b.mesh, V3(r.x0, -0.1f, r.z0), V3(r.x1, 0.0f, r.z1), floorMat, 0.5f);
   }
   addBox(b.mesh, V3(minX - T, H, minZ - T), V3(maxX + T, H + 0.1f, maxZ + T), ceiling, 0.5f);
@@ -482,15 +490,18 @@ void addPainting(Builder& b, size_t room, const RoomEdge& e) {
 // Walls: every room edge, split where a door or an already-built shared edge is; door gaps get
 // a lintel, and walls without doors sometimes a painting.
 void addWalls(Builder& b, const LayoutSpec& L, const int (&wallMats)[3]) {
+  const std::string kinds[3] = {"plaster", "wallpaper", "brick"};
   for (size_t i = 0; i < L.rooms.size(); ++i) {
-    const int wall = wallMats[i % 3];
+    const int wall = L.furnished ? b.textured(kinds[static_cast<int>(b.rnd(i, 41) * 3) % 3],
+                                              300 + i, roomTint(b, i, 42))
+                                 : wallMats[i % 3];
     for (int edge = 0; edge < 4; ++edge) {
       const RoomEdge e = roomEdge(L.rooms[i], edge);
       const std::vector<Gap> open = unbuiltParts(L, i, e);
       if (open.empty()) continue;
       const std::vector<Gap> gaps = doorGaps(L, static_cast<int>(i), edge);
       addWallParts(b, e, open, gaps, wall, L.height);
-      if (gaps.empty() && b.rnd(i, edge) < 0.6f) addPainting(b, i, e);
+      if (!L.furnished && gaps.empty() && b.rnd(i, edge) < 0.6f) addPainting(b, i, e);
     }
   }
 }
@@ -498,15 +509,7 @@ void addWalls(Builder& b, const LayoutSpec& L, const int (&wallMats)[3]) {
 // With clearDoorways, the floor before each door (0.8 m deep on both sides, 0.1 m wider than
 // the door) becomes a keep-out rectangle for furniture.
 void keepDoorwaysClear(Builder& b, const LayoutSpec& L) {
-  if (!L.clearDoorways) return;
-  for (const auto& d : L.doors) {
-    const SharedWall w = sharedWall(L.rooms[d.roomA], L.rooms[d.roomB]);
-    const float half = d.width / 2 + 0.1f, depth = 0.8f;
-    if (w.atX)
-      b.keepOut.emplace_back(w.at - depth, d.at - half, w.at + depth, d.at + half);
-    else
-      b.keepOut.emplace_back(d.at - half, w.at - depth, d.at + half, w.at + depth);
-  }
+  if (L.clearDoorways) b.keepOut = doorwayKeepOuts(L);
 }
 
 // A room to furnish: its floor, centre and size, and the salt of its random draws.
@@ -598,14 +601,29 @@ void furnishRoom(Builder& b, const RoomSpec& r, size_t index, const Materials& m
 
 }  // namespace
 
+std::vector<Eigen::Vector4f> doorwayKeepOuts(const LayoutSpec& L, float depth) {
+  std::vector<Eigen::Vector4f> out;
+  for (const auto& d : L.doors) {
+    const SharedWall w = sharedWall(L.rooms[d.roomA], L.rooms[d.roomB]);
+    const float half = d.width / 2 + 0.1f;
+    if (w.atX)
+      out.emplace_back(w.at - depth, d.at - half, w.at + depth, d.at + half);
+    else
+      out.emplace_back(d.at - half, w.at - depth, d.at + half, w.at + depth);
+  }
+  return out;
+}
+
 Mesh buildLayout(const LayoutSpec& L) {
   Builder b(L.seed);
   const Materials materials = sharedMaterials(b);
   addFloorsAndCeiling(b, L, materials.ceiling);
   addWalls(b, L, materials.walls);
-  // Furniture per room kind, never in front of a door.
-  keepDoorwaysClear(b, L);
-  for (size_t i = 0; i < L.rooms.size(); ++i) furnishRoom(b, L.rooms[i], i, materials);
+  if (!L.furnished) {
+    // Furniture per room kind, never in front of a door.
+    keepDoorwaysClear(b, L);
+    for (size_t i = 0; i < L.rooms.size(); ++i) furnishRoom(b, L.rooms[i], i, materials);
+  }
   b.mesh.validate(L.name);
   return std::move(b.mesh);
 }

@@ -40,7 +40,17 @@ struct LayoutSpec {
   // Leave out furniture that stands in front of a door. Off for the shipped layouts, whose
   // committed files (and the figures measured on them) predate it.
   bool clearDoorways = false;
+  // A shell for make_scenes --furnish (furnish/furnish.h): no box furniture and no paintings,
+  // and each room's wall and floor texture drawn from the seed (kind, variant and tint).
+  bool furnished = false;
 };
+
+// The walls' thickness; a room's rectangle is its walls' centre lines.
+constexpr float kWallThickness = 0.1f;
+
+// The floor before each door that furniture leaves free: (x0, z0, x1, z1), `depth` m deep on
+// both sides of the wall and 0.1 m wider than the door on each side.
+std::vector<Eigen::Vector4f> doorwayKeepOuts(const LayoutSpec& layout, float depth = 0.8f);
 
 // The scenes paircast ships (scenes/<name>/<name>.obj): "room", "apartment", "studio".
 std::vector<LayoutSpec> shippedLayouts();

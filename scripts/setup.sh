@@ -27,6 +27,7 @@ PACKAGES=(
   libopenexr-dev  # OpenEXR's C library: EXR depth in the trainer-only build (util/exr_codec.h)
   libdraco-dev  # the glTF tests encode a Draco mesh (scripts/test_inventory.py expects them)
   slurmctld slurmd slurm-client  # the engine tests (tests/launch/) run a one-node Slurm cluster
+  sweethome3d-furniture  # make_scenes --furnish: Sweet Home 3D's furniture catalogues (CC0, CC-BY)
   # The Python package (python/): pybind11, numpy, and its tests and pip install.
   python3-dev python3-numpy pybind11-dev python3-pybind11 python3-pytest python3-setuptools
 )

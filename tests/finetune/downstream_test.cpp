@@ -182,7 +182,8 @@ TEST(Procrustes, GivesTheNearestRotationWithDeterminantOne) {
   EXPECT_TRUE(torch::allclose(fixed, torch::eye(3, torch::kFloat64)));
 }
 
-// The rotation of an SVD, d = det(U V^T) fixing the sign: what LibTorch's SVD gradient goes through.
+// The rotation of an SVD, d = det(U V^T) fixing the sign: what LibTorch's SVD gradient goes
+// through.
 torch::Tensor svdRotation(const torch::Tensor& m) {
   auto [u, s, vh] = torch::linalg_svd(m, /*full_matrices=*/false);
   const auto d = torch::det(torch::matmul(u, vh));
@@ -380,8 +381,9 @@ TEST(Tiling, ConfidenceTilingWeighsOverlappingTilesByTheHeadsConfidence) {
   depth->eval();
   const auto dl = depth->forward(a.narrow(3, 0, 64), torch::Tensor());
   const auto dr = depth->forward(a.narrow(3, 32, 64), torch::Tensor());
-  EXPECT_TRUE(torch::allclose(predict(depth, a, torch::Tensor(), Tiling::kConfidence).narrow(3, 32, 32),
-                              0.5 * (dl.narrow(3, 32, 32) + dr.narrow(3, 0, 32)), 1e-5, 1e-6));
+  EXPECT_TRUE(
+      torch::allclose(predict(depth, a, torch::Tensor(), Tiling::kConfidence).narrow(3, 32, 32),
+                      0.5 * (dl.narrow(3, 32, 32) + dr.narrow(3, 0, 32)), 1e-5, 1e-6));
   EXPECT_EQ(parseTiling("confidence"), Tiling::kConfidence);
   EXPECT_EQ(parseTiling("nearest"), Tiling::kNearest);
   EXPECT_ERROR_CONTAINS(parseTiling("mean"), "tiling is 'nearest' or 'confidence', not 'mean'");

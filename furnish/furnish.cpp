@@ -1,0 +1,314 @@
+#include "furnish/furnish.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+
+#include "render/obj_writer.h"
+#include "render/scene_loader.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace fs = std::filesystem;
+
+namespace paircast {
+namespace {
+
+struct Rect {
+  float x0, z0, x1, z1;
+  float area() const { return (x1 - x0) * (z1 - z0); }
+  bool overlaps(const Rect& o, float gap) const {
+    return x0 < o.x1 + gap && o.x0 < x1 + gap && z0 < o.z1 + gap && o.z0 < z1 + gap;
+  }
+  bool inside(const Rect& o) const { return x0 >= o.x0 && x1 <= o.x1 && z0 >= o.z0 && z1 <= o.z1; }
+};
+
+// The draws of one room: std::mt19937_64 is the same on every platform, and the conversion
+// to [0, 1) is ours (the standard's distributions are not).
+class RoomDraws {
+ public:
+  RoomDraws(uint64_t seed, int room) : gen_(seed * 0x9E3779B97F4A7C15ull + 7919u * (room + 1)) {}
+  double unit() { return static_cast<double>(gen_() >> 11) * 0x1.0p-53; }
+  size_t below(size_t n) { return static_cast<size_t>(unit() * static_cast<double>(n)) % n; }
+  float between(float a, float b) { return a + static_cast<float>(unit()) * (b - a); }
+
+ private:
+  std::mt19937_64 gen_;
+};
+
+std::string makeScratchDir() {
+  const char* tmp = std::getenv("TMPDIR");
+  std::string pattern = std::string(tmp && *tmp ? tmp : "/tmp") + "/paircast-furniture-XXXXXX";
+  if (!mkdtemp(pattern.data())) throw Error(pattern, "cannot make a scratch folder for models");
+  return pattern;
+}
+
+std::string entryName(const CatalogModel& m) {
+  return fs::path(m.catalogue).filename().string() + "#" + m.id + " (" + m.name + ")";
+}
+
+std::string folderOf(const std::string& model) {
+  const size_t slash = model.rfind('/');
+  return slash == std::string::npos ? "" : model.substr(0, slash + 1);
+}
+
+// The footprint of a model of `width` x `depth` turned by `quarter` turns, centred at (x, z).
+Rect footprint(float x, float z, float width, float depth, int quarter) {
+  const float hx = (quarter % 2 ? depth : width) / 2, hz = (quarter % 2 ? width : depth) / 2;
+  return {x - hx, z - hz, x + hx, z + hz};
+}
+
+// What planRoom needs besides the room.
+struct RoomPlan {
+  const LayoutSpec& layout;
+  const FurnitureLibrary& library;
+  const std::set<size_t>& excluded;
+  const std::vector<Rect>& keepOut;  // doorways, in plan coordinates
+};
+
+// A placement of model `m` against wall `wall` (0: z0, 1: x1, 2: z1, 3: x0; 4: free standing)
+// of the room's interior `in`, or nothing when it does not fit there.
+std::optional<Placement> drawPlacement(const CatalogModel& m, size_t index, int room,
+                                       const Rect& in, int wall, RoomDraws& draw) {
+  // The model's front (+z) faces into the room: quarter turns about +y for each wall.
+  static constexpr int kWallQuarter[4] = {0, 3, 2, 1};
+  const int quarter = wall < 4 ? kWallQuarter[wall] : static_cast<int>(draw.below(4));
+  const Rect size = footprint(0, 0, m.width, m.depth, quarter);
+  const float hx = size.x1, hz = size.z1, g = kFurnitureGap;
+  const float xlo = in.x0 + g + hx, xhi = in.x1 - g - hx, zlo = in.z0 + g + hz,
+              zhi = in.z1 - g - hz;
+  if (xlo > xhi || zlo > zhi) return std::nullopt;
+  float x = draw.between(xlo, xhi), z = draw.between(zlo, zhi);
+  if (wall == 0) z = zlo;
+  if (wall == 1) x = xhi;
+  if (wall == 2) z = zhi;
+  if (wall == 3) x = xlo;
+  const Rect r = footprint(x, z, m.width, m.depth, quarter);
+  return Placement{index, room, x, z, quarter, r.x0, r.z0, r.x1, r.z1};
+}
+
+// The models of room `room`: drawn from its category until kMaxCover of its floor is covered,
+// a count reached, or the attempts run out.
+std::vector<Placement> planRoom(const RoomPlan& plan, int room) {
+  const RoomSpec& r = plan.layout.rooms[static_cast<size_t>(room)];
+  const float t = kWallThickness / 2;
+  const Rect in{r.x0 + t, r.z0 + t, r.x1 - t, r.z1 - t};
+  const float cx = 0.5f * (in.x0 + in.x1), cz = 0.5f * (in.z0 + in.z1), c = kFreeCentre / 2;
+  std::vector<Rect> blocked = plan.keepOut;
+  blocked.push_back({cx - c, cz - c, cx + c, cz + c});
+  std::vector<size_t> candidates;
+  for (size_t i : plan.library.ofCategory(roomCategory(r)))
+    if (!plan.excluded.count(i)) candidates.push_back(i);
+  std::vector<Placement> out;
+  if (candidates.empty()) return out;
+  RoomDraws draw(plan.layout.seed, room);
+  const size_t most = std::clamp<size_t>(static_cast<size_t>(in.area() / 2.0f), 3, 14);
+  float covered = 0;
+  for (int attempt = 0; attempt < 120 && out.size() < most; ++attempt) {
+    const size_t index = candidates[draw.below(candidates.size())];
+    const CatalogModel& m = plan.library.models()[index];
+    const int wall = static_cast<int>(draw.below(5));
+    if (m.elevation + m.height > plan.layout.height - 0.05f) continue;
+    if (m.elevation > 0.05f && wall == 4) continue;  // hung pieces go on walls
+    const auto p = drawPlacement(m, index, room, in, wall, draw);
+    if (!p) continue;
+    const Rect f{p->x0, p->z0, p->x1, p->z1};
+    if (covered + f.area() > kMaxCover * in.area()) continue;
+    const auto hits = [&](const Rect& o) { return f.overlaps(o, 0); };
+    const auto near = [&](const Placement& o) {
+      return f.overlaps({o.x0, o.z0, o.x1, o.z1}, kFurnitureGap);
+    };
+    if (std::any_of(blocked.begin(), blocked.end(), hits) ||
+        std::any_of(out.begin(), out.end(), near))
+      continue;
+    covered += f.area();
+    out.push_back(*p);
+  }
+  return out;
+}
+
+std::vector<Placement> planLayout(const LayoutSpec& layout, const FurnitureLibrary& library,
+                                  const std::set<size_t>& excluded) {
+  std::vector<Rect> keepOut;
+  for (const Eigen::Vector4f& k : doorwayKeepOuts(layout))
+    keepOut.push_back({k[0], k[1], k[2], k[3]});
+  const RoomPlan plan{layout, library, excluded, keepOut};
+  std::vector<Placement> all;
+  for (size_t i = 0; i < layout.rooms.size(); ++i) {
+    auto some = planRoom(plan, static_cast<int>(i));
+    all.insert(all.end(), some.begin(), some.end());
+  }
+  return all;
+}
+
+// The model's mesh turned by p.quarter about +y and moved to its place.
+Mesh placed(const Mesh& model, const Placement& p, float elevation) {
+  Mesh m = model;
+  const float angle = static_cast<float>(M_PI / 2) * static_cast<float>(p.quarter);
+  const float c = std::round(std::cos(angle)), s = std::round(std::sin(angle));
+  for (Eigen::Vector3f& v : m.positions)
+    v = Eigen::Vector3f(c * v.x() + s * v.z() + p.x, v.y() + elevation,
+                        -s * v.x() + c * v.z() + p.z);
+  return m;
+}
+
+nlohmann::json creditsOf(const std::string& name, const std::vector<Placement>& placements,
+                         const FurnitureLibrary& library) {
+  std::map<size_t, int> count;
+  for (const Placement& p : placements) ++count[p.model];
+  nlohmann::json models = nlohmann::json::array();
+  for (const auto& [index, n] : count) {
+    const CatalogModel& m = library.models()[index];
+    models.push_back({{"catalogue", fs::path(m.catalogue).filename().string()},
+                      {"catalogue_name", m.catalogueName},
+                      {"id", m.id},
+                      {"name", m.name},
+                      {"category", m.category},
+                      {"creator", m.creator},
+                      {"license", m.license},
+                      {"instances", n}});
+  }
+  return {{"scene", name},
+          {"source", "Sweet Home 3D furniture catalogues (Debian package sweethome3d-furniture)"},
+          {"models", models}};
+}
+
+}  // namespace
+
+FurnitureLibrary::FurnitureLibrary(const FurnishOptions& options)
+    : options_(options), models_(readCatalogs(options.catalogDir, &warnings)) {
+  scratch_ = makeScratchDir();
+}
+
+FurnitureLibrary::~FurnitureLibrary() {
+  std::error_code ec;
+  fs::remove_all(scratch_, ec);
+}
+
+std::vector<size_t> FurnitureLibrary::ofCategory(const std::string& category) const {
+  std::vector<size_t> out;
+  for (size_t i = 0; i < models_.size(); ++i)
+    if (models_[i].category == category && !models_[i].doorOrWindow &&
+        inSet(models_[i], options_.models))
+      out.push_back(i);
+  return out;
+}
+
+void FurnitureLibrary::load(const std::set<size_t>& indices) {
+  std::map<std::string, std::set<std::string>> folders;  // by catalogue
+  std::vector<size_t> todo;
+  for (size_t i : indices) {
+    if (meshes_.count(i) || unusable_.count(i)) continue;
+    todo.push_back(i);
+    folders[models_[i].catalogue].insert(folderOf(models_[i].model));
+  }
+  std::map<std::string, std::string> catalogueError;
+  for (const auto& [catalogue, wanted] : folders) {
+    try {
+      extractFolders(catalogue, wanted, scratch_);
+    } catch (const Error& e) {
+      catalogueError[catalogue] = e.what();
+    }
+  }
+  for (size_t i : todo) {
+    const CatalogModel& m = models_[i];
+    try {
+      if (catalogueError.count(m.catalogue)) throw Error(catalogueError[m.catalogue]);
+      meshes_.emplace(i, normalised(m, (fs::path(scratch_) / m.model).string()));
+    } catch (const Error& e) {
+      unusable_.insert(i);
+      warnings.push_back("model skipped: " + entryName(m) + ": " + e.what());
+    }
+  }
+}
+
+const Mesh* FurnitureLibrary::mesh(size_t index) const {
+  const auto it = meshes_.find(index);
+  return it == meshes_.end() ? nullptr : &it->second;
+}
+
+Mesh FurnitureLibrary::normalised(const CatalogModel& m, const std::string& objPath) const {
+  if (!fs::is_regular_file(objPath)) throw Error(m.model, "the catalogue has no such model file");
+  LoadOptions load;
+  load.maxTriangles = options_.maxModelTriangles;
+  Scene scene = loadScene(objPath, load);
+  Mesh mesh = std::move(scene.mesh);
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
+  for (Eigen::Vector3f& v : mesh.positions) {
+    v = m.rotation * v;
+    lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
+  }
+  const Eigen::Vector3f size(m.width, m.height, m.depth), extent = hi - lo;
+  Eigen::Vector3f scale;
+  for (int k = 0; k < 3; ++k) scale[k] = extent[k] > 1e-6f ? size[k] / extent[k] : 1.0f;
+  const Eigen::Vector3f centre = 0.5f * (lo + hi);
+  for (Eigen::Vector3f& v : mesh.positions) {
+    v = (v - centre).cwiseProduct(scale);
+    v.y() += 0.5f * extent.y() * scale.y();  // base on y = 0
+  }
+  // Names unique to the model, so that two models' "wood.jpg" stay apart when written.
+  const std::string prefix = fs::path(m.catalogue).stem().string() + "_" + m.id + "_";
+  for (size_t t = 0; t < mesh.textures.size(); ++t)
+    mesh.textures[t].name = prefix + std::to_string(t);
+  return mesh;
+}
+
+std::string roomCategory(const RoomSpec& room) {
+  switch (room.kind) {
+    case RoomKind::Living:
+      return "Living room";
+    case RoomKind::Bedroom:
+      return "Bedroom";
+    case RoomKind::Kitchen:
+      return "Kitchen";
+    case RoomKind::Office:
+      return "Office";
+    case RoomKind::Hall:
+      break;
+  }
+  return (room.x1 - room.x0) * (room.z1 - room.z0) < 12.0f ? "Bathroom" : "Living room";
+}
+
+FurnishedScene furnishLayout(const LayoutSpec& layout, FurnitureLibrary& library) {
+  LayoutSpec shell = layout;
+  shell.furnished = true;
+  FurnishedScene out;
+  out.mesh = buildLayout(shell);
+  // Plan, load what the plan uses, and plan again without the models that could not be used,
+  // until every planned model loads.
+  std::set<size_t> excluded;
+  for (int round = 0; round < 8; ++round) {
+    out.placements = planLayout(layout, library, excluded);
+    std::set<size_t> used;
+    for (const Placement& p : out.placements) used.insert(p.model);
+    library.load(used);
+    size_t before = excluded.size();
+    for (size_t i : used)
+      if (library.unusable(i)) excluded.insert(i);
+    if (excluded.size() == before) break;
+  }
+  std::vector<Placement> kept;
+  for (const Placement& p : out.placements) {
+    const Mesh* model = library.mesh(p.model);
+    if (!model) continue;
+    out.mesh.append(placed(*model, p, library.models()[p.model].elevation));
+    kept.push_back(p);
+  }
+  out.placements = std::move(kept);
+  out.mesh.validate(layout.name);
+  out.credits = creditsOf(layout.name, out.placements, library);
+  return out;
+}
+
+std::string writeFurnishedScene(const FurnishedScene& scene, const std::string& out,
+                                const std::string& name) {
+  const fs::path dir = fs::path(out) / name;
+  const std::string path = (dir / (name + ".obj")).string();
+  writeObj(path, scene.mesh);
+  writeFileAtomic((dir / "credits.json").string(), scene.credits.dump(1) + "\n");
+  return path;
+}
+
+}  // namespace paircast
