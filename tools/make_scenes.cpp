@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
   uint64_t seed = 0;
   std::string scan;
   size_t triangles = ScanSpec{}.triangles;
-  bool furnish = false;
+  bool furnish = false, shell = false;
   std::string models = "all";
   FurnishOptions furnishOptions;
   CLI::App app{"Write the shipped procedural indoor scenes as OBJ + MTL + PNG textures"};
@@ -36,6 +36,9 @@ int main(int argc, char** argv) {
   app.add_flag("--furnish", furnish,
                "Furnish the rooms with Sweet Home 3D models (Debian's sweethome3d-furniture) "
                "instead of boxes, and write credits.json beside each scene");
+  app.add_flag("--shell", shell,
+               "Only the rooms of the plans: the walls, floors and ceiling that --furnish "
+               "furnishes, with no furniture (to measure what the furniture adds)");
   app.add_option("--models", models,
                  "With --furnish: the catalogue models to use: train, heldout (a fifth of them, "
                  "for held-out scenes) or all")
@@ -61,6 +64,7 @@ int main(int argc, char** argv) {
     }
     std::vector<LayoutSpec> layouts = shippedLayouts();
     if (rooms > 0 && random == 0) throw OptionError("rooms", "--rooms needs --random N");
+    if (furnish && shell) throw OptionError("shell", "--shell and --furnish exclude each other");
     if (!furnish && (models != "all" || furnishOptions.catalogDir != kDebianFurnitureDir))
       throw OptionError("models", "--models and --catalogues need --furnish");
     if (random > 0) {
@@ -91,7 +95,9 @@ int main(int argc, char** argv) {
                     layout.doors.size());
         continue;
       }
-      const Mesh mesh = buildLayout(layout);
+      LayoutSpec spec = layout;
+      spec.furnished = shell;
+      const Mesh mesh = buildLayout(spec);
       const std::string path =
           (std::filesystem::path(out) / layout.name / (layout.name + ".obj")).string();
       writeObj(path, mesh);
