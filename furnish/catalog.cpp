@@ -199,6 +199,8 @@ bool modelAt(const std::map<std::string, std::string>& p, int i, CatalogModel& m
   m.depth = number(p, "depth" + n, 0) / 100;
   m.height = number(p, "height" + n, 0) / 100;
   m.elevation = std::max(0.0f, number(p, "elevation" + n, 0) / 100);
+  const float drop = number(p, "dropOnTopElevation" + n, -100);
+  m.dropOnTop = drop > 0 ? drop / 100 : -1;
   m.rotation = rotationOf(text(p, "modelRotation" + n));
   m.doorOrWindow = text(p, "doorOrWindow" + n) == "true";
   if (m.id.empty()) m.id = m.model;

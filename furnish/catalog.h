@@ -23,7 +23,8 @@ struct CatalogModel {
   std::string license;        // its "license" property (UTF-8)
   std::string id, name, category, creator;
   std::string model;  // the OBJ's path inside the archive, without a leading '/'
-  float width = 0, depth = 0, height = 0, elevation = 0;   // x, z, y extents; height above floor
+  float width = 0, depth = 0, height = 0, elevation = 0;  // x, z, y extents; height above floor
+  float dropOnTop = -1;  // where pieces dropped on it rest, above its base (< 0: its height)
   Eigen::Matrix3f rotation = Eigen::Matrix3f::Identity();  // modelRotation: file axes -> SH3D's
   bool doorOrWindow = false;
 };

@@ -89,21 +89,17 @@ std::optional<Placement> drawPlacement(const CatalogModel& m, size_t index, int 
   return Placement{index, room, x, z, quarter, r.x0, r.z0, r.x1, r.z1};
 }
 
-// The models of room `room`: drawn from its category until kMaxCover of its floor is covered,
-// a count reached, or the attempts run out.
-std::vector<Placement> planRoom(const RoomPlan& plan, int room) {
+// The floor pieces of room `room`: drawn from its category until kMaxCover of its floor is
+// covered, a count reached, or the attempts run out.
+std::vector<Placement> planFloor(const RoomPlan& plan, int room,
+                                 const std::vector<size_t>& candidates, RoomDraws& draw) {
   const RoomSpec& r = plan.layout.rooms[static_cast<size_t>(room)];
   const float t = kWallThickness / 2;
   const Rect in{r.x0 + t, r.z0 + t, r.x1 - t, r.z1 - t};
   const float cx = 0.5f * (in.x0 + in.x1), cz = 0.5f * (in.z0 + in.z1), c = kFreeCentre / 2;
   std::vector<Rect> blocked = plan.keepOut;
   blocked.push_back({cx - c, cz - c, cx + c, cz + c});
-  std::vector<size_t> candidates;
-  for (size_t i : plan.library.ofCategory(roomCategory(r)))
-    if (!plan.excluded.count(i)) candidates.push_back(i);
   std::vector<Placement> out;
-  if (candidates.empty()) return out;
-  RoomDraws draw(plan.layout.seed, room);
   const size_t most = std::clamp<size_t>(static_cast<size_t>(in.area() / 2.0f), 3, 14);
   float covered = 0;
   for (int attempt = 0; attempt < 120 && out.size() < most; ++attempt) {
@@ -112,7 +108,7 @@ std::vector<Placement> planRoom(const RoomPlan& plan, int room) {
     const int wall = static_cast<int>(draw.below(5));
     if (m.elevation + m.height > plan.layout.height - 0.05f) continue;
     if (m.elevation > 0.05f && wall == 4) continue;  // hung pieces go on walls
-    const auto p = drawPlacement(m, index, room, in, wall, draw);
+    auto p = drawPlacement(m, index, room, in, wall, draw);
     if (!p) continue;
     const Rect f{p->x0, p->z0, p->x1, p->z1};
     if (covered + f.area() > kMaxCover * in.area()) continue;
@@ -124,8 +120,52 @@ std::vector<Placement> planRoom(const RoomPlan& plan, int room) {
         std::any_of(out.begin(), out.end(), near))
       continue;
     covered += f.area();
+    p->y = m.elevation;
     out.push_back(*p);
   }
+  return out;
+}
+
+// Up to two small pieces on each floor piece that can hold them, inside its top and apart.
+void planTops(const RoomPlan& plan, int room, const std::vector<size_t>& small,
+              std::vector<Placement>& placed, RoomDraws& draw) {
+  const size_t floorPieces = placed.size();
+  for (size_t h = 0; h < floorPieces && !small.empty(); ++h) {
+    const CatalogModel& host = plan.library.models()[placed[h].model];
+    if (!canHold(host)) continue;
+    const Rect top{placed[h].x0, placed[h].z0, placed[h].x1, placed[h].z1};
+    const float y = placed[h].y + host.height;
+    const size_t first = placed.size();
+    for (int attempt = 0; attempt < 6 && placed.size() - first < 2; ++attempt) {
+      const size_t index = small[draw.below(small.size())];
+      const CatalogModel& m = plan.library.models()[index];
+      if (y + m.height > plan.layout.height - 0.05f) continue;
+      auto p = drawPlacement(m, index, room, top, 4, draw);
+      if (!p) continue;
+      const Rect f{p->x0, p->z0, p->x1, p->z1};
+      const bool apart = std::none_of(placed.begin() + static_cast<long>(first), placed.end(),
+                                      [&](const Placement& o) {
+                                        return f.overlaps({o.x0, o.z0, o.x1, o.z1}, kFurnitureGap);
+                                      });
+      if (!apart) continue;
+      p->y = y;
+      p->host = static_cast<int>(h);
+      placed.push_back(*p);
+    }
+  }
+}
+
+// The models of room `room`: floor pieces of its category, then small ones on their tops.
+std::vector<Placement> planRoom(const RoomPlan& plan, int room) {
+  const RoomSpec& r = plan.layout.rooms[static_cast<size_t>(room)];
+  std::vector<size_t> large, small;
+  for (size_t i : plan.library.ofCategory(roomCategory(r)))
+    if (!plan.excluded.count(i))
+      (isTabletop(plan.library.models()[i]) ? small : large).push_back(i);
+  if (large.empty()) return {};
+  RoomDraws draw(plan.layout.seed, room);
+  std::vector<Placement> out = planFloor(plan, room, large, draw);
+  planTops(plan, room, small, out, draw);
   return out;
 }
 
@@ -138,19 +178,20 @@ std::vector<Placement> planLayout(const LayoutSpec& layout, const FurnitureLibra
   std::vector<Placement> all;
   for (size_t i = 0; i < layout.rooms.size(); ++i) {
     auto some = planRoom(plan, static_cast<int>(i));
+    for (Placement& p : some)
+      if (p.host >= 0) p.host += static_cast<int>(all.size());
     all.insert(all.end(), some.begin(), some.end());
   }
   return all;
 }
 
 // The model's mesh turned by p.quarter about +y and moved to its place.
-Mesh placed(const Mesh& model, const Placement& p, float elevation) {
+Mesh placed(const Mesh& model, const Placement& p) {
   Mesh m = model;
   const float angle = static_cast<float>(M_PI / 2) * static_cast<float>(p.quarter);
   const float c = std::round(std::cos(angle)), s = std::round(std::sin(angle));
   for (Eigen::Vector3f& v : m.positions)
-    v = Eigen::Vector3f(c * v.x() + s * v.z() + p.x, v.y() + elevation,
-                        -s * v.x() + c * v.z() + p.z);
+    v = Eigen::Vector3f(c * v.x() + s * v.z() + p.x, v.y() + p.y, -s * v.x() + c * v.z() + p.z);
   return m;
 }
 
@@ -255,6 +296,15 @@ Mesh FurnitureLibrary::normalised(const CatalogModel& m, const std::string& objP
   return mesh;
 }
 
+bool isTabletop(const CatalogModel& m) {
+  return std::max(m.width, m.depth) < 0.35f && m.height < 0.45f && m.elevation <= 0.0f;
+}
+
+bool canHold(const CatalogModel& m) {
+  return m.dropOnTop < 0 && m.elevation <= 0.0f && m.height >= 0.5f && m.height <= 1.2f &&
+         std::min(m.width, m.depth) >= 0.3f;
+}
+
 std::string roomCategory(const RoomSpec& room) {
   switch (room.kind) {
     case RoomKind::Living:
@@ -289,11 +339,16 @@ FurnishedScene furnishLayout(const LayoutSpec& layout, FurnitureLibrary& library
       if (library.unusable(i)) excluded.insert(i);
     if (excluded.size() == before) break;
   }
+  // Whatever still failed to load is left out, with what stands on it.
   std::vector<Placement> kept;
-  for (const Placement& p : out.placements) {
+  std::vector<int> keptAs(out.placements.size(), -1);
+  for (size_t i = 0; i < out.placements.size(); ++i) {
+    Placement p = out.placements[i];
     const Mesh* model = library.mesh(p.model);
-    if (!model) continue;
-    out.mesh.append(placed(*model, p, library.models()[p.model].elevation));
+    if (!model || (p.host >= 0 && keptAs[static_cast<size_t>(p.host)] < 0)) continue;
+    if (p.host >= 0) p.host = keptAs[static_cast<size_t>(p.host)];
+    out.mesh.append(placed(*model, p));
+    keptAs[i] = static_cast<int>(kept.size());
     kept.push_back(p);
   }
   out.placements = std::move(kept);

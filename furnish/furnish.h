@@ -5,8 +5,9 @@
 // 12 m^2 becomes a bathroom, a larger one a living room) and models of the matching catalogue
 // category. Each model is turned by its catalogue's modelRotation, scaled to its catalogue size
 // and set on the floor (or at its catalogue elevation): against a wall, its back to it, or free
-// standing, turned by a multiple of 90 degrees. Footprints never overlap each other, the walls,
-// the floor before each door, or a free square at the room's centre where cameras can stand;
+// standing, turned by a multiple of 90 degrees; small pieces stand on the tops of tables,
+// counters and cabinets (isTabletop, canHold). Floor footprints never overlap each other, the
+// walls, the floor before each door, or a free square at the room's centre where cameras can stand;
 // they cover at most kMaxCover of the room's floor. All draws hash the layout's seed, so a seed
 // gives the same scene, byte for byte.
 #pragma once
@@ -36,13 +37,23 @@ struct FurnishOptions {
   size_t maxModelTriangles = 60000;  // heavier models are left out
 };
 
-// One model in a scene: its footprint is [x0, x1] x [z0, z1] on the floor.
+// Small pieces (both sides under 0.35 m, lower than 0.45 m, standing on the floor in the
+// catalogue: cups, lamps, plants) stand on the tops of tables, counters and cabinets, never on
+// the floor.
+bool isTabletop(const CatalogModel& m);
+// Whether small pieces may stand on `m`: a top 0.5-1.2 m high, sides of 0.3 m or more, and no
+// dropOnTopElevation (the catalogue gives one for seats and beds).
+bool canHold(const CatalogModel& m);
+
+// One model in a scene: its footprint is [x0, x1] x [z0, z1], its base at height y.
 struct Placement {
   size_t model;  // index into FurnitureLibrary::models()
   int room;
   float x, z;   // centre of the footprint
   int quarter;  // turns of 90 degrees about +y; 0 faces +z
   float x0, z0, x1, z1;
+  float y = 0;    // the base: the floor, the catalogue's elevation, or the top of the host
+  int host = -1;  // the placement (index in the scene's) it stands on, or -1
 };
 
 // The catalogues' models and, loaded on demand, their meshes normalised to the catalogue's size:

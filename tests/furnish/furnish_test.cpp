@@ -106,6 +106,8 @@ std::vector<FakeModel> everydayModels() {
     for (int i = 0; i < 4; ++i, ++k)
       m.push_back({"m" + std::to_string(k), c, 40.0f + 25.0f * i, 35.0f + 15.0f * (i % 3),
                    50.0f + 40.0f * i});
+  for (const char* c : categories)  // small pieces, for the tops of the others
+    m.push_back({"s" + std::to_string(k++), c, 15, 12, 20});
   m.push_back({"shelf", "Living room", 60, 20, 30, false, 150});  // hung on a wall
   m.push_back({"tower", "Living room", 50, 50, 400});             // taller than any ceiling
   return m;
@@ -218,23 +220,38 @@ void expectPlacementsKeepTheRules(const LayoutSpec& L, const FurnishedScene& sce
   const float t = kWallThickness / 2, eps = 1e-4f;
   for (size_t i = 0; i < scene.placements.size(); ++i) {
     const Placement& p = scene.placements[i];
+    const CatalogModel& m = library.models()[p.model];
     const RoomSpec& r = L.rooms[static_cast<size_t>(p.room)];
     EXPECT_GE(p.x0, r.x0 + t - eps);
     EXPECT_LE(p.x1, r.x1 - t + eps);
     EXPECT_GE(p.z0, r.z0 + t - eps);
     EXPECT_LE(p.z1, r.z1 - t + eps);
+    // Pieces on the floor stand apart, and so do the pieces on one host.
     for (size_t j = 0; j < i; ++j) {
       const Placement& q = scene.placements[j];
+      if (q.host != p.host) continue;
       EXPECT_TRUE(p.x1 <= q.x0 || q.x1 <= p.x0 || p.z1 <= q.z0 || q.z1 <= p.z0)
           << "placements " << j << " and " << i << " overlap";
     }
+    if (p.host >= 0) {  // small, on its host's top, within it
+      ASSERT_LT(static_cast<size_t>(p.host), i);
+      const Placement& h = scene.placements[static_cast<size_t>(p.host)];
+      EXPECT_TRUE(isTabletop(m));
+      EXPECT_TRUE(canHold(library.models()[h.model]));
+      EXPECT_EQ(h.host, -1);
+      EXPECT_FLOAT_EQ(p.y, h.y + library.models()[h.model].height);
+      EXPECT_TRUE(p.x0 >= h.x0 && p.x1 <= h.x1 && p.z0 >= h.z0 && p.z1 <= h.z1);
+      continue;
+    }
+    EXPECT_FALSE(isTabletop(m)) << m.id << " stands on the floor";
+    EXPECT_FLOAT_EQ(p.y, m.elevation);
     for (const auto& d : doors)
       EXPECT_TRUE(p.x1 <= d[0] || d[2] <= p.x0 || p.z1 <= d[1] || d[3] <= p.z0)
           << "placement " << i << " stands before a door";
     const float cx = 0.5f * (r.x0 + r.x1), cz = 0.5f * (r.z0 + r.z1), c = kFreeCentre / 2;
     EXPECT_TRUE(p.x1 <= cx - c || cx + c <= p.x0 || p.z1 <= cz - c || cz + c <= p.z0)
         << "placement " << i << " takes the room's free centre";
-    EXPECT_LE(library.models()[p.model].height + library.models()[p.model].elevation, L.height);
+    EXPECT_LE(m.height + m.elevation, L.height);
   }
   // The furniture's vertices, in placement order after the shell's.
   size_t v = 0;
@@ -248,7 +265,8 @@ void expectPlacementsKeepTheRules(const LayoutSpec& L, const FurnishedScene& sce
       ASSERT_LE(q.x(), p.x1 + eps);
       ASSERT_GE(q.z(), p.z0 - eps);
       ASSERT_LE(q.z(), p.z1 + eps);
-      ASSERT_GE(q.y(), -eps);
+      ASSERT_GE(q.y(), p.y - eps);
+      ASSERT_LE(q.y(), p.y + library.models()[p.model].height + eps);
       ASSERT_LE(q.y(), L.height);
     }
   }
@@ -258,7 +276,7 @@ void expectPlacementsKeepTheRules(const LayoutSpec& L, const FurnishedScene& sce
 TEST(Furnish, ModelsStandInTheirRoomsApartLeavingDoorwaysAndFloorFree) {
   const std::string dir = writeEverydayCatalog(testing::scratchDir("cat"));
   FurnitureLibrary library(optionsFor(dir));
-  size_t placed = 0;
+  size_t placed = 0, onTops = 0;
   std::set<std::string> categories;
   for (uint64_t seed : {1, 2, 3}) {
     const LayoutSpec L = randomLayout("r", seed, 4);
@@ -275,7 +293,9 @@ TEST(Furnish, ModelsStandInTheirRoomsApartLeavingDoorwaysAndFloorFree) {
       // Each room's furniture covers at most kMaxCover of its floor.
     }
     std::map<int, float> cover;
-    for (const Placement& p : scene.placements) cover[p.room] += (p.x1 - p.x0) * (p.z1 - p.z0);
+    for (const Placement& p : scene.placements)
+      if (p.host < 0) cover[p.room] += (p.x1 - p.x0) * (p.z1 - p.z0);
+    for (const Placement& p : scene.placements) onTops += p.host >= 0;
     for (const auto& [room, area] : cover) {
       const RoomSpec& r = L.rooms[static_cast<size_t>(room)];
       EXPECT_LE(area, kMaxCover * (r.x1 - r.x0 - kWallThickness) * (r.z1 - r.z0 - kWallThickness) +
@@ -284,6 +304,7 @@ TEST(Furnish, ModelsStandInTheirRoomsApartLeavingDoorwaysAndFloorFree) {
     placed += scene.placements.size();
   }
   EXPECT_GE(placed, 12u);
+  EXPECT_GE(onTops, 3u);
   EXPECT_GE(categories.size(), 3u);
 }
 
