@@ -8,7 +8,12 @@ same seed's runs share data order, crops and the random weights the pre-trained 
 
 Each initialisation's difference to the task's trivial baseline (zero flow, a constant depth, the
 identity pose) is given too, with its interval: whether fine-tuning beat the baseline.
+
+INITS (environment, comma-separated; default random,mae,croco) names the initialisations, the
+runs' middle names; each later one is paired against each earlier one (scripts/realism_table.sh
+passes random,box,furnished).
 """
+import os
 import json
 import math
 import statistics
@@ -17,7 +22,7 @@ import sys
 METRICS = {"flow": ["aepe", "aepe_covisible", "px1", "px3", "px5"],
            "depth": ["delta1", "absrel", "rmse"],
            "pose": ["median_rot_err", "median_trans_err"]}
-INITS = ["random", "mae", "croco"]
+INITS = os.environ.get("INITS", "random,mae,croco").split(",")
 T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306,
         9: 2.262}
 
@@ -63,7 +68,10 @@ def main():
             table[task][f"{init}-baseline"] = {m: c for m, c in zip(metrics, cells)}
             lines.append(f"| {init} - trivial baseline | " + " | ".join(fmt(*c) for c in cells)
                          + " |")
-        for a, b in [("croco", "random"), ("croco", "mae"), ("mae", "random")]:
+        pairs = ([("croco", "random"), ("croco", "mae"), ("mae", "random")]
+                 if INITS == ["random", "mae", "croco"] else
+                 [(INITS[j], INITS[i]) for j in range(len(INITS)) for i in range(j)][::-1])
+        for a, b in pairs:
             cells = [interval([runs[(a, s)]["model"][m] - runs[(b, s)]["model"][m]
                                for s in range(seeds)]) for m in metrics]
             table[task][f"{a}-{b}"] = {m: c for m, c in zip(metrics, cells)}
