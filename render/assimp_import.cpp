@@ -65,8 +65,12 @@ std::string explainAssimpError(const std::string& message) {
 // fails an ai_assert, which Debian's assimp 5.2.5 build turns into abort(): a bad file would kill
 // the process (fuzz_scene_ply found it).
 void setPrimitiveTypesFromFaces(aiScene* scene, const std::string& path) {
+  if (scene->mNumMeshes && !scene->mMeshes)
+    throw Error(path, "scene lists meshes it does not have");
   for (unsigned i = 0; i < scene->mNumMeshes; ++i) {
     aiMesh* m = scene->mMeshes[i];
+    if (!m || (m->mNumFaces && !m->mFaces))
+      throw Error(path, "mesh " + std::to_string(i) + " lists faces it does not have");
     unsigned types = 0;
     for (unsigned f = 0; f < m->mNumFaces; ++f) {
       const unsigned n = m->mFaces[f].mNumIndices;
@@ -82,8 +86,10 @@ void setPrimitiveTypesFromFaces(aiScene* scene, const std::string& path) {
 }
 
 // The scene `importer` reads from `path`, triangulated, its points and lines removed; it owns
-// the scene. Two steps: read and validate, repair the primitive-type flags, then post-process
-// (see setPrimitiveTypesFromFaces).
+// the scene. Three steps: read, repair the primitive-type flags, validate, then post-process
+// (see setPrimitiveTypesFromFaces). The repair comes before the validation because importers
+// get the flags wrong in valid files too: assimp's OBJ importer flags a mesh that mixes faces
+// with line elements ('l') as triangles only, which the validation refuses.
 const aiScene* readScene(Assimp::Importer& importer, const std::string& path,
                          const LoadOptions& options) {
   importer.SetIOHandler(new LimitedIOSystem(options.maxFileBytes));  // the importer owns it
@@ -91,10 +97,12 @@ const aiScene* readScene(Assimp::Importer& importer, const std::string& path,
                               aiPrimitiveType_POINT | aiPrimitiveType_LINE);
   const aiScene* scene = nullptr;
   try {
-    scene = importer.ReadFile(path, aiProcess_ValidateDataStructure);
+    scene = importer.ReadFile(path, 0);
     if (scene && scene->mRootNode && !(scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE)) {
       setPrimitiveTypesFromFaces(const_cast<aiScene*>(scene), path);  // the importer owns the scene
-      scene = importer.ApplyPostProcessing(aiProcess_Triangulate | aiProcess_SortByPType);
+      scene = importer.ApplyPostProcessing(aiProcess_ValidateDataStructure);
+      if (scene)
+        scene = importer.ApplyPostProcessing(aiProcess_Triangulate | aiProcess_SortByPType);
     }
   } catch (const Error&) {
     throw;

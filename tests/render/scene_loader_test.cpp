@@ -127,6 +127,18 @@ TEST(SceneLoader, ObjWithMtlAndTexture) {
   EXPECT_TRUE(s.warnings.empty());
 }
 
+// Sweet Home 3D's catalogues have such files (a fridge, a TV): faces of two vertices among
+// the triangles. assimp's OBJ importer flags the mesh as triangles only, and its own validation
+// then refused the file.
+TEST(SceneLoader, ObjWithTwoVertexFacesAmongItsTrianglesLoadsItsTriangles) {
+  const std::string dir = testing::scratchDir("lines");
+  std::ofstream(dir + "/lines.obj") << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\n"
+                                       "f 1 2 3\nf 3 5\nf 1 3 4\nf 1 5\n";
+  const Scene s = loadScene(dir + "/lines.obj");
+  EXPECT_EQ(s.mesh.numTriangles(), 2u);
+  EXPECT_TRUE(s.warnings.empty());
+}
+
 TEST(SceneLoader, MissingTextureWarnsAndKeepsTheScene) {
   const std::string dir = testing::scratchDir("objnotex");
   std::ofstream(dir + "/a.mtl") << "newmtl m\nKd 1 1 1\nmap_Kd nowhere.png\n";
