@@ -9,6 +9,9 @@
 # 512 pairs of the training scenes) and measured on 256 held-out pairs. About 90 minutes on
 # 2 cores; fine-tunes that exist are reused, so adding --downstream to a finished study only
 # fine-tunes.
+# FURNISH=1 furnishes the seven random plans with Sweet Home 3D's models instead of boxes
+# (make_scenes --furnish: the six training plans with --models train, the held-out one with
+# --models heldout; docs/scenes.md, "Furnished homes"), in another OUT.
 # Usage: scripts/covis_ablation.sh [OUT] [extra covis_sweep options]   (OUT: runs/ablation)
 # Rerun the same line to resume a killed sweep.
 set -euo pipefail
@@ -17,14 +20,18 @@ OUT=${1:-runs/ablation}
 shift || true
 [[ -x build/tools/covis_sweep ]] || TARGETS="covis_sweep make_scenes" scripts/build.sh
 SCENES=$OUT/scenes
+furnish=() heldout_furnish=()
+if [[ ${FURNISH:-0} == 1 ]]; then
+  furnish=(--furnish --models train) heldout_furnish=(--furnish --models heldout)
+fi
 if [[ ! -f $SCENES/.done ]]; then
-  build/tools/make_scenes --random 6 --seed 7 --out "$SCENES"
+  build/tools/make_scenes --random 6 --seed 7 "${furnish[@]}" --out "$SCENES"
   build/tools/make_scenes --scan scannet --triangles 100000 --seed 3 --out "$SCENES"
   build/tools/make_scenes --scan replica --triangles 100000 --seed 4 --out "$SCENES"
   touch "$SCENES/.done"
 fi
 if [[ ! -f $SCENES/heldout/.done ]]; then
-  build/tools/make_scenes --random 1 --seed 99 --out "$SCENES/heldout"
+  build/tools/make_scenes --random 1 --seed 99 "${heldout_furnish[@]}" --out "$SCENES/heldout"
   touch "$SCENES/heldout/.done"
 fi
 exec build/tools/covis_sweep \

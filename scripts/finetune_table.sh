@@ -15,7 +15,9 @@
 # TASKS (default "flow depth pose"), PATCH_SIZE (default 16: 4 x 4 patches; 8 gives 8 x 8 at
 # about four times the time), POSE_BLR (default 4e-3; pose learns nothing at 1e-2:
 # docs/finetune.md), PRETRAIN_ONLY=1 (stop after the two pre-trainings: scripts/pose_table.sh
-# starts from them).
+# starts from them), HOMES=N (train on N homes furnished with Sweet Home 3D's training models,
+# make_scenes --random N --furnish --models train --seed 21, and hold out a home of the held-out
+# models, seed 99, instead of the shipped room, apartment and studio; use another OUT).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/finetune_table.sh OUT [SEEDS]}
@@ -35,8 +37,19 @@ truth() {  # OUT/NAME: pairs of the scenes with flow and depth at 64 pixels
     "$bin/generate_pairs" --scenes "$@" --out "$out/$name" --pairs-per-scene "$pairs" \
       --resolution 64 --save-flow --save-depth --seed 7 --quiet > /dev/null
 }
-truth train 400 scenes/room scenes/apartment
-truth heldout 100 scenes/studio
+if [[ ${HOMES:-0} -gt 0 ]]; then
+  [[ -d "$out/homes" ]] ||
+    "$bin/make_scenes" --random "$HOMES" --furnish --models train --seed 21 --out "$out/homes" \
+      2> /dev/null > /dev/null
+  [[ -d "$out/heldout-home" ]] ||
+    "$bin/make_scenes" --random 1 --furnish --models heldout --seed 99 \
+      --out "$out/heldout-home" 2> /dev/null > /dev/null
+  truth train $((800 / HOMES)) "$out/homes"
+  truth heldout 100 "$out/heldout-home"
+else
+  truth train 400 scenes/room scenes/apartment
+  truth heldout 100 scenes/studio
+fi
 
 for task in croco mae; do
   [[ -f "$out/pretrain-$task/summary.json" ]] ||
