@@ -37,7 +37,7 @@ HEADER = """\
 """
 # The modules each option builds; a module not named here is built whatever the options.
 TORCH_MODULES = {"model", "trainer", "gpu", "sweep", "reliability", "finetune", "launch"}
-RENDER_MODULES = {"util", "render", "covis", "dataset", "trainer", "reliability", "finetune",
+RENDER_MODULES = {"util", "render", "furnish", "covis", "dataset", "trainer", "reliability", "finetune",
                   "launch", "python"}
 
 
