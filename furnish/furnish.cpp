@@ -1,6 +1,7 @@
 #include "furnish/furnish.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -169,13 +170,42 @@ std::vector<Placement> planRoom(const RoomPlan& plan, int room) {
   return out;
 }
 
+// Doors of the catalogue in about half the openings, each scaled to its opening's width and
+// height, its depth (at most 0.2 m) centred on the wall.
+std::vector<Placement> planDoors(const LayoutSpec& layout, const FurnitureLibrary& library,
+                                 const std::set<size_t>& excluded) {
+  std::vector<size_t> doors;
+  for (size_t i = 0; i < library.models().size(); ++i)
+    if (isDoor(library.models()[i]) && inSet(library.models()[i], library.options().models) &&
+        !excluded.count(i))
+      doors.push_back(i);
+  std::vector<Placement> out;
+  const std::vector<DoorOpening> openings = doorOpenings(layout);
+  for (size_t k = 0; k < openings.size() && !doors.empty(); ++k) {
+    RoomDraws draw(layout.seed, -1 - static_cast<int>(k));
+    if (draw.unit() >= kClosedDoorShare) continue;
+    const size_t index = doors[draw.below(doors.size())];
+    const CatalogModel& m = library.models()[index];
+    const DoorOpening& d = openings[k];
+    const int quarter = (d.alongZ ? 1 : 0) + 2 * static_cast<int>(draw.below(2));
+    const float depth = std::min(m.depth, 0.2f);
+    const Rect f = footprint(d.x, d.z, d.width, depth, quarter);
+    Placement p{index, layout.doors[k].roomA, d.x, d.z, quarter, f.x0, f.z0, f.x1, f.z1};
+    p.door = static_cast<int>(k);
+    p.widthScale = d.width / m.width;
+    p.heightScale = kDoorHeight / m.height;
+    out.push_back(p);
+  }
+  return out;
+}
+
 std::vector<Placement> planLayout(const LayoutSpec& layout, const FurnitureLibrary& library,
                                   const std::set<size_t>& excluded) {
   std::vector<Rect> keepOut;
   for (const Eigen::Vector4f& k : doorwayKeepOuts(layout))
     keepOut.push_back({k[0], k[1], k[2], k[3]});
   const RoomPlan plan{layout, library, excluded, keepOut};
-  std::vector<Placement> all;
+  std::vector<Placement> all = planDoors(layout, library, excluded);
   for (size_t i = 0; i < layout.rooms.size(); ++i) {
     auto some = planRoom(plan, static_cast<int>(i));
     for (Placement& p : some)
@@ -185,9 +215,22 @@ std::vector<Placement> planLayout(const LayoutSpec& layout, const FurnitureLibra
   return all;
 }
 
-// The model's mesh turned by p.quarter about +y and moved to its place.
+// The extent of a normalised model along z.
+float depthOf(const Mesh& m) {
+  float lo = INFINITY, hi = -INFINITY;
+  for (const Eigen::Vector3f& v : m.positions) lo = std::min(lo, v.z()), hi = std::max(hi, v.z());
+  return hi - lo;
+}
+
+// The model's mesh scaled (a door's), turned by p.quarter about +y and moved to its place.
 Mesh placed(const Mesh& model, const Placement& p) {
   Mesh m = model;
+  const float depthScale = p.door >= 0 ? (p.quarter % 2 ? p.x1 - p.x0 : p.z1 - p.z0) : 1.0f;
+  for (Eigen::Vector3f& v : m.positions) {
+    v.x() *= p.widthScale;
+    v.y() *= p.heightScale;
+    if (p.door >= 0) v.z() = depthScale * (v.z() / std::max(1e-6f, depthOf(model)));
+  }
   const float angle = static_cast<float>(M_PI / 2) * static_cast<float>(p.quarter);
   const float c = std::round(std::cos(angle)), s = std::round(std::sin(angle));
   for (Eigen::Vector3f& v : m.positions)
@@ -294,6 +337,17 @@ Mesh FurnitureLibrary::normalised(const CatalogModel& m, const std::string& objP
   for (size_t t = 0; t < mesh.textures.size(); ++t)
     mesh.textures[t].name = prefix + std::to_string(t);
   return mesh;
+}
+
+bool isDoor(const CatalogModel& m) {
+  std::string name = m.name;
+  for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const bool door = name.find("door") != std::string::npos;
+  const bool excluded = name.find("garage") != std::string::npos ||
+                        name.find("elevator") != std::string::npos ||
+                        name.find("double") != std::string::npos;
+  return (m.doorOrWindow || m.category == "Doors and windows") && door && !excluded &&
+         m.width <= 1.2f;
 }
 
 bool isTabletop(const CatalogModel& m) {

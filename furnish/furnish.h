@@ -5,7 +5,8 @@
 // 12 m^2 becomes a bathroom, a larger one a living room) and models of the matching catalogue
 // category. Each model is turned by its catalogue's modelRotation, scaled to its catalogue size
 // and set on the floor (or at its catalogue elevation): against a wall, its back to it, or free
-// standing, turned by a multiple of 90 degrees; small pieces stand on the tops of tables,
+// standing, turned by a multiple of 90 degrees; about half the door openings get a door of the
+// catalogue, scaled to the opening; small pieces stand on the tops of tables,
 // counters and cabinets (isTabletop, canHold). Floor footprints never overlap each other, the
 // walls, the floor before each door, or a free square at the room's centre where cameras can stand;
 // they cover at most kMaxCover of the room's floor. All draws hash the layout's seed, so a seed
@@ -54,7 +55,14 @@ struct Placement {
   float x0, z0, x1, z1;
   float y = 0;    // the base: the floor, the catalogue's elevation, or the top of the host
   int host = -1;  // the placement (index in the scene's) it stands on, or -1
+  int door = -1;  // the door opening (index in the layout's doors) it closes, or -1
+  float widthScale = 1, heightScale = 1;  // a door's, from its catalogue size to its opening
 };
+
+// The door models: "Doors and windows" entries named a door, at most 1.2 m wide (no garage,
+// elevator or double doors).
+bool isDoor(const CatalogModel& m);
+constexpr float kClosedDoorShare = 0.5f;  // of the openings that get a door
 
 // The catalogues' models and, loaded on demand, their meshes normalised to the catalogue's size:
 // x in [-width/2, width/2], y in [0, height], z in [-depth/2, depth/2], front towards +z.

@@ -465,7 +465,7 @@ void addWallParts(Builder& b, const RoomEdge& e, const std::vector<Gap>& open,
     for (const Gap& g : gaps) {
       if (g.b <= from || g.a >= to) continue;
       segment(cursor, g.a, 0.0f, H);
-      segment(g.a, g.b, 2.1f, H);  // lintel
+      segment(g.a, g.b, kDoorHeight, H);  // lintel
       cursor = g.b;
     }
     segment(cursor, to, 0.0f, H);
@@ -600,6 +600,16 @@ void furnishRoom(Builder& b, const RoomSpec& r, size_t index, const Materials& m
 }
 
 }  // namespace
+
+std::vector<DoorOpening> doorOpenings(const LayoutSpec& L) {
+  std::vector<DoorOpening> out;
+  for (const auto& d : L.doors) {
+    const SharedWall w = sharedWall(L.rooms[d.roomA], L.rooms[d.roomB]);
+    out.push_back(w.atX ? DoorOpening{w.at, d.at, true, d.width}
+                        : DoorOpening{d.at, w.at, false, d.width});
+  }
+  return out;
+}
 
 std::vector<Eigen::Vector4f> doorwayKeepOuts(const LayoutSpec& L, float depth) {
   std::vector<Eigen::Vector4f> out;

@@ -48,6 +48,18 @@ struct LayoutSpec {
 // The walls' thickness; a room's rectangle is its walls' centre lines.
 constexpr float kWallThickness = 0.1f;
 
+// The height of every door opening (the lintel's underside).
+constexpr float kDoorHeight = 2.1f;
+
+// Where each of the layout's doors is: the centre of its opening on the floor, whether its wall
+// runs along z (the line x = const) or along x, and its width.
+struct DoorOpening {
+  float x, z;
+  bool alongZ;
+  float width;
+};
+std::vector<DoorOpening> doorOpenings(const LayoutSpec& layout);
+
 // The floor before each door that furniture leaves free: (x0, z0, x1, z1), `depth` m deep on
 // both sides of the wall and 0.1 m wider than the door on each side.
 std::vector<Eigen::Vector4f> doorwayKeepOuts(const LayoutSpec& layout, float depth = 0.8f);

@@ -108,8 +108,11 @@ std::vector<FakeModel> everydayModels() {
                    50.0f + 40.0f * i});
   for (const char* c : categories)  // small pieces, for the tops of the others
     m.push_back({"s" + std::to_string(k++), c, 15, 12, 20});
-  m.push_back({"shelf", "Living room", 60, 20, 30, false, 150});  // hung on a wall
-  m.push_back({"tower", "Living room", 50, 50, 400});             // taller than any ceiling
+  m.push_back({"door1", "Doors and windows", 87, 10, 205});
+  m.push_back({"door2", "Doors and windows", 96, 17, 210});
+  m.push_back({"garagedoor", "Doors and windows", 440, 30, 220});  // never in a room's opening
+  m.push_back({"shelf", "Living room", 60, 20, 30, false, 150});   // hung on a wall
+  m.push_back({"tower", "Living room", 50, 50, 400});              // taller than any ceiling
   return m;
 }
 
@@ -218,10 +221,22 @@ void expectPlacementsKeepTheRules(const LayoutSpec& L, const FurnishedScene& sce
                                   const FurnitureLibrary& library, size_t shellTriangles) {
   const auto doors = doorwayKeepOuts(L);
   const float t = kWallThickness / 2, eps = 1e-4f;
+  const auto openings = doorOpenings(L);
   for (size_t i = 0; i < scene.placements.size(); ++i) {
     const Placement& p = scene.placements[i];
     const CatalogModel& m = library.models()[p.model];
     const RoomSpec& r = L.rooms[static_cast<size_t>(p.room)];
+    if (p.door >= 0) {  // a door, filling its opening, within the floor kept free before it
+      const DoorOpening& o = openings[static_cast<size_t>(p.door)];
+      EXPECT_TRUE(isDoor(m));
+      EXPECT_FLOAT_EQ(p.x, o.x);
+      EXPECT_FLOAT_EQ(p.z, o.z);
+      EXPECT_NEAR(o.alongZ ? p.z1 - p.z0 : p.x1 - p.x0, o.width, 1e-5f);
+      EXPECT_LE(o.alongZ ? p.x1 - p.x0 : p.z1 - p.z0, 0.2f + 1e-6f);
+      const auto& k = doors[static_cast<size_t>(p.door)];
+      EXPECT_TRUE(p.x0 >= k[0] && p.x1 <= k[2] && p.z0 >= k[1] && p.z1 <= k[3]);
+      continue;
+    }
     EXPECT_GE(p.x0, r.x0 + t - eps);
     EXPECT_LE(p.x1, r.x1 - t + eps);
     EXPECT_GE(p.z0, r.z0 + t - eps);
@@ -266,7 +281,7 @@ void expectPlacementsKeepTheRules(const LayoutSpec& L, const FurnishedScene& sce
       ASSERT_GE(q.z(), p.z0 - eps);
       ASSERT_LE(q.z(), p.z1 + eps);
       ASSERT_GE(q.y(), p.y - eps);
-      ASSERT_LE(q.y(), p.y + library.models()[p.model].height + eps);
+      ASSERT_LE(q.y(), p.y + (p.door >= 0 ? kDoorHeight : library.models()[p.model].height) + eps);
       ASSERT_LE(q.y(), L.height);
     }
   }
@@ -276,7 +291,7 @@ void expectPlacementsKeepTheRules(const LayoutSpec& L, const FurnishedScene& sce
 TEST(Furnish, ModelsStandInTheirRoomsApartLeavingDoorwaysAndFloorFree) {
   const std::string dir = writeEverydayCatalog(testing::scratchDir("cat"));
   FurnitureLibrary library(optionsFor(dir));
-  size_t placed = 0, onTops = 0;
+  size_t placed = 0, onTops = 0, doors = 0;
   std::set<std::string> categories;
   for (uint64_t seed : {1, 2, 3}) {
     const LayoutSpec L = randomLayout("r", seed, 4);
@@ -286,6 +301,7 @@ TEST(Furnish, ModelsStandInTheirRoomsApartLeavingDoorwaysAndFloorFree) {
     const FurnishedScene scene = furnishLayout(L, library);
     expectPlacementsKeepTheRules(L, scene, library, shellTriangles);
     for (const Placement& p : scene.placements) {
+      if (p.door >= 0) continue;
       const RoomSpec& r = L.rooms[static_cast<size_t>(p.room)];
       EXPECT_EQ(library.models()[p.model].category, roomCategory(r));
       EXPECT_NE(library.models()[p.model].id, "Test#tower");
@@ -295,7 +311,7 @@ TEST(Furnish, ModelsStandInTheirRoomsApartLeavingDoorwaysAndFloorFree) {
     std::map<int, float> cover;
     for (const Placement& p : scene.placements)
       if (p.host < 0) cover[p.room] += (p.x1 - p.x0) * (p.z1 - p.z0);
-    for (const Placement& p : scene.placements) onTops += p.host >= 0;
+    for (const Placement& p : scene.placements) onTops += p.host >= 0, doors += p.door >= 0;
     for (const auto& [room, area] : cover) {
       const RoomSpec& r = L.rooms[static_cast<size_t>(room)];
       EXPECT_LE(area, kMaxCover * (r.x1 - r.x0 - kWallThickness) * (r.z1 - r.z0 - kWallThickness) +
@@ -305,6 +321,7 @@ TEST(Furnish, ModelsStandInTheirRoomsApartLeavingDoorwaysAndFloorFree) {
   }
   EXPECT_GE(placed, 12u);
   EXPECT_GE(onTops, 3u);
+  EXPECT_GE(doors, 2u);
   EXPECT_GE(categories.size(), 3u);
 }
 
@@ -339,7 +356,8 @@ TEST(Furnish, ABrokenModelIsSkippedWithAWarningNamingItsEntry) {
       << library.warnings[0];
   EXPECT_NE(library.warnings[0].find("(m"), std::string::npos);
   EXPECT_FALSE(scene.placements.empty());  // the bedroom's
-  for (const Placement& p : scene.placements) EXPECT_EQ(p.room, 0);
+  for (const Placement& p : scene.placements)
+    if (p.door < 0) EXPECT_EQ(p.room, 0);
 }
 
 TEST(Furnish, HeldOutScenesUseOnlyHeldOutModelsAndTrainScenesNone) {
