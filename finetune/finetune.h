@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "finetune/evaluate.h"
+#include "finetune/tiling.h"
 #include "model/downstream.h"
 #include "trainer/trainer.h"
 
