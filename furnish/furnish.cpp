@@ -23,7 +23,6 @@ struct Rect {
   bool overlaps(const Rect& o, float gap) const {
     return x0 < o.x1 + gap && o.x0 < x1 + gap && z0 < o.z1 + gap && o.z0 < z1 + gap;
   }
-  bool inside(const Rect& o) const { return x0 >= o.x0 && x1 <= o.x1 && z0 >= o.z0 && z1 <= o.z1; }
 };
 
 // The draws of one room: std::mt19937_64 is the same on every platform, and the conversion
@@ -194,6 +193,7 @@ std::vector<Placement> planDoors(const LayoutSpec& layout, const FurnitureLibrar
     p.door = static_cast<int>(k);
     p.widthScale = d.width / m.width;
     p.heightScale = kDoorHeight / m.height;
+    p.depthScale = depth / m.depth;
     out.push_back(p);
   }
   return out;
@@ -215,22 +215,11 @@ std::vector<Placement> planLayout(const LayoutSpec& layout, const FurnitureLibra
   return all;
 }
 
-// The extent of a normalised model along z.
-float depthOf(const Mesh& m) {
-  float lo = INFINITY, hi = -INFINITY;
-  for (const Eigen::Vector3f& v : m.positions) lo = std::min(lo, v.z()), hi = std::max(hi, v.z());
-  return hi - lo;
-}
-
 // The model's mesh scaled (a door's), turned by p.quarter about +y and moved to its place.
 Mesh placed(const Mesh& model, const Placement& p) {
   Mesh m = model;
-  const float depthScale = p.door >= 0 ? (p.quarter % 2 ? p.x1 - p.x0 : p.z1 - p.z0) : 1.0f;
-  for (Eigen::Vector3f& v : m.positions) {
-    v.x() *= p.widthScale;
-    v.y() *= p.heightScale;
-    if (p.door >= 0) v.z() = depthScale * (v.z() / std::max(1e-6f, depthOf(model)));
-  }
+  const Eigen::Vector3f scale(p.widthScale, p.heightScale, p.depthScale);
+  for (Eigen::Vector3f& v : m.positions) v = v.cwiseProduct(scale);
   const float angle = static_cast<float>(M_PI / 2) * static_cast<float>(p.quarter);
   const float c = std::round(std::cos(angle)), s = std::round(std::sin(angle));
   for (Eigen::Vector3f& v : m.positions)

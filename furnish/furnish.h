@@ -56,7 +56,7 @@ struct Placement {
   float y = 0;    // the base: the floor, the catalogue's elevation, or the top of the host
   int host = -1;  // the placement (index in the scene's) it stands on, or -1
   int door = -1;  // the door opening (index in the layout's doors) it closes, or -1
-  float widthScale = 1, heightScale = 1;  // a door's, from its catalogue size to its opening
+  float widthScale = 1, heightScale = 1, depthScale = 1;  // a door's: catalogue size to opening
 };
 
 // The door models: "Doors and windows" entries named a door, at most 1.2 m wide (no garage,
