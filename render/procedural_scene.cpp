@@ -354,6 +354,14 @@ Materials sharedMaterials(Builder& b) {
   return m;
 }
 
+// A furnished shell's: the ceiling alone (its walls and floors draw their own, and nothing
+// else uses the others).
+Materials shellMaterials(Builder& b) {
+  Materials m{};
+  m.ceiling = b.textured("plaster", 4, V3(1.0f, 1.0f, 1.0f));
+  return m;
+}
+
 // A light tint, drawn per room: furnished shells vary their textures' colours.
 V3 roomTint(Builder& b, size_t room, uint64_t salt) {
   return V3(0.75f + 0.25f * b.rnd(room, salt), 0.75f + 0.25f * b.rnd(room, salt + 1),
@@ -613,20 +621,17 @@ std::vector<DoorOpening> doorOpenings(const LayoutSpec& L) {
 
 std::vector<Eigen::Vector4f> doorwayKeepOuts(const LayoutSpec& L, float depth) {
   std::vector<Eigen::Vector4f> out;
-  for (const auto& d : L.doors) {
-    const SharedWall w = sharedWall(L.rooms[d.roomA], L.rooms[d.roomB]);
-    const float half = d.width / 2 + 0.1f;
-    if (w.atX)
-      out.emplace_back(w.at - depth, d.at - half, w.at + depth, d.at + half);
-    else
-      out.emplace_back(d.at - half, w.at - depth, d.at + half, w.at + depth);
+  for (const DoorOpening& o : doorOpenings(L)) {
+    const float half = o.width / 2 + 0.1f;
+    const float hx = o.alongZ ? depth : half, hz = o.alongZ ? half : depth;
+    out.emplace_back(o.x - hx, o.z - hz, o.x + hx, o.z + hz);
   }
   return out;
 }
 
 Mesh buildLayout(const LayoutSpec& L) {
   Builder b(L.seed);
-  const Materials materials = sharedMaterials(b);
+  const Materials materials = L.furnished ? shellMaterials(b) : sharedMaterials(b);
   addFloorsAndCeiling(b, L, materials.ceiling);
   addWalls(b, L, materials.walls);
   if (!L.furnished) {
