@@ -13,7 +13,6 @@
 
 namespace paircast {
 
-
 // The model's output for images of any size at least the training size S ([1, 3, H, W]
 // normalised): flow [1, channels, H, W] and depth [1, 1, H, W] from tiles of S x S that overlap
 // by half or more, combined by `tiling`; pose [1, 12] from the centre crop. Throws

@@ -106,11 +106,10 @@ int predictOrEvaluate(const Flags& f) {
   }
   if (f.image1.empty() || f.out.empty())
     throw OptionError("image1", "--predict needs --image1 (and --image2) and --out");
-  std::printf(
-      "%s\n",
-      predictToFile(f.checkpoint, f.image1, f.image2, f.out, f.c.train.device, parseTiling(f.tiling))
-          .dump()
-          .c_str());
+  std::printf("%s\n", predictToFile(f.checkpoint, f.image1, f.image2, f.out, f.c.train.device,
+                                    parseTiling(f.tiling))
+                          .dump()
+                          .c_str());
   return 0;
 }
 

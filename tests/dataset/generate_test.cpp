@@ -566,7 +566,8 @@ TEST(GeneratePairs, APartKilledAndRerunBesideAnotherMakesOneMachinesOutput) {
   EXPECT_TRUE(writing && testing::hasTemporary(out, "pairs-1-"))
       << "part 1 was not killed while writing a shard: the test did not test its cleanup";
   EXPECT_EQ(testing::runProcess(partArgs(out, 1)), 0);
-  EXPECT_TRUE(testing::hasTemporary(out, "pairs-0-")) << "part 1's rerun removed part 0's temporary";
+  EXPECT_TRUE(testing::hasTemporary(out, "pairs-0-"))
+      << "part 1's rerun removed part 0's temporary";
   kill(part0, SIGCONT);
   EXPECT_EQ(testing::waitProcess(part0), 0) << "part 0 failed while part 1 was killed and rerun";
   expectSameAsOneMachine(out);

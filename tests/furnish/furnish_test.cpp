@@ -356,8 +356,11 @@ TEST(Furnish, ABrokenModelIsSkippedWithAWarningNamingItsEntry) {
       << library.warnings[0];
   EXPECT_NE(library.warnings[0].find("(m"), std::string::npos);
   EXPECT_FALSE(scene.placements.empty());  // the bedroom's
-  for (const Placement& p : scene.placements)
-    if (p.door < 0) EXPECT_EQ(p.room, 0);
+  for (const Placement& p : scene.placements) {
+    if (p.door < 0) {
+      EXPECT_EQ(p.room, 0);
+    }
+  }
 }
 
 TEST(Furnish, HeldOutScenesUseOnlyHeldOutModelsAndTrainScenesNone) {
