@@ -45,9 +45,27 @@ struct Options {
   int batch = 16, steps = 12, warmupSteps = 2, threads = 2, workers = 2, imgSize = 224;
   std::string crocoDir, python = "/usr/bin/python3", device = "cpu", amp = "auto";
   std::vector<std::string> data;  // shards; none: generated from scenes/ (full build)
-  bool live = true, fusedAdamW = true, finetune = false;
+  bool live = true, fusedAdamW = true, finetune = false, profile = false;
   double peakTflops = 800.0;
 };
+
+// Prints a profile written by the training loop (trainer/op_profile.h): the stages, the kinds of
+// operator and the slowest operators, in ms a step; returns it.
+nlohmann::json printProfile(const std::string& preset, const std::string& file) {
+  std::ifstream in(file);
+  const nlohmann::json p = nlohmann::json::parse(in);
+  std::printf("%-6s profile, %s, %lld steps: %.1f ms a step, %.1f in operators\n", preset.c_str(),
+              p["precision"].value("ran", "").c_str(), p["steps"].get<long long>(),
+              p["wall_ms_per_step"].get<double>(), p["ms_per_step"].get<double>());
+  const std::pair<const char*, const char*> tables[] = {
+      {"stages", "stage"}, {"kinds", "kind"}, {"ops", "op"}};
+  for (const auto& [table, key] : tables)
+    for (const auto& r : p[table])
+      std::printf("  %-6s %-34s %8.2f ms %5.1f%% %9.1f calls\n", table,
+                  r[key].get<std::string>().c_str(), r["ms_per_step"].get<double>(),
+                  100 * r["share"].get<double>(), r["calls_per_step"].get<double>());
+  return p;
+}
 
 // The SUMMARY line a timing script prints ("" when it printed none).
 std::string summaryLine(const std::string& cmd) {
@@ -302,7 +320,12 @@ int main(int argc, char** argv) {
                  "Our step's precision: auto (bf16 on CUDA and on CPUs with bf16 units), bf16, "
                  "fp16 (CUDA) or none; a second run times it in float32")
       ->check(CLI::IsMember({"auto", "bf16", "fp16", "none"}));
-  app.add_flag("!--no-fused-adamw", o.fusedAdamW, "On CUDA, LibTorch's unfused AdamW step");
+  app.add_flag("!--no-fused-adamw", o.fusedAdamW,
+               "LibTorch's per-parameter AdamW step instead of the fused kernel (CUDA) or the "
+               "flat buffers (CPU)");
+  app.add_flag("--profile", o.profile,
+               "Also run our step once more under the operator profiler and print where its "
+               "time goes, by stage and by kind of operator (not in the timed runs)");
   app.add_option("--peak-tflops", o.peakTflops,
                  "The device's dense bf16 peak for the utilisation (H100 and H200: ~800 measured)");
   app.add_option("--croco-dir", o.crocoDir,
@@ -360,7 +383,8 @@ int main(int argc, char** argv) {
         o.batch, o.device.c_str(), (" " + precision.ran).c_str(), o.threads, o.workers, o.imgSize,
         o.imgSize, o.steps, o.warmupSteps);
     // Ours on `preset` at --amp `amp`: steady pairs/s, data wait and summary.json.
-    auto runOurs = [&](const std::string& preset, bool isLive, const std::string& amp) {
+    auto runOurs = [&](const std::string& preset, bool isLive, const std::string& amp,
+                       bool fusedAdamW, const std::string& profile) {
       TrainConfig c;
 #if PAIRCAST_WITH_RENDER
       if (isLive) c.live = {scenes};
@@ -376,7 +400,8 @@ int main(int argc, char** argv) {
       c.workers = o.workers;
       c.device = o.device;
       c.amp = amp;
-      c.fusedAdamW = o.fusedAdamW;
+      c.fusedAdamW = fusedAdamW;
+      c.profile = profile;
       c.progress = false;
       const nlohmann::json s = runPretrain(c);
       auto [pps, wait] = steadyRate(c.out, o.batch, o.warmupSteps);
@@ -393,7 +418,7 @@ int main(int argc, char** argv) {
       }());
       for (const bool isLive : {false, true}) {
         if (isLive && !o.live) continue;
-        const auto [pps, wait, s] = runOurs(preset, isLive, o.amp);
+        const auto [pps, wait, s] = runOurs(preset, isLive, o.amp, o.fusedAdamW, "");
         std::printf("%-6s %-7s %-7s %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
                     isLive ? "live" : "shards", precision.ran.c_str(), pps, 100 * wait);
         nlohmann::json row = {
@@ -415,13 +440,26 @@ int main(int argc, char** argv) {
         std::printf("\n");
         if (!isLive) {
           if (o.device == "cpu" && precision.ran != "float32") {
-            const auto [pps32, wait32, s32] = runOurs(preset, false, "none");
+            const auto [pps32, wait32, s32] = runOurs(preset, false, "none", o.fusedAdamW, "");
             std::printf("%-6s shards  float32 %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
                         pps32, 100 * wait32);
             addFraction(row, "float32_gemm_fraction", f.flops_full, pps32, peaks, "float32");
             std::printf("  -> %s is %.2fx\n", precision.ran.c_str(), pps / pps32);
             row["float32_pairs_per_s"] = pps32;
             row["float32_data_wait"] = wait32;
+          }
+          if (o.device == "cpu" && o.fusedAdamW) {
+            const auto [ppsOwn, waitOwn, sOwn] = runOurs(preset, false, o.amp, false, "");
+            std::printf(
+                "%-6s shards  %-7s %8.2f pairs/s  with LibTorch's per-parameter AdamW "
+                "-> flat buffers %.2fx\n",
+                preset.c_str(), precision.ran.c_str(), ppsOwn, pps / ppsOwn);
+            row["per_parameter_adamw_pairs_per_s"] = ppsOwn;
+          }
+          if (o.profile) {
+            const std::string file = tmp + "/profile-" + preset + ".json";
+            runOurs(preset, false, o.amp, o.fusedAdamW, file);
+            row["profile"] = printProfile(preset, file);
           }
           const double off =
               officialTrainSeconds(o, preset, o.device == "cuda" ? officialAmp : "none");

@@ -187,7 +187,12 @@ std::vector<char> pickleSave(const c10::IValue& value) {
 // {'name': tensor}, each detached, on the CPU and contiguous, as torch.save would store them.
 c10::impl::GenericDict tensorDict(const std::map<std::string, torch::Tensor>& tensors) {
   c10::impl::GenericDict dict(c10::StringType::get(), c10::TensorType::get());
-  for (const auto& [k, t] : tensors) dict.insert(k, t.detach().to(torch::kCPU).contiguous());
+  for (const auto& [k, t] : tensors) {
+    auto c = t.detach().to(torch::kCPU).contiguous();
+    // A view into a larger buffer (FlatAdamW's) would take the whole buffer into the file.
+    if (c.storage_offset() != 0 || c.storage().nbytes() != c.nbytes()) c = c.clone();
+    dict.insert(k, c);
+  }
   return dict;
 }
 

@@ -224,7 +224,7 @@ torch::Tensor CroCoNetImpl::encode(const torch::Tensor& img, const torch::Tensor
   const int S = config_.img_size;
   if (img.dim() != 4 || img.size(1) != 3 || img.size(2) != S || img.size(3) != S)
     throw Error("CroCo input must be [B, 3, " + std::to_string(S) + ", " + std::to_string(S) + "]");
-  auto x = patch_embed(img);  // [B, N, D]
+  auto x = residualStream(patch_embed(img));  // [B, N, D]
   if (enc_pos_embed.defined()) x = x + enc_pos_embed.unsqueeze(0);
   const int64_t B = x.size(0), C = x.size(2);
   auto pos = positions_.to(x.device()).unsqueeze(0).expand({B, -1, 2});  // [B, N, 2]
@@ -252,12 +252,13 @@ CroCoOutput CroCoNetImpl::forward(const torch::Tensor& img1, const torch::Tensor
     throw Error("mask must be [B, " + std::to_string(N) + "] bool");
   // Image 1's decoder tokens: its visible features, mask tokens elsewhere. Image 2's, when it
   // is given, are all its patches' features.
-  auto vis1 = linear(decoder_embed, encode(img1, mask));  // [B, Nv, Dd]
+  auto vis1 = residualStream(linear(decoder_embed, encode(img1, mask)));  // [B, Nv, Dd]
   const int64_t Dd = vis1.size(2);
   auto f1 = mask_token.to(vis1.dtype()).expand({B, N, Dd}).clone();
   f1.index_put_({mask.logical_not()}, vis1.reshape({-1, Dd}));
   torch::Tensor f2;
-  if (img2.defined()) f2 = linear(decoder_embed, encode(img2, torch::Tensor()));  // [B, N, Dd]
+  if (img2.defined())
+    f2 = residualStream(linear(decoder_embed, encode(img2, torch::Tensor())));  // [B, N, Dd]
   if (dec_pos_embed.defined()) {
     f1 = f1 + dec_pos_embed;
     if (f2.defined()) f2 = f2 + dec_pos_embed;

@@ -22,6 +22,15 @@ torch::Tensor sincosPosEmbed(int dim, int grid);
 // Patch positions (row, col), [N, 2] int64, row-major.
 torch::Tensor patchPositions(int grid);
 
+// The residual stream in float32 under autocast: the patch and decoder embeddings come out of
+// autocast in bf16 or fp16, and with cosine embeddings adding the float32 table promotes them.
+// With RoPE there is no table, and LibTorch 1.13's CPU LayerNorm refuses a bf16 input with
+// float32 weights; so both embeddings go through this, whatever the positions.
+inline torch::Tensor residualStream(const torch::Tensor& x) {
+  const auto t = x.scalar_type();
+  return t == torch::kBFloat16 || t == torch::kHalf ? x.to(torch::kFloat32) : x;
+}
+
 // 2D rotary embedding (CroCo v2's RoPE2D): the first half of each head's channels rotates with
 // the row, the second with the column. tokens [B, H, N, Dh], positions [B, N, 2].
 torch::Tensor applyRope2d(const torch::Tensor& tokens, const torch::Tensor& positions, double freq);

@@ -195,7 +195,7 @@ DownstreamNetImpl::DownstreamNetImpl(const DownstreamConfig& c) : config_(c) {
 }
 
 std::vector<torch::Tensor> DownstreamNetImpl::encodeBlocks(const torch::Tensor& img, bool all) {
-  auto x = patch_embed(img);  // [B, N, D]
+  auto x = residualStream(patch_embed(img));  // [B, N, D]
   if (enc_pos_embed.defined()) x = x + enc_pos_embed.unsqueeze(0);
   auto pos = positions_.to(x.device()).unsqueeze(0).expand({x.size(0), -1, 2});
   std::vector<torch::Tensor> out;
@@ -210,7 +210,7 @@ std::vector<torch::Tensor> DownstreamNetImpl::encodeBlocks(const torch::Tensor& 
 
 std::vector<torch::Tensor> DownstreamNetImpl::decodeBlocks(const torch::Tensor& feat1,
                                                            const torch::Tensor& feat2) {
-  auto f1 = decoder_embed(feat1), f2 = decoder_embed(feat2);
+  auto f1 = residualStream(decoder_embed(feat1)), f2 = residualStream(decoder_embed(feat2));
   if (dec_pos_embed.defined()) {
     f1 = f1 + dec_pos_embed;
     f2 = f2 + dec_pos_embed;
@@ -316,7 +316,7 @@ std::string DownstreamNetImpl::initFromPretrained(const Checkpoint& ck, const st
   }
   if (theirs.pos_embed != ours.pos_embed)
     throw Error(source, "checkpoint of another model: pos_embed " + theirs.pos_embed + ", not " +
-                            ours.pos_embed);
+                            ours.pos_embed + " (use the --pos-embed it was trained with)");
   torch::NoGradGuard noGrad;
   for (auto& [k, t] : stateDict(*this)) {
     if (!(encoderKey(k) || (decoder && decoderKey(k)))) continue;

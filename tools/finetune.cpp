@@ -14,6 +14,7 @@ struct Flags {
   FinetuneConfig c;
   std::string preset = "tiny";
   int imgSize = 224, patchSize = 16;
+  std::string posEmbed = "cosine";
   bool quiet = false, predict = false, evaluate = false, noJitter = false;
   std::string checkpoint, image1, image2, out, tiling = "nearest";
   CLI::Option* blrOpt = nullptr;
@@ -53,6 +54,9 @@ void addTrainingFlags(CLI::App& app, Flags& f) {
                  "ViT patch size (16; 8 gives 64 patches at --img-size 64, for --head linear or "
                  "pose: the DPT head needs 16)")
       ->check(CLI::Range(1, 64));
+  app.add_option("--pos-embed", f.posEmbed,
+                 "cosine or RoPE100, as the --init checkpoint was pre-trained (pretrain "
+                 "--pos-embed)");
   addLoopFlags(app, t);
   f.blrOpt = app.get_option("--blr");
   f.blrOpt->description(
@@ -87,6 +91,7 @@ int train(Flags& f) {
   c.model.croco = presetConfig(f.preset);
   c.model.croco.img_size = f.imgSize;
   c.model.croco.patch_size = f.patchSize;
+  c.model.croco.pos_embed = f.posEmbed;
   if (c.model.head.empty()) c.model.head = c.model.task == "pose" ? "pose" : "dpt";
   if (f.blrOpt->count() == 0) c.train.blr = defaultFinetuneBlr(c.model.task);
   if (!f.quiet) logLaunch("finetune", launchRole(processEnvironment()).describe());

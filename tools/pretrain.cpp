@@ -28,13 +28,14 @@ int main(int argc, char** argv) {
   int patchSize = 16;
   app.add_option("--patch-size", patchSize, "ViT patch size (16 as the paper)")
       ->check(CLI::Range(1, 64));
+  std::string posEmbed = "cosine";
+  app.add_option("--pos-embed", posEmbed,
+                 "cosine (CroCo v1's absolute sin-cos) or RoPE100 (CroCo v2's rotary: relative "
+                 "positions in every attention)");
   addLoopFlags(app, c);
   app.add_option("--accum-iter", c.accumIter, "Iterations per optimizer step")
       ->check(CLI::Range(1, 4096));
   app.add_option("--out", c.out, "Output folder")->required();
-  app.add_flag("!--no-fused-adamw", c.fusedAdamW,
-               "On CUDA, step AdamW with LibTorch's own per-parameter kernels instead of the "
-               "fused one (LibTorch >= 2.1)");
   app.add_option("--workers", c.workers, "Data worker threads")->check(CLI::Range(1, 256));
   app.add_option("--batch-format", c.batchFormat,
                  "What the data threads hand over: float32 (normalised), uint8 (crops, jittered "
@@ -51,6 +52,7 @@ int main(int argc, char** argv) {
     c.model.decoder = decoder;
     c.model.img_size = imgSize;
     c.model.patch_size = patchSize;
+    c.model.pos_embed = posEmbed;
     c.progress = !quiet;
     if (!quiet) logLaunch("pretrain", launchRole(processEnvironment()).describe());
     const nlohmann::json summary = runPretrain(c);

@@ -26,6 +26,12 @@ inline void addLoopFlags(CLI::App& app, TrainConfig& c) {
   app.add_option("--save-every", c.saveEvery, "Iterations between checkpoints");
   app.add_option("--log-every", c.logEvery, "Iterations between log lines")
       ->check(CLI::Range(1, 1000000));
+  app.add_flag("!--no-fused-adamw", c.fusedAdamW,
+               "Step AdamW with LibTorch's own per-parameter operators instead of the fused "
+               "kernel (CUDA, LibTorch >= 2.1) or the flat buffers (CPU)");
+  app.add_option("--profile", c.profile,
+                 "Write the time per operator, kind and stage of the steps after the first two "
+                 "to this JSON file (docs/trainer.md)");
   app.add_option("--max-nan-skips", c.maxNanSkips, "Non-finite losses in a row before stopping");
 }
 

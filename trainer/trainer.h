@@ -45,7 +45,7 @@ struct TrainConfig {
   // Stop after this many iterations as a signal stops a run (a checkpoint, "interrupted"),
   // leaving the schedule as it is: a run cut into parts, resumed with --resume. -1: never.
   int64_t stopAfter = -1;
-  double blr = 1.5e-4;    // lr = blr * effective batch / 256
+  double blr = 1.5e-4;  // lr = blr * effective batch / 256
   double minLr = 0.0;
   double warmupEpochs = 1.0;
   double weightDecay = 0.05;
@@ -73,6 +73,9 @@ struct TrainConfig {
   int64_t reconEvery = 0;  // write recon-latest.png every N iterations (0: never)
   int maxNanSkips = 5;     // consecutive non-finite losses before stopping
   bool progress = true;
+  // Write an operator profile (trainer/op_profile.h) of every step after the first two to this
+  // file at the end of the run (--profile); empty: none.
+  std::string profile;
   int64_t debugNanAtStep = -1;  // fault injection for tests: this iteration's loss becomes NaN
 };
 

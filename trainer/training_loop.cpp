@@ -16,8 +16,10 @@
 #include "model/autocast.h"
 #include "model/torch_compat.h"
 #include "trainer/distributed.h"
+#include "trainer/flat_adamw.h"
 #include "trainer/fused_adamw.h"
 #include "trainer/grad_scaler.h"
+#include "trainer/op_profile.h"
 #include "util/atomic_file.h"
 #include "util/blas_core.h"
 #include "util/error.h"
@@ -33,6 +35,8 @@ namespace {
 
 using Clock = SteadyClock;
 constexpr auto since = secondsSince;
+// The first steps of a run allocate and warm caches; a profile leaves them out.
+constexpr int64_t kProfileWarmupSteps = 2;
 
 std::atomic<int> gSignal{0};
 void onSignal(int sig) {
@@ -221,15 +225,29 @@ class TrainingLoop {
     start_ = Clock::now();
     firstIter_ = iter_;
     model_->train();
+    std::unique_ptr<OpProfile> profile;
+    if (lead_ && !c_.profile.empty()) profile = std::make_unique<OpProfile>();
+    int64_t profiled = 0;
+    double profiledSeconds = 0;
     while (iter_ < stopAt_) {
+      const bool counting = profile && iter_ - firstIter_ >= kProfileWarmupSteps;
+      if (counting) profile->resume();
       const auto t0 = Clock::now();
-      task_.fetch(iter_);
+      {
+        RECORD_USER_SCOPE(kStageData);
+        task_.fetch(iter_);
+      }
       const double wait = since(t0);
       epoch_ = static_cast<double>(iter_) / perEpoch_;
       if (iter_ % c_.accumIter == 0) setLearningRate();
       stepLoss_ = step();
       ++iter_;
       const double stepTime = since(t0);
+      if (counting) {
+        profile->pause();
+        ++profiled;
+        profiledSeconds += stepTime;
+      }
       waitTotal_ += wait;
       stepTotal_ += stepTime;
       if (lead_ && std::isfinite(stepLoss_) && ((iter_ - 1) % c_.logEvery == 0 || iter_ == stopAt_))
@@ -257,6 +275,16 @@ class TrainingLoop {
       }
     }
     if (iter_ > firstIter_) progress_.show(progressText(), /*last=*/true);
+    if (profile) writeProfile(*profile, profiled, profiledSeconds);
+  }
+
+  // The operator profile with the steps' wall time beside the operators' summed self times.
+  void writeProfile(const OpProfile& profile, int64_t steps, double seconds) {
+    nlohmann::json j = profile.report(steps);
+    j["wall_ms_per_step"] = 1e3 * seconds / std::max<int64_t>(steps, 1);
+    j["precision"] = precision_.toJson();
+    j["batch_size"] = c_.batchSize;
+    writeFileAtomic(c_.profile, j.dump(1) + "\n");
   }
 
   nlohmann::json summary() {
@@ -280,6 +308,7 @@ class TrainingLoop {
                      {"warmup_epochs", warmupEpochs_},
                      {"steps", stopAt_}};
     s["fused_adamw"] = c_.fusedAdamW && device_.is_cuda() && fusedAdamWCompiled();
+    s["flat_adamw"] = flatAdamW_.active();
     if (scaler_->enabled()) s["loss_scale"] = scaler_->scale();
     s["precision"] = precision_.toJson();
     s["openblas_core"] = blasCore().toJson();
@@ -351,6 +380,7 @@ class TrainingLoop {
     {
       // bf16 or fp16 autocast, or none; the task computes the loss itself in float32.
       const AutocastGuard autocast(precision_);
+      RECORD_USER_SCOPE(kStageForward);
       loss = task_.loss(device_);
     }
     if (iter_ == c_.debugNanAtStep) loss = loss * std::numeric_limits<float>::quiet_NaN();
@@ -367,12 +397,18 @@ class TrainingLoop {
       progress_.breakLine();
       std::fprintf(stderr, "%s: warning: non-finite loss at step %lld, step skipped\n",
                    tool_.c_str(), static_cast<long long>(iter_));
-      opt_->zero_grad();
+      flatAdamW_.zeroGrad(*opt_);
       return lossValue;
     }
     nanRun_ = 0;
-    scaler_->scaleLoss(loss / c_.accumIter).backward();
-    if ((iter_ + 1) % c_.accumIter == 0) optimizerStep();
+    {
+      RECORD_USER_SCOPE(kStageBackward);
+      scaler_->scaleLoss(loss / c_.accumIter).backward();
+    }
+    if ((iter_ + 1) % c_.accumIter == 0) {
+      RECORD_USER_SCOPE(kStageOptimizer);
+      optimizerStep();
+    }
     lastLoss_ = lossValue;
     return lossValue;
   }
@@ -387,7 +423,9 @@ class TrainingLoop {
     // With a loss scale, gradients that overflowed skip the step (on every rank alike: they
     // were all-reduced) and the scale backs off.
     const bool finite = scaler_->unscale(ordered_);
-    if (finite && !(c_.fusedAdamW && fusedAdamWStep(*opt_))) opt_->step();
+    // CUDA: the fused kernel; the CPU: flat buffers (both --no-fused-adamw turns off).
+    if (finite && !(c_.fusedAdamW && (fusedAdamWStep(*opt_) || flatAdamW_.step(*opt_))))
+      opt_->step();
     scaler_->update(finite);
     if (!finite && lead_) {
       progress_.breakLine();
@@ -396,7 +434,7 @@ class TrainingLoop {
                    "loss scale now %g\n",
                    tool_.c_str(), static_cast<long long>(iter_), scaler_->scale());
     }
-    opt_->zero_grad();
+    flatAdamW_.zeroGrad(*opt_);
   }
 
   // One line of log.jsonl for the step just taken (iter_ - 1).
@@ -494,6 +532,7 @@ class TrainingLoop {
   std::vector<torch::Tensor> ordered_;  // the trained parameters, in trainable() order
   double lr_ = 0;                       // the peak lr
   std::unique_ptr<torch::optim::AdamW> opt_;
+  FlatAdamW flatAdamW_;  // the CPU step over flat buffers (trainer/flat_adamw.h)
   std::unique_ptr<GradScaler> scaler_;
   Precision precision_;
   // Position.
