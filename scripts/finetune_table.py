@@ -19,7 +19,7 @@ import math
 import statistics
 import sys
 
-METRICS = {"flow": ["aepe", "aepe_covisible", "px1", "px3", "px5"],
+METRICS = {"flow": ["aepe", "aepe_covisible", "aepe_all_known", "px1", "px3", "px5"],
            "depth": ["delta1", "absrel", "rmse"],
            "pose": ["median_rot_err", "median_trans_err"]}
 INITS = os.environ.get("INITS", "random,mae,croco").split(",")

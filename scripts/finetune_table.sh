@@ -7,7 +7,8 @@
 #   scripts/finetune_table.sh OUT [SEEDS]     (default 3 seeds; about 20 minutes on 2 cores)
 #
 # Steps (each skipped when its output exists, so a killed run continues): pairs with flow and
-# depth from the shipped room and apartment (training) and studio (held out); pre-training of the
+# depth from the shipped room and apartment (training) and studio (held out), wide ones and, for
+# flow, flow-style ones (generate_pairs --motion near); pre-training of the
 # tiny preset at 64 pixels on cross-view completion and on auto-completion (mae); then, for each
 # seed, task and initialisation, finetune with the linear heads (pose: the pose head); last,
 # OUT/table.md and OUT/table.json. Environment: BUILD_DIR (default build), PRETRAIN_EPOCHS
@@ -17,7 +18,8 @@
 # docs/finetune.md), PRETRAIN_ONLY=1 (stop after the two pre-trainings: scripts/pose_table.sh
 # starts from them), HOMES=N (train on N homes furnished with Sweet Home 3D's training models,
 # make_scenes --random N --furnish --models train --seed 21, and hold out a home of the held-out
-# models, seed 99, instead of the shipped room, apartment and studio; use another OUT).
+# models, seed 99, instead of the shipped room, apartment and studio; use another OUT), AMP
+# (default auto: bf16 where the CPU has bf16 units; none: float32; use another OUT).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/finetune_table.sh OUT [SEEDS]}
@@ -27,16 +29,23 @@ pretrain_epochs=${PRETRAIN_EPOCHS:-30}
 epochs=${FINETUNE_EPOCHS:-4}
 read -r -a tasks <<< "${TASKS:-flow depth pose}"
 patch=${PATCH_SIZE:-16}
+amp=${AMP:-auto}
 mkdir -p "$out"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 
-truth() {  # OUT/NAME: pairs of the scenes with flow and depth at 64 pixels
+truth() {  # OUT/NAME PAIRS [generate_pairs flags] -- SCENES...: pairs with flow and depth, 64 px
   local name=$1 pairs=$2
   shift 2
+  local flags=()
+  while [[ $1 != -- ]]; do flags+=("$1"); shift; done
+  shift
   [[ -f "$out/$name/summary.json" ]] ||
     "$bin/generate_pairs" --scenes "$@" --out "$out/$name" --pairs-per-scene "$pairs" \
-      --resolution 64 --save-flow --save-depth --seed 7 --quiet > /dev/null
+      --resolution 64 --save-flow --save-depth --seed 7 --quiet "${flags[@]}" > /dev/null
 }
+# Flow fine-tunes and is held out on flow-style pairs (small, dense motions: generate_pairs
+# --motion near), as docs/finetune.md's pilot; depth and pose on the wide pre-training pairs.
+near=(--motion near --min-covis 0.6)
 if [[ ${HOMES:-0} -gt 0 ]]; then
   [[ -d "$out/homes" ]] ||
     "$bin/make_scenes" --random "$HOMES" --furnish --models train --seed 21 --out "$out/homes" \
@@ -44,17 +53,21 @@ if [[ ${HOMES:-0} -gt 0 ]]; then
   [[ -d "$out/heldout-home" ]] ||
     "$bin/make_scenes" --random 1 --furnish --models heldout --seed 99 \
       --out "$out/heldout-home" 2> /dev/null > /dev/null
-  truth train $((800 / HOMES)) "$out/homes"
-  truth heldout 100 "$out/heldout-home"
+  train_scenes=("$out/homes") heldout_scenes=("$out/heldout-home") per_scene=$((800 / HOMES))
 else
-  truth train 400 scenes/room scenes/apartment
-  truth heldout 100 scenes/studio
+  train_scenes=(scenes/room scenes/apartment) heldout_scenes=(scenes/studio) per_scene=400
+fi
+truth train "$per_scene" -- "${train_scenes[@]}"
+truth heldout 100 -- "${heldout_scenes[@]}"
+if [[ " ${tasks[*]} " == *" flow "* ]]; then
+  truth flow-train "$per_scene" "${near[@]}" -- "${train_scenes[@]}"
+  truth flow-heldout 100 "${near[@]}" -- "${heldout_scenes[@]}"
 fi
 
 for task in croco mae; do
   [[ -f "$out/pretrain-$task/summary.json" ]] ||
     "$bin/pretrain" --data "$out/train/pairs-*.tar" --task "$task" --preset tiny --img-size 64 \
-      --patch-size "$patch" \
+      --patch-size "$patch" --amp "$amp" \
       --batch-size 16 --epochs "$pretrain_epochs" --blr 6e-3 --seed 0 \
       --out "$out/pretrain-$task" --quiet > /dev/null
 done
@@ -67,11 +80,12 @@ for ((seed = 0; seed < seeds; ++seed)); do
       [[ -f "$run/heldout.json" ]] && continue
       ckpt=random
       [[ $init != random ]] && ckpt="$out/pretrain-$init/checkpoint-last.pth"
-      head=linear blr=1e-2
+      head=linear blr=1e-2 data=train
       [[ $task == pose ]] && head=pose blr=${POSE_BLR:-4e-3}
+      [[ $task == flow ]] && data=flow-train
       "$bin/finetune" --task "$task" --head "$head" --init "$ckpt" --preset tiny --img-size 64 \
-        --patch-size "$patch" \
-        --data "$out/train/pairs-*.tar" --eval-data "$out/heldout/pairs-*.tar" \
+        --patch-size "$patch" --amp "$amp" \
+        --data "$out/$data/pairs-*.tar" --eval-data "$out/${data/train/heldout}/pairs-*.tar" \
         --batch-size 8 --epochs "$epochs" --warmup-epochs 1 --blr "$blr" --seed "$seed" \
         --out "$run" --quiet > /dev/null
       echo "finetune_table: $task from $init, seed $seed done" >&2

@@ -17,7 +17,7 @@
 # 1000, of 16 pairs), FINETUNE_STEPS (default 800, of 8 pairs), EVAL_EVERY (default 100),
 # SEED (default 0), INITS (default "random mae croco"), FLOORPLANS (default 0: also train on
 # this many random floor plans of make_scenes), FLOW_PAIRS (default 400: flow-style pairs a
-# training scene).
+# training scene), POS_EMBED (default cosine; RoPE100: CroCo v2's positions, in the run names).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/flow_pilot.sh OUT}
@@ -31,6 +31,9 @@ eval_every=${EVAL_EVERY:-100}
 seed=${SEED:-0}
 floorplans=${FLOORPLANS:-0}
 flow_pairs=${FLOW_PAIRS:-400}
+pos_embed=${POS_EMBED:-cosine}
+pe=""
+[[ $pos_embed != cosine ]] && pe="-$pos_embed"
 mkdir -p "$out"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 
@@ -57,10 +60,10 @@ pairs flow-heldout 100 --motion near --min-covis 0.6 -- scenes/studio
 
 for patch in "${patches[@]}"; do
   for task in croco mae; do
-    run="$out/pretrain-$task-p$patch-s$pretrain_steps"
+    run="$out/pretrain-$task-p$patch$pe-s$pretrain_steps"
     [[ -f "$run/summary.json" ]] ||
       "$bin/pretrain" --data "$out/wide/pairs-*.tar" --task "$task" --preset tiny --img-size 64 \
-        --patch-size "$patch" --batch-size 16 --epochs $(((pretrain_steps + 49) / 50)) \
+        --patch-size "$patch" --pos-embed "$pos_embed" --batch-size 16 --epochs $(((pretrain_steps + 49) / 50)) \
         --max-steps "$pretrain_steps" --blr 6e-3 --seed 0 --out "$run" --quiet > /dev/null
     echo "flow_pilot: pre-trained $task with $patch-pixel patches" >&2
   done
@@ -71,12 +74,12 @@ pairs_n=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["pairs
 for patch in "${patches[@]}"; do
   for scale in "${scales[@]}"; do
     for init in "${inits[@]}"; do
-      run="$out/finetune/p$patch-scale$scale-$init-s$pretrain_steps-f$floorplans-n$flow_pairs-$finetune_steps"
+      run="$out/finetune/p$patch$pe-scale$scale-$init-s$pretrain_steps-f$floorplans-n$flow_pairs-$finetune_steps"
       [[ -f "$run/heldout.json" ]] && continue
       ckpt=random
-      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch-s$pretrain_steps/checkpoint-last.pth"
+      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch$pe-s$pretrain_steps/checkpoint-last.pth"
       "$bin/finetune" --task flow --head linear --init "$ckpt" --preset tiny --img-size 64 \
-        --patch-size "$patch" --flow-scale "$scale" \
+        --patch-size "$patch" --pos-embed "$pos_embed" --flow-scale "$scale" \
         --data "$out/$flow_train/pairs-*.tar" --eval-data "$out/flow-heldout/pairs-*.tar" \
         --batch-size 8 --epochs $(((finetune_steps * 8 + pairs_n - 1) / pairs_n)) \
         --max-steps "$finetune_steps" \
