@@ -12,6 +12,8 @@
 # FURNISH=1 furnishes the seven random plans with Sweet Home 3D's models instead of boxes
 # (make_scenes --furnish: the six training plans with --models train, the held-out one with
 # --models heldout; docs/scenes.md, "Furnished homes"), in another OUT.
+# Precision: covis_sweep's --amp auto (bf16 on CPUs with bf16 units); the figures of
+# docs/covis_ablation.md were measured with --amp none (float32), which the extra options take.
 # Usage: scripts/covis_ablation.sh [OUT] [extra covis_sweep options]   (OUT: runs/ablation)
 # Rerun the same line to resume a killed sweep.
 set -euo pipefail

@@ -39,9 +39,8 @@ int main(int argc, char** argv) {
   app.add_option("--device", c.device, "Training device (evaluation runs on the CPU)")
       ->check(CLI::IsMember({"cpu", "cuda"}));
   app.add_option("--amp", c.amp,
-                 "Training and evaluation precision: none (float32, the default: exact resume), "
-                 "auto (bf16 on CUDA and on CPUs with bf16 units, else float32), bf16 or fp16 "
-                 "(CUDA training)")
+                 "Training and evaluation precision: auto (the default: bf16 on CUDA and on CPUs "
+                 "with bf16 units, else float32), none (float32), bf16 or fp16 (CUDA training)")
       ->check(CLI::IsMember({"auto", "bf16", "fp16", "none"}));
   app.add_option("--blr", c.blr, "Base learning rate (lr = blr * batch / 256)");
   app.add_option(
