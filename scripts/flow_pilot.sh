@@ -8,16 +8,20 @@
 #   scripts/flow_pilot.sh OUT
 #
 # Steps (each skipped when its output exists, so a killed run continues): wide pre-training pairs
-# of the shipped room and apartment (covis >= 0.5, as finetune_table.sh); flow-style pairs of
-# the same scenes (training) and of the studio (held out); pre-training on cross-view completion
-# and on auto-completion (mae) for each patch size; the fine-tunes; last, OUT/pilot.md (the table)
-# and OUT/curves.json (held-out AEPE against steps, from each fine-tune's log.jsonl).
+# of the training scenes (covis >= 0.5, as finetune_table.sh); flow-style pairs of the same
+# scenes (training) and of the studio (held out); pre-training on cross-view completion and on
+# auto-completion (mae) for each patch size, on the wide pairs of every training scene (on two
+# scenes, cross-view completion memorises them: bench/croco_reference_probe.py); the
+# fine-tunes; last, OUT/pilot.md (the table) and OUT/curves.json (held-out AEPE against steps,
+# from each fine-tune's log.jsonl).
 # Environment: BUILD_DIR (default build), PATCHES (default "8 16"), SCALES (default "0 1": 0 is
 # finetune's default flow scale, img_size / 16; 1 regresses pixels), PRETRAIN_STEPS (default
 # 1000, of 16 pairs), FINETUNE_STEPS (default 800, of 8 pairs), EVAL_EVERY (default 100),
 # SEED (default 0), INITS (default "random mae croco"), FLOORPLANS (default 0: also train on
-# this many random floor plans of make_scenes), FLOW_PAIRS (default 400: flow-style pairs a
-# training scene), POS_EMBED (default cosine; RoPE100: CroCo v2's positions, in the run names).
+# this many random floor plans of make_scenes, in pre-training and fine-tuning), FLOW_PAIRS
+# (default 400: flow-style pairs a training scene), WIDE_PAIRS (wide pre-training pairs a
+# training scene; default 400 with no floor plans, else 150), POS_EMBED (default cosine;
+# RoPE100: CroCo v2's positions, in the run names).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/flow_pilot.sh OUT}
@@ -31,6 +35,7 @@ eval_every=${EVAL_EVERY:-100}
 seed=${SEED:-0}
 floorplans=${FLOORPLANS:-0}
 flow_pairs=${FLOW_PAIRS:-400}
+wide_pairs=${WIDE_PAIRS:-$((floorplans > 0 ? 150 : 400))}
 pos_embed=${POS_EMBED:-cosine}
 pe=""
 [[ $pos_embed != cosine ]] && pe="-$pos_embed"
@@ -54,16 +59,20 @@ if ((floorplans > 0)); then
   train_scenes+=("$out/floorplans-$floorplans")
 fi
 flow_train=flow-train-f$floorplans-n$flow_pairs
-pairs wide 400 -- scenes/room scenes/apartment
+wide=wide-f$floorplans-n$wide_pairs
+pairs "$wide" "$wide_pairs" -- "${train_scenes[@]}"
+wide_n=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["pairs"])' \
+  "$out/$wide/summary.json")
 pairs "$flow_train" "$flow_pairs" --motion near --min-covis 0.6 -- "${train_scenes[@]}"
 pairs flow-heldout 100 --motion near --min-covis 0.6 -- scenes/studio
 
 for patch in "${patches[@]}"; do
   for task in croco mae; do
-    run="$out/pretrain-$task-p$patch$pe-s$pretrain_steps"
+    run="$out/pretrain-$task-p$patch$pe-s$pretrain_steps-f$floorplans"
     [[ -f "$run/summary.json" ]] ||
-      "$bin/pretrain" --data "$out/wide/pairs-*.tar" --task "$task" --preset tiny --img-size 64 \
-        --patch-size "$patch" --pos-embed "$pos_embed" --batch-size 16 --epochs $(((pretrain_steps + 49) / 50)) \
+      "$bin/pretrain" --data "$out/$wide/pairs-*.tar" --task "$task" --preset tiny --img-size 64 \
+        --patch-size "$patch" --pos-embed "$pos_embed" --batch-size 16 \
+        --epochs $(((pretrain_steps * 16 + wide_n - 1) / wide_n)) \
         --max-steps "$pretrain_steps" --blr 6e-3 --seed 0 --out "$run" --quiet > /dev/null
     echo "flow_pilot: pre-trained $task with $patch-pixel patches" >&2
   done
@@ -77,7 +86,7 @@ for patch in "${patches[@]}"; do
       run="$out/finetune/p$patch$pe-scale$scale-$init-s$pretrain_steps-f$floorplans-n$flow_pairs-$finetune_steps"
       [[ -f "$run/heldout.json" ]] && continue
       ckpt=random
-      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch$pe-s$pretrain_steps/checkpoint-last.pth"
+      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch$pe-s$pretrain_steps-f$floorplans/checkpoint-last.pth"
       "$bin/finetune" --task flow --head linear --init "$ckpt" --preset tiny --img-size 64 \
         --patch-size "$patch" --pos-embed "$pos_embed" --flow-scale "$scale" \
         --data "$out/$flow_train/pairs-*.tar" --eval-data "$out/flow-heldout/pairs-*.tar" \
