@@ -52,6 +52,9 @@ pairs() {  # OUT/NAME PAIRS-PER-SCENE [generate_pairs flags] -- SCENES...
     "$bin/generate_pairs" --scenes "$@" --out "$out/$name" --pairs-per-scene "$n" \
       --resolution 64 --save-flow --save-depth --seed 7 --quiet "${flags[@]}" > /dev/null
 }
+pair_count() {  # OUT/NAME's pairs, from its summary.json
+  python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["pairs"])' "$out/$1/summary.json"
+}
 train_scenes=(scenes/room scenes/apartment)
 if ((floorplans > 0)); then
   [[ -d "$out/floorplans-$floorplans" ]] ||
@@ -61,8 +64,7 @@ fi
 flow_train=flow-train-f$floorplans-n$flow_pairs
 wide=wide-f$floorplans-n$wide_pairs
 pairs "$wide" "$wide_pairs" -- "${train_scenes[@]}"
-wide_n=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["pairs"])' \
-  "$out/$wide/summary.json")
+wide_n=$(pair_count "$wide")
 pairs "$flow_train" "$flow_pairs" --motion near --min-covis 0.6 -- "${train_scenes[@]}"
 pairs flow-heldout 100 --motion near --min-covis 0.6 -- scenes/studio
 
@@ -78,8 +80,7 @@ for patch in "${patches[@]}"; do
   done
 done
 
-pairs_n=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["pairs"])' \
-  "$out/$flow_train/summary.json")
+pairs_n=$(pair_count "$flow_train")
 for patch in "${patches[@]}"; do
   for scale in "${scales[@]}"; do
     for init in "${inits[@]}"; do
