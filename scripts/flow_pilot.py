@@ -3,14 +3,25 @@
 OUT/finetune, its held-out flow figures against zero flow, and its held-out AEPE every
 --eval-every steps from its log.jsonl. Writes OUT/pilot.md, OUT/curves.json and OUT/curves.svg
 (held-out AEPE over zero flow's against steps; RUNS, a comma-separated list of substrings,
-picks the runs plotted).
+picks the runs plotted). Runs that differ only in their initialisation and seed (a name ending in
+-seedN; none is seed 0) are paired seed by seed: pilot.md gives each pair of initialisations'
+mean AEPE difference over the seeds both have, its 95 % t-interval, and the half-width as a share
+of the difference (the fine-tuning table's criterion asks for at most a quarter).
 
     scripts/flow_pilot.py OUT [RUNS]
 """
 
 import json
+import re
 import sys
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from finetune_table import interval  # noqa: E402
+
+INIT_ORDER = ["random", "mae", "croco"]
+NAME = re.compile(r"^(?P<head>.+?-scale\d+)-(?P<init>[a-z]+)-(?P<tail>s\d+-.+?)"
+                  r"(?:-seed(?P<seed>\d+))?$")
 
 
 def curve(run):
@@ -21,6 +32,35 @@ def curve(run):
         if "heldout" in entry:
             points.append((entry["step"] + 1, entry["heldout"]["aepe"]))
     return points
+
+
+def paired(aepe):
+    """Lines of the paired table from {run name: AEPE}: for each configuration (the name less its
+    initialisation and seed) and each two of its initialisations, the later one's gain over the
+    earlier (earlier minus later, px) over the seeds both have, when there are two or more."""
+    runs = {}
+    for name, value in aepe.items():
+        m = NAME.match(name)
+        if m and m["init"] in INIT_ORDER:
+            config = f"{m['head']}-{m['tail']}"
+            runs.setdefault(config, {}).setdefault(m["init"], {})[int(m["seed"] or 0)] = value
+    lines = []
+    for config, inits in sorted(runs.items()):
+        names = [i for i in INIT_ORDER if i in inits]
+        for a, b in [(a, b) for k, a in enumerate(names) for b in names[k + 1:]]:
+            seeds = sorted(set(inits[a]) & set(inits[b]))
+            if len(seeds) < 2:
+                continue
+            mean, half = interval([inits[a][s] - inits[b][s] for s in seeds])
+            share = f"{half / abs(mean):.2f}" if mean else "inf"
+            lines.append(f"| {config} | {a} - {b} | {len(seeds)} | {mean:.3f} ± {half:.3f} "
+                         f"| {share} |")
+    if not lines:
+        return []
+    return ["", "Paired over seeds: AEPE difference (px), the first initialisation's minus the "
+            "second's (positive: the second is better), with its 95 % t-interval:", "",
+            "| configuration | pair | seeds | difference | half-width / difference |",
+            "| --- | --- | --- | --- | --- |"] + lines
 
 
 COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"]
@@ -87,6 +127,7 @@ def main():
     for r in rows:
         lines.append(f"| {r[0]} | {r[1]:.3f} | {r[2]:.3f} | {r[3]:.3f} | {r[4]:.3f} | {r[5]:.3f} "
                      f"| {r[6]:.3f} | {r[7]:.0f} |")
+    lines += paired({r[0]: r[1] for r in rows})
     (out / "pilot.md").write_text("\n".join(lines) + "\n")
     (out / "curves.json").write_text(json.dumps(curves, indent=1) + "\n")
     picked = sys.argv[2].split(",") if len(sys.argv) == 3 else None

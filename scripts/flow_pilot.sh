@@ -17,8 +17,11 @@
 # Environment: BUILD_DIR (default build), PATCHES (default "8 16"), SCALES (default "0 1": 0 is
 # finetune's default flow scale, img_size / 16; 1 regresses pixels), PRETRAIN_STEPS (default
 # 1000, of 16 pairs), FINETUNE_STEPS (default 800, of 8 pairs), EVAL_EVERY (default 100),
-# SEED (default 0), INITS (default "random mae croco"), FLOORPLANS (default 0: also train on
-# this many random floor plans of make_scenes, in pre-training and fine-tuning), FLOW_PAIRS
+# SEEDS (default "0": the fine-tunes' seeds; a seed N > 0 ends the run's name in -seedN, and
+# OUT/pilot.md pairs the initialisations seed by seed), INITS (default "random mae croco"),
+# FLOORPLANS (default 0: also train on this many random floor plans of make_scenes --seed 5, in
+# pre-training and fine-tuning), PRETRAIN_FLOORPLANS (default 0: this many more, make_scenes
+# --seed 6, in pre-training alone; "+N" in the names), FLOW_PAIRS
 # (default 400: flow-style pairs a training scene), WIDE_PAIRS (wide pre-training pairs a
 # training scene; default 400 with no floor plans, else 150), POS_EMBED (default cosine;
 # RoPE100: CroCo v2's positions, in the run names).
@@ -32,8 +35,9 @@ read -r -a inits <<< "${INITS:-random mae croco}"
 pretrain_steps=${PRETRAIN_STEPS:-1000}
 finetune_steps=${FINETUNE_STEPS:-800}
 eval_every=${EVAL_EVERY:-100}
-seed=${SEED:-0}
+read -r -a seeds <<< "${SEEDS:-${SEED:-0}}"
 floorplans=${FLOORPLANS:-0}
+pretrain_floorplans=${PRETRAIN_FLOORPLANS:-0}
 flow_pairs=${FLOW_PAIRS:-400}
 wide_pairs=${WIDE_PAIRS:-$((floorplans > 0 ? 150 : 400))}
 pos_embed=${POS_EMBED:-cosine}
@@ -65,14 +69,25 @@ flow_train=flow-train-f$floorplans-n$flow_pairs
 wide=wide-f$floorplans-n$wide_pairs
 pairs "$wide" "$wide_pairs" -- "${train_scenes[@]}"
 wide_n=$(pair_count "$wide")
+pretrain_data=("$out/$wide/pairs-*.tar")
+plans=f$floorplans
+if ((pretrain_floorplans > 0)); then
+  more=floorplans-pretrain-$pretrain_floorplans
+  [[ -d "$out/$more" ]] ||
+    "$bin/make_scenes" --random "$pretrain_floorplans" --seed 6 --out "$out/$more" > /dev/null
+  pairs "wide-$more-n$wide_pairs" "$wide_pairs" -- "$out/$more"
+  wide_n=$((wide_n + $(pair_count "wide-$more-n$wide_pairs")))
+  pretrain_data+=("$out/wide-$more-n$wide_pairs/pairs-*.tar")
+  plans+=+$pretrain_floorplans
+fi
 pairs "$flow_train" "$flow_pairs" --motion near --min-covis 0.6 -- "${train_scenes[@]}"
 pairs flow-heldout 100 --motion near --min-covis 0.6 -- scenes/studio
 
 for patch in "${patches[@]}"; do
   for task in croco mae; do
-    run="$out/pretrain-$task-p$patch$pe-s$pretrain_steps-f$floorplans"
+    run="$out/pretrain-$task-p$patch$pe-s$pretrain_steps-$plans"
     [[ -f "$run/summary.json" ]] ||
-      "$bin/pretrain" --data "$out/$wide/pairs-*.tar" --task "$task" --preset tiny --img-size 64 \
+      "$bin/pretrain" --data "${pretrain_data[@]}" --task "$task" --preset tiny --img-size 64 \
         --patch-size "$patch" --pos-embed "$pos_embed" --batch-size 16 \
         --epochs $(((pretrain_steps * 16 + wide_n - 1) / wide_n)) \
         --max-steps "$pretrain_steps" --blr 6e-3 --seed 0 --out "$run" --quiet > /dev/null
@@ -81,20 +96,25 @@ for patch in "${patches[@]}"; do
 done
 
 pairs_n=$(pair_count "$flow_train")
-for patch in "${patches[@]}"; do
-  for scale in "${scales[@]}"; do
-    for init in "${inits[@]}"; do
-      run="$out/finetune/p$patch$pe-scale$scale-$init-s$pretrain_steps-f$floorplans-n$flow_pairs-$finetune_steps"
-      [[ -f "$run/heldout.json" ]] && continue
-      ckpt=random
-      [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch$pe-s$pretrain_steps-f$floorplans/checkpoint-last.pth"
-      "$bin/finetune" --task flow --head linear --init "$ckpt" --preset tiny --img-size 64 \
-        --patch-size "$patch" --pos-embed "$pos_embed" --flow-scale "$scale" \
-        --data "$out/$flow_train/pairs-*.tar" --eval-data "$out/flow-heldout/pairs-*.tar" \
-        --batch-size 8 --epochs $(((finetune_steps * 8 + pairs_n - 1) / pairs_n)) \
-        --max-steps "$finetune_steps" \
-        --eval-every "$eval_every" --seed "$seed" --out "$run" --quiet > /dev/null
-      echo "flow_pilot: fine-tuned p$patch-s$scale-$init" >&2
+finetune() {  # SEED PATCH SCALE INIT: one fine-tune, unless it is done
+  local seed=$1 patch=$2 scale=$3 init=$4
+  local run="$out/finetune/p$patch$pe-scale$scale-$init-s$pretrain_steps-$plans-n$flow_pairs-$finetune_steps"
+  ((seed > 0)) && run+=-seed$seed
+  [[ -f "$run/heldout.json" ]] && return
+  local ckpt=random
+  [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch$pe-s$pretrain_steps-$plans/checkpoint-last.pth"
+  "$bin/finetune" --task flow --head linear --init "$ckpt" --preset tiny --img-size 64 \
+    --patch-size "$patch" --pos-embed "$pos_embed" --flow-scale "$scale" \
+    --data "$out/$flow_train/pairs-*.tar" --eval-data "$out/flow-heldout/pairs-*.tar" \
+    --batch-size 8 --epochs $(((finetune_steps * 8 + pairs_n - 1) / pairs_n)) \
+    --max-steps "$finetune_steps" \
+    --eval-every "$eval_every" --seed "$seed" --out "$run" --quiet > /dev/null
+  echo "flow_pilot: fine-tuned p$patch-s$scale-$init, seed $seed" >&2
+}
+for seed in "${seeds[@]}"; do
+  for patch in "${patches[@]}"; do
+    for scale in "${scales[@]}"; do
+      for init in "${inits[@]}"; do finetune "$seed" "$patch" "$scale" "$init"; done
     done
   done
 done

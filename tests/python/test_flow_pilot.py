@@ -1,0 +1,77 @@
+"""scripts/flow_pilot.py on made-up fine-tunes: the table, and the seed-by-seed pairing of
+initialisations that decides whether pre-training pays (docs/finetune.md, the pilot)."""
+
+import json
+import subprocess
+import sys
+
+from conftest import SOURCE_DIR
+
+SCRIPT = SOURCE_DIR / "scripts" / "flow_pilot.py"
+CONFIG = "s20000-f40+80-n150-20000"
+
+
+def fake_run(out, name, aepe, zero=5.5):
+    """A fine-tune's folder as finetune writes it: held-out figures, summary and two evaluations."""
+    run = out / "finetune" / name
+    run.mkdir(parents=True)
+    figures = {"aepe": aepe, "aepe_covisible": aepe - 0.01, "aepe_all_known": aepe + 0.3,
+               "px3": aepe / 10}
+    (run / "heldout.json").write_text(json.dumps(
+        {"model": figures, "baseline": {"aepe": zero}}))
+    (run / "summary.json").write_text(json.dumps({"seconds": 12.0}))
+    log = [{"step": 999, "heldout": {"aepe": zero - 0.1}}, {"step": 1999, "heldout": figures}]
+    (run / "log.jsonl").write_text("".join(json.dumps(e) + "\n" for e in log))
+
+
+def name(init, seed, config=CONFIG):
+    return f"p16-scale0-{init}-{config}" + (f"-seed{seed}" if seed else "")
+
+
+def pilot(out):
+    done = subprocess.run([sys.executable, str(SCRIPT), str(out)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return (out / "pilot.md").read_text()
+
+
+def paired_rows(text):
+    """{(configuration, pair): [seeds, difference, half-width / difference]} from pilot.md."""
+    rows = {}
+    for line in text.splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 5 and " - " in cells[1]:
+            rows[(cells[0], cells[1])] = [cells[2], cells[3], cells[4]]
+    return rows
+
+
+def test_initialisations_are_paired_seed_by_seed(tmp_path):
+    for seed, (random, croco) in enumerate([(5.0, 3.0), (5.2, 3.5), (5.1, 3.3)]):
+        fake_run(tmp_path, name("random", seed), random)
+        fake_run(tmp_path, name("croco", seed), croco)
+    fake_run(tmp_path, name("mae", 0), 4.0)  # one seed: nothing to pair it with
+    rows = paired_rows(pilot(tmp_path))
+    # Differences 2.0, 1.7, 1.8: mean 1.833, sd 0.1528, t(2) 4.303, so 0.379 either side.
+    assert rows == {(f"p16-scale0-{CONFIG}", "random - croco"): ["3", "1.833 ± 0.379", "0.21"]}
+
+
+def test_only_the_seeds_both_have_are_paired(tmp_path):
+    for seed, aepe in enumerate([5.0, 5.2, 5.1]):
+        fake_run(tmp_path, name("random", seed), aepe)
+    fake_run(tmp_path, name("croco", 0), 4.0)
+    fake_run(tmp_path, name("croco", 2), 4.5)
+    rows = paired_rows(pilot(tmp_path))
+    # Seeds 0 and 2: differences 1.0 and 0.6, mean 0.8, sd 0.2828, t(1) 12.706: 2.541.
+    assert rows == {(f"p16-scale0-{CONFIG}", "random - croco"): ["2", "0.800 ± 2.541", "3.18"]}
+
+
+def test_other_budgets_and_unfinished_runs_are_not_paired(tmp_path):
+    for seed in (0, 1):
+        fake_run(tmp_path, name("random", seed), 5.0 + seed / 10)
+        fake_run(tmp_path, name("croco", seed, "s20000-f40+80-n150-30000"), 2.7 + seed / 10)
+    (tmp_path / "finetune" / name("croco", 1)).mkdir()  # killed before its held-out figures
+    text = pilot(tmp_path)
+    assert paired_rows(text) == {}
+    assert "Paired over seeds" not in text
+    table = [line for line in text.splitlines() if line.startswith("| p16")]
+    assert len(table) == 4
+    assert f"| {name('croco', 0, 's20000-f40+80-n150-30000')} | 2.700 | 5.500 | 0.491 |" in text
