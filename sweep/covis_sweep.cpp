@@ -93,7 +93,8 @@ nlohmann::json downstreamSettings(const SweepConfig& c) {
           {"blr", c.finetuneBlr},
           {"head", "linear"},
           {"eval_covis", {0.1, 1.0}},
-          {"band", {kDownstreamBandLo, kDownstreamBandHi}}};
+          {"band", {kDownstreamBandLo, kDownstreamBandHi}},
+          {"flow_motion", c.finetuneFlowMotion}};
 }
 
 // What every rank must agree on before training: the sets, and how they are trained.
@@ -550,6 +551,9 @@ void SweepConfig::validate() const {
                                               std::to_string(finetuneBatch) + ")");
     if (finetuneEvalPairs < 1)
       throw OptionError("finetune_eval_pairs", "held-out pairs must be >= 1");
+    if (finetuneFlowMotion != "near" && finetuneFlowMotion != "walk")
+      throw OptionError("finetune_flow_motion",
+                        "flow's pairs are near or walk, not '" + finetuneFlowMotion + "'");
   }
   for (size_t i = 0; i < baselines.size(); ++i) {
     if (baselines[i] != "mae")

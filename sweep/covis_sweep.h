@@ -92,6 +92,9 @@ struct SweepConfig {
   int64_t finetuneSteps = 200;  // per fine-tune, of finetuneBatch pairs
   int finetunePairs = 512;      // fine-tuning pairs from the training scenes (covis >= 0.5)
   int finetuneEvalPairs = 256;  // held-out pairs from the held-out scenes (covis 0.1-1)
+  // Flow's pairs: "near", flow-style pairs of their own (generate_pairs --motion near, covis >=
+  // 0.6), as many, for training and held out; "walk", depth's pairs above.
+  std::string finetuneFlowMotion = "near";
   int finetuneBatch = 8;
   double finetuneBlr = 1e-2;
   bool reports = true;  // a dataset report per set

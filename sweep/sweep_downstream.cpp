@@ -26,7 +26,14 @@ nlohmann::json dataSettings(const SweepConfig& c) {
           {"pairs", c.finetunePairs},
           {"eval_pairs", c.finetuneEvalPairs},
           {"resolution", c.resolution},
-          {"seed", c.seed}};
+          {"seed", c.seed},
+          {"flow_motion", c.finetuneFlowMotion}};
+}
+
+// Whether flow fine-tunes on flow-style pairs of its own (--finetune-flow-motion near).
+bool flowStylePairs(const SweepConfig& c) {
+  return c.finetuneFlowMotion == "near" &&
+         std::find(c.downstream.begin(), c.downstream.end(), "flow") != c.downstream.end();
 }
 
 // What a fine-tune is made with: one made otherwise is made again. The world size sets the
@@ -68,10 +75,12 @@ void keepOnlyIfMadeWith(const SweepConfig& c, const fs::path& dir, const nlohman
   writeFileAtomic((dir / "settings.json").string(), settings.dump(1) + "\n");
 }
 
-// ds/<part>: pairs of `scenes` with flow and depth, covis in [lo, hi], unless already there.
+// ds/<part>: pairs of `scenes` with flow and depth, covis in [lo, hi], the second view drawn by
+// `motion`, unless already there.
 std::string generateTruth(const SweepConfig& c, const std::string& part,
                           const std::vector<std::string>& scenes, int pairs, double lo, double hi,
-                          uint64_t seed) {
+                          uint64_t seed,
+                          SamplerOptions::Motion motion = SamplerOptions::Motion::kWalk) {
   GenerateConfig g;
   g.scenes = scenes;
   g.out = (fs::path(c.out) / "ds" / part).string();
@@ -83,6 +92,7 @@ std::string generateTruth(const SweepConfig& c, const std::string& part,
   g.pair.resolution = c.resolution;
   g.pair.minCovis = lo;
   g.pair.maxCovis = hi;
+  g.pair.sampler.motion = motion;
   g.saveFlow = true;
   g.saveDepth = true;
   g.progress = false;
@@ -105,15 +115,16 @@ std::map<std::string, double> covisByKey(const std::string& pattern, size_t* sam
   return covis;
 }
 
-// The mean of the finite values of `key` over pairs whose covis is in [lo, hi) (hi = 1 closed),
-// with their count.
-std::pair<double, int> meanOver(const nlohmann::json& pairs, const DownstreamData& d,
+// The mean of the finite values of `key` over pairs whose covis (in `covisByKey`) is in [lo, hi)
+// (hi = 1 closed), with their count.
+std::pair<double, int> meanOver(const nlohmann::json& pairs,
+                                const std::map<std::string, double>& covisByKey,
                                 const std::string& key, double lo, double hi) {
   double sum = 0;
   int n = 0;
   for (const auto& p : pairs) {
-    const auto it = d.heldoutCovis.find(p.value("key", ""));
-    if (it == d.heldoutCovis.end()) continue;
+    const auto it = covisByKey.find(p.value("key", ""));
+    if (it == covisByKey.end()) continue;
     const double v = numberOrNan(p, key), covis = it->second;
     const bool in = covis >= lo - 1e-9 && (covis < hi - 1e-9 || (hi >= 1 && covis <= 1));
     if (in && std::isfinite(v)) sum += v, ++n;
@@ -129,24 +140,43 @@ nlohmann::json perPair(const fs::path& dir, bool baseline) {
 }
 
 void addFlowFigures(nlohmann::json& out, const nlohmann::json& pairs, const DownstreamData& d) {
-  const double lo = kDownstreamBandLo, hi = kDownstreamBandHi;
-  out["ft_flow_aepe"] = meanOver(pairs, d, "aepe", lo, hi).first;
-  out["ft_flow_aepe_covisible"] = meanOver(pairs, d, "aepe_covisible", lo, hi).first;
-  out["ft_flow_px3"] = meanOver(pairs, d, "px3", lo, hi).first;
-  out["ft_flow_aepe_all"] = meanOver(pairs, d, "aepe", 0, 1).first;
+  const auto& covis = d.flowHeldoutCovis;
+  const double lo = d.flowBandLo, hi = d.flowBandHi;
+  out["ft_flow_aepe"] = meanOver(pairs, covis, "aepe", lo, hi).first;
+  out["ft_flow_aepe_covisible"] = meanOver(pairs, covis, "aepe_covisible", lo, hi).first;
+  out["ft_flow_px3"] = meanOver(pairs, covis, "px3", lo, hi).first;
+  out["ft_flow_aepe_all"] = meanOver(pairs, covis, "aepe", 0, 1).first;
   nlohmann::json bins = nlohmann::json::array();
   for (int b = 0; b * kDownstreamBinWidth < 1 - 1e-9; ++b) {
     const double blo = b * kDownstreamBinWidth, bhi = (b + 1) * kDownstreamBinWidth;
-    const auto [aepe, n] = meanOver(pairs, d, "aepe", blo, bhi);
+    const auto [aepe, n] = meanOver(pairs, covis, "aepe", blo, bhi);
     if (n == 0) continue;
     bins.push_back(
         {{"covis_lo", blo},
          {"covis_hi", bhi},
          {"pairs", n},
          {"ft_flow_aepe", aepe},
-         {"ft_flow_aepe_covisible", meanOver(pairs, d, "aepe_covisible", blo, bhi).first}});
+         {"ft_flow_aepe_covisible", meanOver(pairs, covis, "aepe_covisible", blo, bhi).first}});
   }
   out["ft_flow_by_covis"] = bins;
+}
+
+// ds/<train> and ds/<heldout>'s shard patterns, training pairs and held-out covis; throws
+// paircast::Error naming the folder when training has fewer pairs than a batch, or nothing is
+// held out.
+void openParts(const SweepConfig& c, const std::string& train, const std::string& heldout,
+               std::string* trainShards, std::string* heldoutShards, size_t* trainPairs,
+               std::map<std::string, double>* heldoutCovis) {
+  const fs::path ds = fs::path(c.out) / "ds";
+  *trainShards = (ds / train / "pairs-*.tar").string();
+  *heldoutShards = (ds / heldout / "pairs-*.tar").string();
+  covisByKey(*trainShards, trainPairs);
+  *heldoutCovis = covisByKey(*heldoutShards);
+  if (*trainPairs < static_cast<size_t>(c.finetuneBatch))
+    throw Error((ds / train).string(),
+                "holds " + std::to_string(*trainPairs) +
+                    " fine-tuning pairs, fewer than one batch (--finetune-batch)");
+  if (heldoutCovis->empty()) throw Error((ds / heldout).string(), "holds no held-out pairs");
 }
 
 }  // namespace
@@ -157,21 +187,28 @@ DownstreamData prepareDownstreamData(const SweepConfig& c, const std::vector<std
   // Seeds apart from the pool's (c.seed), the held-out xv pairs' (+1) and the probes' (+3).
   generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11);
   generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12);
+  if (flowStylePairs(c)) {
+    const auto near = SamplerOptions::Motion::kNear;
+    generateTruth(c, "flow-train", train, c.finetunePairs, kFlowStyleMinCovis, 1.0, c.seed + 13,
+                  near);
+    generateTruth(c, "flow-heldout", heldout, c.finetuneEvalPairs, kFlowStyleMinCovis, 1.0,
+                  c.seed + 14, near);
+  }
   return openDownstreamData(c);
 }
 
 DownstreamData openDownstreamData(const SweepConfig& c) {
   DownstreamData d;
-  d.trainShards = (fs::path(c.out) / "ds" / "train" / "pairs-*.tar").string();
-  d.heldoutShards = (fs::path(c.out) / "ds" / "heldout" / "pairs-*.tar").string();
-  covisByKey(d.trainShards, &d.trainPairs);
-  d.heldoutCovis = covisByKey(d.heldoutShards);
-  if (d.trainPairs < static_cast<size_t>(c.finetuneBatch))
-    throw Error((fs::path(c.out) / "ds" / "train").string(),
-                "holds " + std::to_string(d.trainPairs) +
-                    " fine-tuning pairs, fewer than one batch (--finetune-batch)");
-  if (d.heldoutCovis.empty())
-    throw Error((fs::path(c.out) / "ds" / "heldout").string(), "holds no held-out pairs");
+  openParts(c, "train", "heldout", &d.trainShards, &d.heldoutShards, &d.trainPairs,
+            &d.heldoutCovis);
+  if (!flowStylePairs(c)) {
+    d.flowTrainShards = d.trainShards, d.flowHeldoutShards = d.heldoutShards;
+    d.flowTrainPairs = d.trainPairs, d.flowHeldoutCovis = d.heldoutCovis;
+    return d;
+  }
+  openParts(c, "flow-train", "flow-heldout", &d.flowTrainShards, &d.flowHeldoutShards,
+            &d.flowTrainPairs, &d.flowHeldoutCovis);
+  d.flowBandLo = kFlowStyleMinCovis, d.flowBandHi = 1.0;
   return d;
 }
 
@@ -201,14 +238,16 @@ FinetuneConfig finetuneConfig(const SweepConfig& c, const CroCoConfig& mc,
   f.model.croco = mc;
   f.model.task = job.task;
   f.model.head = "linear";
-  f.data = {data.trainShards};
-  f.evalData = {data.heldoutShards};
+  const bool flow = job.task == "flow";
+  f.data = {flow ? data.flowTrainShards : data.trainShards};
+  f.evalData = {flow ? data.flowHeldoutShards : data.heldoutShards};
   f.init = job.init;
   TrainConfig& t = f.train;
   t.device = c.device;
   t.amp = c.amp;
-  setSweepSchedule(t, c.finetuneSteps, static_cast<int64_t>(data.trainPairs), c.finetuneBatch,
-                   world);
+  setSweepSchedule(t, c.finetuneSteps,
+                   static_cast<int64_t>(flow ? data.flowTrainPairs : data.trainPairs),
+                   c.finetuneBatch, world);
   t.blr = c.finetuneBlr;
   t.seed = job.seed;
   t.workers = c.workers;
@@ -241,9 +280,9 @@ nlohmann::json downstreamFigures(const SweepConfig& c, const DownstreamData& d,
     if (task == "flow") addFlowFigures(out, pairs, d);
     if (task == "depth") {
       out["ft_depth_delta1"] =
-          meanOver(pairs, d, "delta1", kDownstreamBandLo, kDownstreamBandHi).first;
+          meanOver(pairs, d.heldoutCovis, "delta1", kDownstreamBandLo, kDownstreamBandHi).first;
       out["ft_depth_absrel"] =
-          meanOver(pairs, d, "absrel", kDownstreamBandLo, kDownstreamBandHi).first;
+          meanOver(pairs, d.heldoutCovis, "absrel", kDownstreamBandLo, kDownstreamBandHi).first;
     }
   }
   return out;

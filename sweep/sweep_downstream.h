@@ -25,18 +25,28 @@ class Distributed;
 
 // The held-out band the columns are measured on, and the by-covis bins' width.
 constexpr double kDownstreamBandLo = 0.3, kDownstreamBandHi = 0.7, kDownstreamBinWidth = 0.1;
+// Flow-style pairs' least covis (as docs/finetune.md's pilot, generate_pairs --min-covis 0.6).
+constexpr double kFlowStyleMinCovis = 0.6;
 
 // The fine-tuning data, generated once (with --save-flow --save-depth) and then reused.
 struct DownstreamData {
   std::string trainShards, heldoutShards;  // glob patterns
   size_t trainPairs = 0;
   std::map<std::string, double> heldoutCovis;  // held-out pair key -> its covis
+  // Flow's pairs (--finetune-flow-motion): flow-style ones (near), or the ones above (walk); and
+  // the held-out band its columns average over (near: every flow-style pair).
+  std::string flowTrainShards, flowHeldoutShards;
+  size_t flowTrainPairs = 0;
+  std::map<std::string, double> flowHeldoutCovis;
+  double flowBandLo = kDownstreamBandLo, flowBandHi = kDownstreamBandHi;
 };
 
 // Generates ds/train (--finetune-pairs from the training scenes, covis >= 0.5, CroCo's band)
-// and ds/heldout (--finetune-eval-pairs from the held-out scenes, covis in [0.1, 1]), unless a
-// previous sweep made them with the same settings, and opens them. Throws paircast::Error naming
-// the folder when a part gives too few pairs.
+// and ds/heldout (--finetune-eval-pairs from the held-out scenes, covis in [0.1, 1]); and, when
+// flow is fine-tuned on flow-style pairs, ds/flow-train and ds/flow-heldout (as many, with
+// generate_pairs --motion near, covis >= 0.6); unless a previous sweep made them with the same
+// settings; then opens them. Throws paircast::Error naming the folder when a part gives too few
+// pairs.
 DownstreamData prepareDownstreamData(const SweepConfig& config,
                                      const std::vector<std::string>& trainScenes,
                                      const std::vector<std::string>& heldoutScenes);
@@ -74,9 +84,9 @@ void runFinetuneJob(const SweepConfig& config, const CroCoConfig& model, const D
 
 // A run's downstream figures from its fine-tunes' heldout.json: ft_flow_aepe,
 // ft_flow_aepe_covisible, ft_flow_px3, ft_depth_delta1, ft_depth_absrel (means over the held-out
-// pairs at covis 0.3-0.7), ft_flow_aepe_all (all held-out pairs) and ft_flow_by_covis (bins of
-// 0.1). With `baseline`, the trivial baseline's (zero flow, constant depth) instead. Empty for a
-// task not fine-tuned.
+// pairs at covis 0.3-0.7; flow's over every flow-style pair when it has its own), ft_flow_aepe_all
+// (all of flow's held-out pairs) and ft_flow_by_covis (bins of 0.1). With `baseline`, the trivial
+// baseline's (zero flow, constant depth) instead. Empty for a task not fine-tuned.
 nlohmann::json downstreamFigures(const SweepConfig& config, const DownstreamData& data,
                                  const std::filesystem::path& runDir, bool baseline = false);
 

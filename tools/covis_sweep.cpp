@@ -81,6 +81,10 @@ int main(int argc, char** argv) {
                  "Held-out pairs from the held-out scenes (covis 0.1-1) the fine-tunes are "
                  "measured on")
       ->check(CLI::Range(1, 10000000));
+  app.add_option("--finetune-flow-motion", c.finetuneFlowMotion,
+                 "Flow's pairs: near (flow-style pairs of their own, generate_pairs --motion near, "
+                 "covis >= 0.6, the default) or walk (the depth fine-tunes' pairs)")
+      ->check(CLI::IsMember({"near", "walk"}));
   app.add_option("--finetune-batch", c.finetuneBatch, "Pairs per fine-tuning step and process")
       ->check(CLI::Range(1, 65536));
   app.add_option("--finetune-blr", c.finetuneBlr,

@@ -230,10 +230,14 @@ std::vector<std::string> miniArgs(const std::string& out) {
           "--quiet"};  // --amp auto, as miniSweep
 }
 
+// `args` with `option` set to `value`: replaced where it is given, appended where it is not.
 std::vector<std::string> withOption(std::vector<std::string> args, const std::string& option,
                                     const std::string& value) {
   const auto it = std::find(args.begin(), args.end(), option);
-  if (it != args.end()) *(it + 1) = value;
+  if (it != args.end())
+    *(it + 1) = value;
+  else
+    args.insert(args.end(), {option, value});
   return args;
 }
 
@@ -586,10 +590,10 @@ std::map<std::string, fs::file_time_type> times(const std::string& out, bool fin
   return all;
 }
 
-// The covis of each held-out fine-tuning pair, read from its shards.
-std::map<std::string, double> heldoutCovis(const std::string& out) {
+// The covis of each pair of a fine-tuning data part (ds/<part>), read from its shards.
+std::map<std::string, double> partCovis(const std::string& out, const std::string& part) {
   std::map<std::string, double> covis;
-  for (const auto& e : fs::directory_iterator(out + "/ds/heldout"))
+  for (const auto& e : fs::directory_iterator(out + "/ds/" + part))
     if (e.path().extension() == ".tar") {
       const ShardIndex index = ShardIndex::open(e.path().string());
       for (size_t i = 0; i < index.size(); ++i) covis[index[i].key] = index[i].record.covis;
@@ -597,22 +601,27 @@ std::map<std::string, double> heldoutCovis(const std::string& out) {
   return covis;
 }
 
-// A run's column is the mean of its fine-tune's per-pair figures over the held-out pairs at
-// covis 0.3-0.7, and its by-covis bins count every held-out pair once.
+// A run's column is the mean of its fine-tune's per-pair figures over its held-out pairs: for
+// depth those at covis 0.3-0.7 of ds/heldout, for flow every flow-style pair of
+// ds/flow-heldout; and its flow bins count every flow-style held-out pair once.
 void expectColumnsFromThePairs(const nlohmann::json& row, const std::string& out,
                                const std::string& runDir) {
-  const auto covis = heldoutCovis(out);
+  const auto wide = partCovis(out, "heldout"), flowStyle = partCovis(out, "flow-heldout");
   for (const auto& [task, figure, column] :
        {std::tuple{"flow", "aepe", "ft_flow_aepe"}, std::tuple{"flow", "px3", "ft_flow_px3"},
         std::tuple{"depth", "delta1", "ft_depth_delta1"},
-        std::tuple{"flow", "aepe_covisible", "ft_flow_aepe_covisible"}}) {
+        std::tuple{"flow", "aepe_covisible", "ft_flow_aepe_covisible"},
+        std::tuple{"flow", "aepe", "ft_flow_aepe_all"}}) {
+    const bool flow = std::string(task) == "flow";
+    const auto& covis = flow ? flowStyle : wide;
+    const double lo = flow ? 0.6 : 0.3, hi = flow ? 1.01 : 0.7;
     const auto h = nlohmann::json::parse(readFile(runDir + "/finetune-" + task + "/heldout.json"));
     double sum = 0;
     int n = 0, all = 0;
     for (const auto& p : h["per_pair"]["model"]) {
       const double c = covis.at(p["key"].get<std::string>());
       ++all;
-      if (c >= 0.3 && c < 0.7 && p[figure].is_number()) sum += p[figure].get<double>(), ++n;
+      if (c >= lo && c < hi && p[figure].is_number()) sum += p[figure].get<double>(), ++n;
     }
     EXPECT_EQ(all, static_cast<int>(covis.size())) << "every held-out pair is measured";
     ASSERT_GT(n, 0) << "no held-out pair in the band";
@@ -620,7 +629,32 @@ void expectColumnsFromThePairs(const nlohmann::json& row, const std::string& out
   }
   int binned = 0;
   for (const auto& bin : row["ft_flow_by_covis"]) binned += bin["pairs"].get<int>();
-  EXPECT_EQ(binned, static_cast<int>(covis.size()));
+  EXPECT_EQ(binned, static_cast<int>(flowStyle.size()));
+}
+
+// Flow fine-tunes on flow-style pairs of its own, of the training and held-out scenes; depth on
+// the wide ones. With --finetune-flow-motion walk, flow shares depth's pairs and band.
+void expectFlowStylePairsForFlow(const SweepConfig& c) {
+  for (const char* part : {"flow-train", "flow-heldout"}) {
+    const auto index = nlohmann::json::parse(readFile(c.out + "/ds/" + part + "/index.json"));
+    EXPECT_EQ(index["motion"]["kind"], "near") << part;
+    const auto covis = partCovis(c.out, part);
+    EXPECT_EQ(covis.size(), std::string(part) == "flow-train" ? 16u : 24u) << part;
+    for (const auto& [key, value] : covis) EXPECT_GE(value, 0.6 - 1e-9) << part << " " << key;
+  }
+  EXPECT_EQ(nlohmann::json::parse(readFile(c.out + "/ds/train/index.json"))["motion"]["kind"],
+            "walk");
+  const DownstreamData near = openDownstreamData(c);
+  EXPECT_EQ(near.flowTrainShards, c.out + "/ds/flow-train/pairs-*.tar");
+  EXPECT_EQ(near.flowTrainPairs, 16u);
+  EXPECT_EQ(near.flowBandLo, 0.6);
+  SweepConfig walkConfig = c;
+  walkConfig.finetuneFlowMotion = "walk";
+  const DownstreamData walk = openDownstreamData(walkConfig);
+  EXPECT_EQ(walk.flowTrainShards, walk.trainShards);
+  EXPECT_EQ(walk.flowHeldoutCovis, walk.heldoutCovis);
+  EXPECT_EQ(walk.flowBandLo, kDownstreamBandLo);
+  EXPECT_EQ(walk.flowBandHi, kDownstreamBandHi);
 }
 
 // The real command, started from `clean`'s pre-training alone and SIGKILLed at growing delays
@@ -691,6 +725,7 @@ TEST(CovisSweep, DownstreamAddedToAFinishedSweepFineTunesOnlyWhatIsMissing) {
   }
   expectColumnsFromThePairs(r["runs"][4], out, runDir(out, "bin_0.75", 1));
   expectColumnsFromThePairs(r["random_runs"][0], out, out + "/runs/random/seed-0");
+  expectFlowStylePairsForFlow(c);
   EXPECT_EQ(r["runs"][4]["set"], "bin_0.75");
   EXPECT_EQ(r["runs"][4]["seed_index"], 1);
 
@@ -781,7 +816,16 @@ TEST(CovisSweep, FineTunesStartFromTheSeedsRandomWeightsAndMaeKeepsItsRandomDeco
   fs::create_directories(fs::path(mae.init).parent_path());
   saveCheckpoint(mae.init, pretrained, 0, {{"task", "mae"}});
   DownstreamData data;
-  data.trainPairs = 16;
+  data.trainShards = "wide/*.tar", data.heldoutShards = "wide-heldout/*.tar";
+  data.flowTrainShards = "near/*.tar", data.flowHeldoutShards = "near-heldout/*.tar";
+  data.trainPairs = data.flowTrainPairs = 16;
+  for (const FinetuneJob& job : {jobs[0], jobs[1]}) {  // flow, then depth
+    const FinetuneConfig f = finetuneConfig(c, presetConfig(c.preset), data, job, 1);
+    const bool flow = job.task == "flow";
+    EXPECT_EQ(f.data, std::vector<std::string>{flow ? "near/*.tar" : "wide/*.tar"});
+    EXPECT_EQ(f.evalData,
+              std::vector<std::string>{flow ? "near-heldout/*.tar" : "wide-heldout/*.tar"});
+  }
   torch::manual_seed(runSeed(c, 1));
   CroCoNet random(mc);
   const auto p = stateDict(pretrained), w = stateDict(random);
@@ -816,11 +860,14 @@ TEST(CovisSweep, BadDownstreamOptionsAreRefused) {
   c.downstream = {"flow", "flow"};
   EXPECT_ERROR_CONTAINS(runCovisSweep(c), "task 'flow' is given twice");
   c.downstream = {"flow"};
+  c.finetuneFlowMotion = "jump";
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "flow's pairs are near or walk, not 'jump'");
+  c.finetuneFlowMotion = "near";
   c.finetunePairs = 4;
   EXPECT_ERROR_CONTAINS(runCovisSweep(c), "fine-tuning pairs must be at least one batch (8)");
   for (const auto& [option, value] :
        {std::pair{"--downstream", "pose"}, std::pair{"--finetune-steps", "0"},
-        std::pair{"--finetune-pairs", "x"}})
+        std::pair{"--finetune-pairs", "x"}, std::pair{"--finetune-flow-motion", "jump"}})
     EXPECT_EQ(testing::runProcess(withOption(downstreamArgs(c.out), option, value)), 2) << option;
   EXPECT_FALSE(fs::exists(c.out + "/pool"));
 }
