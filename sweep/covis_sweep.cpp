@@ -505,6 +505,11 @@ std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>
   return runs;
 }
 
+bool SweepConfig::flowOnFlowStylePairs() const {
+  return finetuneFlowMotion == "near" &&
+         std::find(downstream.begin(), downstream.end(), "flow") != downstream.end();
+}
+
 void SweepConfig::validate() const {
   if (out.empty()) throw OptionError("out", "an output folder is required");
   if (scenes.empty()) throw OptionError("scenes", "give the training scenes");

@@ -50,6 +50,8 @@ std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
 struct SweepConfig {
   // Checks what a user sets; throws OptionError naming the field.
   void validate() const;
+  // Whether flow is fine-tuned, on flow-style pairs of its own (finetuneFlowMotion "near").
+  bool flowOnFlowStylePairs() const;
 
   std::vector<std::string> scenes;   // training scenes (files, folders or .txt lists)
   std::vector<std::string> heldout;  // evaluation scenes; never in training (checked)

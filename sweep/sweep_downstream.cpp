@@ -30,12 +30,6 @@ nlohmann::json dataSettings(const SweepConfig& c) {
           {"flow_motion", c.finetuneFlowMotion}};
 }
 
-// Whether flow fine-tunes on flow-style pairs of its own (--finetune-flow-motion near).
-bool flowStylePairs(const SweepConfig& c) {
-  return c.finetuneFlowMotion == "near" &&
-         std::find(c.downstream.begin(), c.downstream.end(), "flow") != c.downstream.end();
-}
-
 // What a fine-tune is made with: one made otherwise is made again. The world size sets the
 // epochs' length, and so the data order and the schedule.
 nlohmann::json jobSettings(const SweepConfig& c, const FinetuneJob& job, int world) {
@@ -187,7 +181,7 @@ DownstreamData prepareDownstreamData(const SweepConfig& c, const std::vector<std
   // Seeds apart from the pool's (c.seed), the held-out xv pairs' (+1) and the probes' (+3).
   generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11);
   generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12);
-  if (flowStylePairs(c)) {
+  if (c.flowOnFlowStylePairs()) {
     const auto near = SamplerOptions::Motion::kNear;
     generateTruth(c, "flow-train", train, c.finetunePairs, kFlowStyleMinCovis, 1.0, c.seed + 13,
                   near);
@@ -201,7 +195,7 @@ DownstreamData openDownstreamData(const SweepConfig& c) {
   DownstreamData d;
   openParts(c, "train", "heldout", &d.trainShards, &d.heldoutShards, &d.trainPairs,
             &d.heldoutCovis);
-  if (!flowStylePairs(c)) {
+  if (!c.flowOnFlowStylePairs()) {
     d.flowTrainShards = d.trainShards, d.flowHeldoutShards = d.heldoutShards;
     d.flowTrainPairs = d.trainPairs, d.flowHeldoutCovis = d.heldoutCovis;
     return d;

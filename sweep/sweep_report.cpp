@@ -505,9 +505,7 @@ const char* const kTableFineTuned[] = {"ft_flow_aepe",    "ft_flow_aepe_covisibl
 std::string downstreamParagraph(const SweepConfig& c) {
   std::string tasks;
   for (const auto& t : c.downstream) tasks += (tasks.empty() ? "" : " and ") + t;
-  const bool flowStyle =
-      c.finetuneFlowMotion == "near" &&
-      std::find(c.downstream.begin(), c.downstream.end(), "flow") != c.downstream.end();
+  const bool flowStyle = c.flowOnFlowStylePairs();
   const std::string data =
       flowStyle ? " pairs of the training scenes (flow: flow-style pairs, generate_pairs --motion "
                   "near, covis >= 0.6; depth: wide pairs, covis >= 0.5)"
