@@ -8,9 +8,14 @@ picks the runs plotted). Runs that differ only in their initialisation and seed 
 mean AEPE difference over the seeds both have, its 95 % t-interval, and the half-width as a share
 of the difference (the fine-tuning table's criterion asks for at most a quarter).
 
-    scripts/flow_pilot.py OUT [RUNS]
+    scripts/flow_pilot.py OUT [RUNS] [--max-ratio INIT=RATIO]
+
+--max-ratio makes it a test (tests/learning/flow_learns.sh): exit status 1, naming the run, when a
+finished fine-tune from INIT ends with held-out AEPE above RATIO times zero flow's, or when no
+fine-tune from INIT has finished.
 """
 
+import argparse
 import json
 import re
 import sys
@@ -105,11 +110,38 @@ def svg_plot(curves, zero, path):
     path.write_text("\n".join(out) + "\n")
 
 
+def over_ratio(rows, init, most):
+    """The failures of --max-ratio INIT=MOST among the table's rows, one line each."""
+    mine = [r for r in rows if (m := NAME.match(r[0])) and m["init"] == init]
+    if not mine:
+        return [f"flow_pilot: no finished fine-tune from {init}"]
+    return [f"flow_pilot: {r[0]}: held-out AEPE {r[1]:.3f} px is {r[3]:.3f} of zero flow's "
+            f"{r[2]:.3f}, above {most}" for r in mine if r[3] > most]
+
+
+def parse_args():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("runs", nargs="?", help="comma-separated substrings of the runs plotted")
+    parser.add_argument("--max-ratio", metavar="INIT=RATIO")
+    args = parser.parse_args()
+    if args.max_ratio:
+        init, _, ratio = args.max_ratio.partition("=")
+        try:
+            args.max_ratio = (init, float(ratio))
+        except ValueError:
+            parser.error(f"--max-ratio wants INIT=RATIO, not '{args.max_ratio}'")
+        if init not in INIT_ORDER:
+            parser.error(f"--max-ratio: unknown initialisation '{init}' (one of {INIT_ORDER})")
+    return args
+
+
 def main():
-    if len(sys.argv) not in (2, 3):
-        print(__doc__, file=sys.stderr)
-        return 2
-    out = Path(sys.argv[1])
+    args = parse_args()
+    out = args.out
+    if not (out / "finetune").is_dir():
+        print(f"flow_pilot: {out / 'finetune'}: no such folder", file=sys.stderr)
+        return 1
     rows, curves, zero = [], {}, None
     for run in sorted((out / "finetune").iterdir()):
         heldout = run / "heldout.json"
@@ -131,13 +163,16 @@ def main():
     lines += paired({r[0]: r[1] for r in rows})
     (out / "pilot.md").write_text("\n".join(lines) + "\n")
     (out / "curves.json").write_text(json.dumps(curves, indent=1) + "\n")
-    picked = sys.argv[2].split(",") if len(sys.argv) == 3 else None
+    picked = args.runs.split(",") if args.runs else None
     if zero is not None:
         shown = {name: points for name, points in curves.items()
                  if picked is None or any(p in name for p in picked)}
         svg_plot(shown, zero, out / "curves.svg")
     print("\n".join(lines))
-    return 0
+    failures = over_ratio(rows, *args.max_ratio) if args.max_ratio else []
+    for failure in failures:
+        print(failure, file=sys.stderr)
+    return 1 if failures else 0
 
 
 if __name__ == "__main__":

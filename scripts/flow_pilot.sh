@@ -24,7 +24,9 @@
 # --seed 6, in pre-training alone; "+N" in the names), FLOW_PAIRS
 # (default 400: flow-style pairs a training scene), WIDE_PAIRS (wide pre-training pairs a
 # training scene; default 400 with no floor plans, else 150), POS_EMBED (default cosine;
-# RoPE100: CroCo v2's positions, in the run names).
+# RoPE100: CroCo v2's positions, in the run names), MAX_RATIO (INIT=RATIO: fail, exit status 1,
+# when a fine-tune from INIT ends above RATIO times zero flow's held-out AEPE; see
+# tests/learning/flow_learns.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/flow_pilot.sh OUT}
@@ -85,6 +87,7 @@ pairs flow-heldout 100 --motion near --min-covis 0.6 -- scenes/studio
 
 for patch in "${patches[@]}"; do
   for task in croco mae; do
+    [[ " ${inits[*]} " == *" $task "* ]] || continue  # only the checkpoints a fine-tune starts from
     run="$out/pretrain-$task-p$patch$pe-s$pretrain_steps-$plans"
     [[ -f "$run/summary.json" ]] ||
       "$bin/pretrain" --data "${pretrain_data[@]}" --task "$task" --preset tiny --img-size 64 \
@@ -118,4 +121,4 @@ for seed in "${seeds[@]}"; do
     done
   done
 done
-python3 scripts/flow_pilot.py "$out"
+python3 scripts/flow_pilot.py "$out" ${MAX_RATIO:+--max-ratio "$MAX_RATIO"}

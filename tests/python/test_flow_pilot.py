@@ -75,3 +75,42 @@ def test_other_budgets_and_unfinished_runs_are_not_paired(tmp_path):
     table = [line for line in text.splitlines() if line.startswith("| p16")]
     assert len(table) == 4
     assert f"| {name('croco', 0, 's20000-f40+80-n150-30000')} | 2.700 | 5.500 | 0.491 |" in text
+
+
+def max_ratio(out, *args):
+    return subprocess.run([sys.executable, str(SCRIPT), str(out), *args], capture_output=True,
+                          text=True)
+
+
+def test_max_ratio_fails_naming_each_run_above_it(tmp_path):
+    fake_run(tmp_path, name("croco", 0), 3.80)  # 0.691 of zero flow's 5.5
+    fake_run(tmp_path, name("croco", 1), 3.90)  # 0.709
+    fake_run(tmp_path, name("random", 0), 5.00)  # 0.909: another initialisation, not checked
+    done = max_ratio(tmp_path, "--max-ratio", "croco=0.7")
+    assert done.returncode == 1
+    failures = done.stderr.strip().splitlines()
+    assert failures == [f"flow_pilot: {name('croco', 1)}: held-out AEPE 3.900 px is 0.709 of "
+                        "zero flow's 5.500, above 0.7"]
+    assert (tmp_path / "pilot.md").exists()  # the table is written either way
+    assert max_ratio(tmp_path, "--max-ratio", "croco=0.71").returncode == 0
+    assert max_ratio(tmp_path, "--max-ratio", "random=0.91").returncode == 0
+    assert max_ratio(tmp_path, "--max-ratio", "random=0.91").stderr == ""
+
+
+def test_max_ratio_fails_when_no_run_of_the_init_finished(tmp_path):
+    fake_run(tmp_path, name("random", 0), 5.0)
+    (tmp_path / "finetune" / name("croco", 0)).mkdir()  # killed before its held-out figures
+    done = max_ratio(tmp_path, "--max-ratio", "croco=0.7")
+    assert done.returncode == 1
+    assert done.stderr.strip() == "flow_pilot: no finished fine-tune from croco"
+
+
+def test_max_ratio_refuses_bad_values(tmp_path):
+    fake_run(tmp_path, name("croco", 0), 3.0)
+    for bad in ("croco", "croco=", "croco=small", "dino=0.7"):
+        done = max_ratio(tmp_path, "--max-ratio", bad)
+        assert done.returncode == 2, bad
+        assert "--max-ratio" in done.stderr.splitlines()[-1]
+    done = max_ratio(tmp_path / "absent", "--max-ratio", "croco=0.7")
+    assert done.returncode == 1
+    assert done.stderr.strip() == f"flow_pilot: {tmp_path / 'absent' / 'finetune'}: no such folder"
