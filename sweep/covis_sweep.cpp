@@ -510,6 +510,13 @@ bool SweepConfig::flowOnFlowStylePairs() const {
          std::find(downstream.begin(), downstream.end(), "flow") != downstream.end();
 }
 
+bool SweepConfig::finetunesOnWidePairs() const {
+  const auto has = [&](const char* task) {
+    return std::find(downstream.begin(), downstream.end(), task) != downstream.end();
+  };
+  return has("depth") || (has("flow") && !flowOnFlowStylePairs());
+}
+
 void SweepConfig::validate() const {
   if (out.empty()) throw OptionError("out", "an output folder is required");
   if (scenes.empty()) throw OptionError("scenes", "give the training scenes");

@@ -52,6 +52,9 @@ struct SweepConfig {
   void validate() const;
   // Whether flow is fine-tuned, on flow-style pairs of its own (finetuneFlowMotion "near").
   bool flowOnFlowStylePairs() const;
+  // Whether a fine-tune reads depth's wide pairs (ds/train, ds/heldout): depth is fine-tuned, or
+  // flow is, on those pairs (finetuneFlowMotion "walk").
+  bool finetunesOnWidePairs() const;
 
   std::vector<std::string> scenes;   // training scenes (files, folders or .txt lists)
   std::vector<std::string> heldout;  // evaluation scenes; never in training (checked)

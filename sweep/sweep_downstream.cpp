@@ -179,8 +179,10 @@ DownstreamData prepareDownstreamData(const SweepConfig& c, const std::vector<std
                                      const std::vector<std::string>& heldout) {
   keepOnlyIfMadeWith(c, fs::path(c.out) / "ds", dataSettings(c));
   // Seeds apart from the pool's (c.seed), the held-out xv pairs' (+1) and the probes' (+3).
-  generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11);
-  generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12);
+  if (c.finetunesOnWidePairs()) {
+    generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11);
+    generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12);
+  }
   if (c.flowOnFlowStylePairs()) {
     const auto near = SamplerOptions::Motion::kNear;
     generateTruth(c, "flow-train", train, c.finetunePairs, kFlowStyleMinCovis, 1.0, c.seed + 13,
@@ -193,8 +195,9 @@ DownstreamData prepareDownstreamData(const SweepConfig& c, const std::vector<std
 
 DownstreamData openDownstreamData(const SweepConfig& c) {
   DownstreamData d;
-  openParts(c, "train", "heldout", &d.trainShards, &d.heldoutShards, &d.trainPairs,
-            &d.heldoutCovis);
+  if (c.finetunesOnWidePairs())
+    openParts(c, "train", "heldout", &d.trainShards, &d.heldoutShards, &d.trainPairs,
+              &d.heldoutCovis);
   if (!c.flowOnFlowStylePairs()) {
     d.flowTrainShards = d.trainShards, d.flowHeldoutShards = d.heldoutShards;
     d.flowTrainPairs = d.trainPairs, d.flowHeldoutCovis = d.heldoutCovis;

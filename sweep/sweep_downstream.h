@@ -42,7 +42,8 @@ struct DownstreamData {
 };
 
 // Generates ds/train (--finetune-pairs from the training scenes, covis >= 0.5, CroCo's band)
-// and ds/heldout (--finetune-eval-pairs from the held-out scenes, covis in [0.1, 1]); and, when
+// and ds/heldout (--finetune-eval-pairs from the held-out scenes, covis in [0.1, 1]) when a
+// fine-tune reads them (SweepConfig::finetunesOnWidePairs); and, when
 // flow is fine-tuned on flow-style pairs, ds/flow-train and ds/flow-heldout (as many, with
 // generate_pairs --motion near, covis >= 0.6); unless a previous sweep made them with the same
 // settings; then opens them. Throws paircast::Error naming the folder when a part gives too few
@@ -51,6 +52,7 @@ DownstreamData prepareDownstreamData(const SweepConfig& config,
                                      const std::vector<std::string>& trainScenes,
                                      const std::vector<std::string>& heldoutScenes);
 // Opens the data rank 0 prepared (the other ranks of a multi-process sweep), without writing.
+// The parts no fine-tune reads are left closed: their fields stay empty.
 DownstreamData openDownstreamData(const SweepConfig& config);
 
 // One fine-tune: a task from a run's checkpoint, or from a seed's random weights.

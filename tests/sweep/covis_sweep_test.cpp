@@ -792,6 +792,50 @@ TEST(CovisSweep, DownstreamAddedToAFinishedSweepFineTunesOnlyWhatIsMissing) {
   }
 }
 
+// Only the parts a fine-tune reads are rendered: flow alone on flow-style pairs makes no wide
+// pairs; adding depth makes them and keeps flow's; flow on wide pairs ("walk") needs them.
+TEST(CovisSweep, FineTuningDataHoldsOnlyThePartsItsTasksRead) {
+  SweepConfig c = downstreamSweep(testing::scratchDir("ds_parts"));
+  const auto made = [&] {
+    std::set<std::string> parts;
+    for (const auto& e : fs::directory_iterator(c.out + "/ds"))
+      if (fs::exists(e.path() / "summary.json")) parts.insert(e.path().filename().string());
+    return parts;
+  };
+  const auto written = [&](const std::string& part) {  // each file of ds/<part>, with its time
+    std::map<std::string, fs::file_time_type> files;
+    for (const auto& e : fs::directory_iterator(c.out + "/ds/" + part))
+      files[e.path().string()] = fs::last_write_time(e.path());
+    return files;
+  };
+  c.downstream = {"flow"};
+  EXPECT_FALSE(c.finetunesOnWidePairs());
+  const DownstreamData flow = prepareDownstreamData(c, c.scenes, c.heldout);
+  EXPECT_EQ(made(), (std::set<std::string>{"flow-heldout", "flow-train"}));
+  EXPECT_EQ(flow.flowTrainPairs, 16u);
+  EXPECT_EQ(flow.flowHeldoutCovis.size(), 24u);
+  EXPECT_EQ(flow.trainShards, "");
+  EXPECT_EQ(flow.trainPairs, 0u);
+  EXPECT_TRUE(flow.heldoutCovis.empty());
+  const auto flowFiles = written("flow-train");
+
+  c.downstream = {"flow", "depth"};
+  EXPECT_TRUE(c.finetunesOnWidePairs());
+  const DownstreamData both = prepareDownstreamData(c, c.scenes, c.heldout);
+  EXPECT_EQ(made(), (std::set<std::string>{"flow-heldout", "flow-train", "heldout", "train"}));
+  EXPECT_EQ(both.trainPairs, 16u);
+  EXPECT_EQ(both.heldoutCovis.size(), 24u);
+  EXPECT_EQ(both.flowHeldoutCovis, flow.flowHeldoutCovis);  // flow's pairs were kept
+  EXPECT_EQ(written("flow-train"), flowFiles);
+
+  c.downstream = {"depth"};
+  EXPECT_TRUE(c.finetunesOnWidePairs());
+  c.downstream = {"flow"};
+  c.finetuneFlowMotion = "walk";
+  EXPECT_TRUE(c.finetunesOnWidePairs());
+  EXPECT_EQ(openDownstreamData(c).flowTrainShards, c.out + "/ds/train/pairs-*.tar");
+}
+
 TEST(CovisSweep, FineTunesStartFromTheSeedsRandomWeightsAndMaeKeepsItsRandomDecoder) {
   SweepConfig c = downstreamSweep(testing::scratchDir("ds_init"));
   c.downstream = {"flow", "depth"};
