@@ -8,15 +8,18 @@ picks the runs plotted). Runs that differ only in their initialisation and seed 
 mean AEPE difference over the seeds both have, its 95 % t-interval, and the half-width as a share
 of the difference (the fine-tuning table's criterion asks for at most a quarter).
 
-    scripts/flow_pilot.py OUT [RUNS] [--max-ratio INIT=RATIO]
+    scripts/flow_pilot.py OUT [RUNS] [--max-ratio INIT=RATIO [--check-runs NAMES]]
 
 --max-ratio makes it a test (tests/learning/flow_learns.sh): exit status 1, naming the run, when a
 finished fine-tune from INIT ends with held-out AEPE above RATIO times zero flow's, or when no
-fine-tune from INIT has finished.
+fine-tune from INIT has finished. --check-runs (a comma-separated list of run names, as
+flow_pilot.sh passes the runs it was asked for) checks those runs alone, each of which must have
+finished, so that other runs kept in OUT do not count.
 """
 
 import argparse
 import json
+import math
 import re
 import sys
 from pathlib import Path
@@ -110,9 +113,15 @@ def svg_plot(curves, zero, path):
     path.write_text("\n".join(out) + "\n")
 
 
-def over_ratio(rows, init, most):
-    """The failures of --max-ratio INIT=MOST among the table's rows, one line each."""
-    mine = [r for r in rows if (m := NAME.match(r[0])) and m["init"] == init]
+def over_ratio(rows, init, most, names=None):
+    """The failures of --max-ratio INIT=MOST among the table's rows (those named in `names`, when
+    given, each of which must be there), one line each."""
+    is_init = lambda name: (m := NAME.match(name)) is not None and m["init"] == init
+    finished = {r[0] for r in rows}
+    missing = [n for n in names or [] if is_init(n) and n not in finished]
+    mine = [r for r in rows if is_init(r[0]) and (names is None or r[0] in names)]
+    if missing:
+        return [f"flow_pilot: {n}: not finished (no heldout.json)" for n in missing]
     if not mine:
         return [f"flow_pilot: no finished fine-tune from {init}"]
     return [f"flow_pilot: {r[0]}: held-out AEPE {r[1]:.3f} px is {r[3]:.3f} of zero flow's "
@@ -124,13 +133,20 @@ def parse_args():
     parser.add_argument("out", type=Path)
     parser.add_argument("runs", nargs="?", help="comma-separated substrings of the runs plotted")
     parser.add_argument("--max-ratio", metavar="INIT=RATIO")
+    parser.add_argument("--check-runs", metavar="NAMES")
     args = parser.parse_args()
+    if args.check_runs is not None and not args.max_ratio:
+        parser.error("--check-runs needs --max-ratio")
+    args.check_runs = args.check_runs.split(",") if args.check_runs else None
     if args.max_ratio:
         init, _, ratio = args.max_ratio.partition("=")
         try:
-            args.max_ratio = (init, float(ratio))
+            value = float(ratio)
         except ValueError:
-            parser.error(f"--max-ratio wants INIT=RATIO, not '{args.max_ratio}'")
+            value = math.nan
+        if not math.isfinite(value) or value <= 0:
+            parser.error(f"--max-ratio wants INIT=RATIO with RATIO > 0, not '{args.max_ratio}'")
+        args.max_ratio = (init, value)
         if init not in INIT_ORDER:
             parser.error(f"--max-ratio: unknown initialisation '{init}' (one of {INIT_ORDER})")
     return args
@@ -169,7 +185,7 @@ def main():
                  if picked is None or any(p in name for p in picked)}
         svg_plot(shown, zero, out / "curves.svg")
     print("\n".join(lines))
-    failures = over_ratio(rows, *args.max_ratio) if args.max_ratio else []
+    failures = over_ratio(rows, *args.max_ratio, args.check_runs) if args.max_ratio else []
     for failure in failures:
         print(failure, file=sys.stderr)
     return 1 if failures else 0

@@ -10,10 +10,10 @@
 # Steps (each skipped when its output exists, so a killed run continues): wide pre-training pairs
 # of the training scenes (covis >= 0.5, as finetune_table.sh); flow-style pairs of the same
 # scenes (training) and of the studio (held out); pre-training on cross-view completion and on
-# auto-completion (mae) for each patch size, on the wide pairs of every training scene (on two
-# scenes, cross-view completion memorises them: bench/croco_reference_probe.py); the
-# fine-tunes; last, OUT/pilot.md (the table) and OUT/curves.json (held-out AEPE against steps,
-# from each fine-tune's log.jsonl).
+# auto-completion (mae), those INITS starts from, for each patch size, on the wide pairs of
+# every training scene (on two scenes, cross-view completion memorises them:
+# bench/croco_reference_probe.py); the fine-tunes; last, OUT/pilot.md (the table) and
+# OUT/curves.json (held-out AEPE against steps, from each fine-tune's log.jsonl).
 # Environment: BUILD_DIR (default build), PATCHES (default "8 16"), SCALES (default "0 1": 0 is
 # finetune's default flow scale, img_size / 16; 1 regresses pixels), PRETRAIN_STEPS (default
 # 1000, of 16 pairs), FINETUNE_STEPS (default 800, of 8 pairs), EVAL_EVERY (default 100),
@@ -25,8 +25,8 @@
 # (default 400: flow-style pairs a training scene), WIDE_PAIRS (wide pre-training pairs a
 # training scene; default 400 with no floor plans, else 150), POS_EMBED (default cosine;
 # RoPE100: CroCo v2's positions, in the run names), MAX_RATIO (INIT=RATIO: fail, exit status 1,
-# when a fine-tune from INIT ends above RATIO times zero flow's held-out AEPE; see
-# tests/learning/flow_learns.sh).
+# when a fine-tune from INIT that this call names ends above RATIO times zero flow's held-out
+# AEPE; see tests/learning/flow_learns.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: scripts/flow_pilot.sh OUT}
@@ -103,6 +103,7 @@ finetune() {  # SEED PATCH SCALE INIT: one fine-tune, unless it is done
   local seed=$1 patch=$2 scale=$3 init=$4
   local run="$out/finetune/p$patch$pe-scale$scale-$init-s$pretrain_steps-$plans-n$flow_pairs-$finetune_steps"
   ((seed > 0)) && run+=-seed$seed
+  runs_asked+=("$(basename "$run")")
   [[ -f "$run/heldout.json" ]] && return
   local ckpt=random
   [[ $init != random ]] && ckpt="$out/pretrain-$init-p$patch$pe-s$pretrain_steps-$plans/checkpoint-last.pth"
@@ -114,6 +115,7 @@ finetune() {  # SEED PATCH SCALE INIT: one fine-tune, unless it is done
     --eval-every "$eval_every" --seed "$seed" --out "$run" --quiet > /dev/null
   echo "flow_pilot: fine-tuned p$patch-s$scale-$init, seed $seed" >&2
 }
+runs_asked=()
 for seed in "${seeds[@]}"; do
   for patch in "${patches[@]}"; do
     for scale in "${scales[@]}"; do
@@ -121,4 +123,8 @@ for seed in "${seeds[@]}"; do
     done
   done
 done
-python3 scripts/flow_pilot.py "$out" ${MAX_RATIO:+--max-ratio "$MAX_RATIO"}
+check=()
+if [[ -n ${MAX_RATIO:-} ]]; then
+  check=(--max-ratio "$MAX_RATIO" --check-runs "$(IFS=,; echo "${runs_asked[*]}")")
+fi
+python3 scripts/flow_pilot.py "$out" "${check[@]}"

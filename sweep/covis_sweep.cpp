@@ -505,16 +505,16 @@ std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>
   return runs;
 }
 
+bool SweepConfig::finetunes(const std::string& task) const {
+  return std::find(downstream.begin(), downstream.end(), task) != downstream.end();
+}
+
 bool SweepConfig::flowOnFlowStylePairs() const {
-  return finetuneFlowMotion == "near" &&
-         std::find(downstream.begin(), downstream.end(), "flow") != downstream.end();
+  return finetuneFlowMotion == "near" && finetunes("flow");
 }
 
 bool SweepConfig::finetunesOnWidePairs() const {
-  const auto has = [&](const char* task) {
-    return std::find(downstream.begin(), downstream.end(), task) != downstream.end();
-  };
-  return has("depth") || (has("flow") && !flowOnFlowStylePairs());
+  return finetunes("depth") || (finetunes("flow") && !flowOnFlowStylePairs());
 }
 
 void SweepConfig::validate() const {

@@ -50,6 +50,8 @@ std::vector<std::vector<size_t>> drawSets(const std::vector<double>& poolCovis,
 struct SweepConfig {
   // Checks what a user sets; throws OptionError naming the field.
   void validate() const;
+  // Whether `task` (flow or depth) is in --downstream.
+  bool finetunes(const std::string& task) const;
   // Whether flow is fine-tuned, on flow-style pairs of its own (finetuneFlowMotion "near").
   bool flowOnFlowStylePairs() const;
   // Whether a fine-tune reads depth's wide pairs (ds/train, ds/heldout): depth is fine-tuned, or

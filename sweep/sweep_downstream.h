@@ -1,10 +1,12 @@
 // The downstream stage of covis_sweep (--downstream flow,depth): every run's checkpoint, and
 // each seed's random weights, fine-tuned with the same budget through the finetune command's
 // code (finetune/finetune.h), then measured on held-out pairs, as CroCo's paper judges its
-// pre-training. One fixed set of fine-tuning pairs with flow and depth comes from the training
-// scenes (ds/train); the held-out pairs come from the held-out scenes at covis 0.1-1
-// (ds/heldout). The figures of the columns are over the held-out pairs at covis 0.3-0.7; the
-// whole range goes into the by-covis breakdown. Each fine-tune is a folder of its run
+// pre-training. Fixed sets of fine-tuning pairs with flow and depth come from the training
+// scenes: depth's wide pairs (ds/train), and flow's flow-style pairs (ds/flow-train) unless
+// --finetune-flow-motion walk gives flow depth's; the held-out pairs, of the same kinds, from the
+// held-out scenes (ds/heldout at covis 0.1-1, ds/flow-heldout). Depth's columns are over its
+// held-out pairs at covis 0.3-0.7, flow's over every flow-style pair; the whole range goes into
+// the by-covis breakdown. Each fine-tune is a folder of its run
 // (finetune-<task>/), kept and reused like the runs, so a killed sweep resumes fine-tune by
 // fine-tune.
 #pragma once

@@ -501,29 +501,6 @@ const char* const kTableFineTuned[] = {"ft_flow_aepe",    "ft_flow_aepe_covisibl
                                        "ft_flow_px3",     "ft_flow_aepe_all",
                                        "ft_depth_delta1", "ft_depth_absrel"};
 
-// What the fine-tunes were, for the page.
-std::string downstreamParagraph(const SweepConfig& c) {
-  std::string tasks;
-  for (const auto& t : c.downstream) tasks += (tasks.empty() ? "" : " and ") + t;
-  const bool flowStyle = c.flowOnFlowStylePairs();
-  const std::string data =
-      flowStyle ? " pairs of the training scenes (flow: flow-style pairs, generate_pairs --motion "
-                  "near, covis >= 0.6; depth: wide pairs, covis >= 0.5)"
-                : " pairs of the training scenes (covis >= 0.5)";
-  const std::string measured =
-      flowStyle ? "Measured on held-out pairs of the same kinds: flow on every flow-style pair, "
-                  "depth at covis 0.3-0.7"
-                : "Measured on held-out pairs at covis 0.3-0.7 (ft_flow_aepe_all: 0.1-1)";
-  return html::paragraph(
-      "Fine-tuned (columns ft_*): every run, and each seed's random weights (fine-tuned from "
-      "scratch on the fine-tuning data alone), for " +
-      tasks + " with the linear heads, " + std::to_string(c.finetuneSteps) + " steps of " +
-      std::to_string(c.finetuneBatch) + " on " + std::to_string(c.finetunePairs) + data +
-      ", the same data order, crops and jitter for every run of a seed; mae keeps its encoder "
-      "and the seed's random decoder. " +
-      measured + "; the floor row is zero flow and a constant depth.");
-}
-
 // summary.html: what was trained, the verdicts, the plots, and the table of sets and baselines.
 std::string summaryPage(const SweepConfig& c, const nlohmann::json& results) {
   const nlohmann::json& rows = results.at("rows");
@@ -710,6 +687,34 @@ std::string downstreamByCovisPlot(const nlohmann::json& rows) {
 }
 
 }  // namespace
+
+std::string downstreamParagraph(const SweepConfig& c) {
+  std::string tasks, kinds, bands;
+  const auto add = [](std::string& list, const std::string& sep, const std::string& item) {
+    list += (list.empty() ? "" : sep) + item;
+  };
+  for (const auto& t : c.downstream) add(tasks, " and ", t);
+  if (c.flowOnFlowStylePairs()) {
+    add(kinds, "; ", "flow: flow-style pairs, generate_pairs --motion near, covis >= 0.6");
+    add(bands, ", ", "flow on every flow-style pair");
+  } else if (c.finetunes("flow")) {
+    add(kinds, "; ", "flow: wide pairs, covis >= 0.5");
+    add(bands, ", ", "flow at covis 0.3-0.7 (ft_flow_aepe_all: 0.1-1)");
+  }
+  if (c.finetunes("depth")) {
+    add(kinds, "; ", "depth: wide pairs, covis >= 0.5");
+    add(bands, ", ", "depth at covis 0.3-0.7");
+  }
+  return html::paragraph(
+      "Fine-tuned (columns ft_*): every run, and each seed's random weights (fine-tuned from "
+      "scratch on the fine-tuning data alone), for " +
+      tasks + " with the linear heads, " + std::to_string(c.finetuneSteps) + " steps of " +
+      std::to_string(c.finetuneBatch) + " on " + std::to_string(c.finetunePairs) +
+      " pairs of the training scenes (" + kinds +
+      "), the same data order, crops and jitter for every run of a seed; mae keeps its encoder "
+      "and the seed's random decoder. Measured on held-out pairs of the same kinds: " +
+      bands + "; the floor row is zero flow and a constant depth.");
+}
 
 const std::vector<std::string>& sweepMetrics() {
   static const std::vector<std::string> metrics = [] {

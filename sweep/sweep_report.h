@@ -37,5 +37,8 @@ std::vector<std::string> sweepVerdicts(const nlohmann::json& results);
 // "runs"), "runs", "random_encoder" (aggregated), "random_runs", "constant_depth" (probe_*),
 // "verdicts" and "config"; results.json holds `results` itself.
 void writeSweepReport(const SweepConfig& config, const nlohmann::json& results);
+// The page's paragraph on the fine-tunes (--downstream): the tasks, the budget, the pairs each
+// task trains on and the held-out pairs its columns average over.
+std::string downstreamParagraph(const SweepConfig& config);
 
 }  // namespace paircast

@@ -18,6 +18,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=${1:-${BUILD_DIR:-build}/learning/flow}
 PATCHES=16 SCALES=0 INITS=croco PRETRAIN_STEPS=20000 FINETUNE_STEPS=20000 EVAL_EVERY=1000 \
-  FLOORPLANS=40 PRETRAIN_FLOORPLANS=80 FLOW_PAIRS=150 SEEDS=${SEEDS:-0} \
+  FLOORPLANS=40 PRETRAIN_FLOORPLANS=80 FLOW_PAIRS=150 WIDE_PAIRS=150 POS_EMBED=cosine \
+  SEEDS=${SEEDS:-0} \
   MAX_RATIO=${MAX_RATIO:-croco=0.7} scripts/flow_pilot.sh "$out"
 echo "flow_learns: passed; the table is $out/pilot.md"

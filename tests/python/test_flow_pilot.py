@@ -107,10 +107,32 @@ def test_max_ratio_fails_when_no_run_of_the_init_finished(tmp_path):
 
 def test_max_ratio_refuses_bad_values(tmp_path):
     fake_run(tmp_path, name("croco", 0), 3.0)
-    for bad in ("croco", "croco=", "croco=small", "dino=0.7"):
+    for bad in ("croco", "croco=", "croco=small", "dino=0.7", "croco=nan", "croco=inf",
+                "croco=0", "croco=-1"):
         done = max_ratio(tmp_path, "--max-ratio", bad)
         assert done.returncode == 2, bad
         assert "--max-ratio" in done.stderr.splitlines()[-1]
     done = max_ratio(tmp_path / "absent", "--max-ratio", "croco=0.7")
     assert done.returncode == 1
     assert done.stderr.strip() == f"flow_pilot: {tmp_path / 'absent' / 'finetune'}: no such folder"
+    done = max_ratio(tmp_path, "--check-runs", name("croco", 0))
+    assert done.returncode == 2
+    assert "--check-runs needs --max-ratio" in done.stderr
+
+
+def test_check_runs_checks_the_runs_named_alone(tmp_path):
+    fake_run(tmp_path, name("croco", 0), 3.0)  # 0.545: this call's run
+    fake_run(tmp_path, name("croco", 0, "s20000-f40+80-n150-800"), 5.0)  # another budget's, 0.909
+    this = name("croco", 0)
+    assert max_ratio(tmp_path, "--max-ratio", "croco=0.7").returncode == 1
+    assert max_ratio(tmp_path, "--max-ratio", "croco=0.7", "--check-runs", this).returncode == 0
+    # A named run of the init that has not finished fails, even when another one passes.
+    unfinished = name("croco", 1)
+    (tmp_path / "finetune" / unfinished).mkdir()
+    done = max_ratio(tmp_path, "--max-ratio", "croco=0.7", "--check-runs", f"{this},{unfinished}")
+    assert done.returncode == 1
+    assert done.stderr.strip() == f"flow_pilot: {unfinished}: not finished (no heldout.json)"
+    # Runs of other initialisations in the list are not checked.
+    done = max_ratio(tmp_path, "--max-ratio", "croco=0.7", "--check-runs",
+                     f"{this},{name('random', 1)}")
+    assert done.returncode == 0, done.stderr

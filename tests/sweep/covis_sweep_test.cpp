@@ -836,6 +836,50 @@ TEST(CovisSweep, FineTuningDataHoldsOnlyThePartsItsTasksRead) {
   EXPECT_EQ(openDownstreamData(c).flowTrainShards, c.out + "/ds/train/pairs-*.tar");
 }
 
+// The page names, for each task fine-tuned and only for those, the pairs it trains on and the
+// held-out pairs its columns average over.
+TEST(CovisSweep, DownstreamParagraphDescribesTheTasksThatRan) {
+  SweepConfig c = downstreamSweep("unused");
+  const std::string flowStyle =
+                        "flow: flow-style pairs, generate_pairs --motion near, covis >= 0.6",
+                    flowWide = "flow: wide pairs, covis >= 0.5",
+                    depth = "depth: wide pairs, covis >= 0.5";
+  const auto has = [](const std::string& text, const std::string& part) {
+    return text.find(part) != std::string::npos;
+  };
+  c.downstream = {"flow"};
+  std::string text = downstreamParagraph(c);
+  EXPECT_TRUE(has(text,
+                  "for flow with the linear heads, 4 steps of 8 on 16 pairs of the "
+                  "training scenes (" +
+                      flowStyle + "), "))
+      << text;
+  EXPECT_TRUE(has(text,
+                  "Measured on held-out pairs of the same kinds: flow on every "
+                  "flow-style pair; "))
+      << text;
+  EXPECT_FALSE(has(text, "depth:")) << text;
+
+  c.downstream = {"flow", "depth"};
+  text = downstreamParagraph(c);
+  EXPECT_TRUE(has(text, "for flow and depth with")) << text;
+  EXPECT_TRUE(has(text, "(" + flowStyle + "; " + depth + "), ")) << text;
+  EXPECT_TRUE(has(text, ": flow on every flow-style pair, depth at covis 0.3-0.7; ")) << text;
+
+  c.finetuneFlowMotion = "walk";
+  text = downstreamParagraph(c);
+  EXPECT_TRUE(has(text, "(" + flowWide + "; " + depth + "), ")) << text;
+  EXPECT_TRUE(has(text,
+                  ": flow at covis 0.3-0.7 (ft_flow_aepe_all: 0.1-1), depth at covis "
+                  "0.3-0.7; "))
+      << text;
+
+  c.downstream = {"depth"};
+  text = downstreamParagraph(c);
+  EXPECT_TRUE(has(text, "(" + depth + "), ")) << text;
+  EXPECT_FALSE(has(text, "flow:")) << text;
+}
+
 TEST(CovisSweep, FineTunesStartFromTheSeedsRandomWeightsAndMaeKeepsItsRandomDecoder) {
   SweepConfig c = downstreamSweep(testing::scratchDir("ds_init"));
   c.downstream = {"flow", "depth"};
