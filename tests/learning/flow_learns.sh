@@ -9,7 +9,7 @@
 #
 #   tests/learning/flow_learns.sh [OUT]      (default OUT: BUILD_DIR/learning/flow)
 #
-# About 75 minutes on 2 cores, so it is not in the suite that scripts/test.sh and CI run (75
+# About 40 minutes on 2 cores alone, so it is not in the suite that scripts/test.sh and CI run (75
 # minutes in all for two Debian releases); docs/releases.md says when to run it. Every stage is
 # kept in OUT: a killed run continues where it stopped, and a second run only checks.
 # Environment: BUILD_DIR (default build, built by scripts/build.sh), MAX_RATIO (default
