@@ -190,12 +190,16 @@ std::string signedInterval(const Interval& d) {
   return b;
 }
 
+// The items with `sep` between each two.
+std::string joined(const std::vector<std::string>& items, const std::string& sep) {
+  std::string s;
+  for (const auto& i : items) s += (s.empty() ? "" : sep) + i;
+  return s;
+}
+
 // "bin_0.15 (-0.030 ± 0.012), mae (-0.041 ± 0.009)", or "none".
 std::string listOf(const std::vector<std::string>& items) {
-  if (items.empty()) return "none";
-  std::string s;
-  for (const auto& i : items) s += (s.empty() ? "" : ", ") + i;
-  return s;
+  return items.empty() ? "none" : joined(items, ", ");
 }
 
 // Against the best set and against the random encoder, for one metric. The completion loss of
@@ -689,31 +693,27 @@ std::string downstreamByCovisPlot(const nlohmann::json& rows) {
 }  // namespace
 
 std::string downstreamParagraph(const SweepConfig& c) {
-  std::string tasks, kinds, bands;
-  const auto add = [](std::string& list, const std::string& sep, const std::string& item) {
-    list += (list.empty() ? "" : sep) + item;
-  };
-  for (const auto& t : c.downstream) add(tasks, " and ", t);
+  std::vector<std::string> kinds, bands;  // each task's training pairs and held-out band
   if (c.flowOnFlowStylePairs()) {
-    add(kinds, "; ", "flow: flow-style pairs, generate_pairs --motion near, covis >= 0.6");
-    add(bands, ", ", "flow on every flow-style pair");
+    kinds.push_back("flow: flow-style pairs, generate_pairs --motion near, covis >= 0.6");
+    bands.push_back("flow on every flow-style pair");
   } else if (c.finetunes("flow")) {
-    add(kinds, "; ", "flow: wide pairs, covis >= 0.5");
-    add(bands, ", ", "flow at covis 0.3-0.7 (ft_flow_aepe_all: 0.1-1)");
+    kinds.push_back("flow: wide pairs, covis >= 0.5");
+    bands.push_back("flow at covis 0.3-0.7 (ft_flow_aepe_all: 0.1-1)");
   }
   if (c.finetunes("depth")) {
-    add(kinds, "; ", "depth: wide pairs, covis >= 0.5");
-    add(bands, ", ", "depth at covis 0.3-0.7");
+    kinds.push_back("depth: wide pairs, covis >= 0.5");
+    bands.push_back("depth at covis 0.3-0.7");
   }
   return html::paragraph(
       "Fine-tuned (columns ft_*): every run, and each seed's random weights (fine-tuned from "
       "scratch on the fine-tuning data alone), for " +
-      tasks + " with the linear heads, " + std::to_string(c.finetuneSteps) + " steps of " +
-      std::to_string(c.finetuneBatch) + " on " + std::to_string(c.finetunePairs) +
-      " pairs of the training scenes (" + kinds +
+      joined(c.downstream, " and ") + " with the linear heads, " + std::to_string(c.finetuneSteps) +
+      " steps of " + std::to_string(c.finetuneBatch) + " on " + std::to_string(c.finetunePairs) +
+      " pairs of the training scenes (" + joined(kinds, "; ") +
       "), the same data order, crops and jitter for every run of a seed; mae keeps its encoder "
       "and the seed's random decoder. Measured on held-out pairs of the same kinds: " +
-      bands + "; the floor row is zero flow and a constant depth.");
+      joined(bands, ", ") + "; the floor row is zero flow and a constant depth.");
 }
 
 const std::vector<std::string>& sweepMetrics() {
