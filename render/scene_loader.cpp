@@ -41,8 +41,15 @@ UpAxis guessUpAxis(const Mesh& mesh, const std::string& path) {
   }
   if (across[1] > 1.25 * across[0]) return UpAxis::Z;
   if (across[0] > 1.25 * across[1]) return UpAxis::Y;
+  // Many rooms' walls can rival the floors and ceilings; a storey is still lower than it is deep.
+  const MeshStats stats = computeStats(mesh);
+  const Eigen::Vector3f extent = stats.boundsMax - stats.boundsMin;
+  if (extent.z() < 0.8f * extent.y()) return UpAxis::Z;
+  if (extent.y() < 0.8f * extent.z()) return UpAxis::Y;
   throw Error(path, "cannot tell the up axis (" + std::to_string(across[0]) + " m^2 across y, " +
-                        std::to_string(across[1]) + " m^2 across z): pass --up y or --up z");
+                        std::to_string(across[1]) + " m^2 across z, and " +
+                        std::to_string(extent.y()) + " m along y, " + std::to_string(extent.z()) +
+                        " m along z): pass --up y or --up z");
 }
 
 bool isSupportedSceneFile(const std::string& path) {

@@ -20,9 +20,14 @@ Eigen::Vector3f upVector(UpAxis up);          // of y or z
 
 // The up axis of a mesh whose file does not say (--up auto): the one of y and z with the larger
 // area of surfaces across it (within 30 degrees), since a building's floors and ceilings
-// outweigh its walls along one axis. Throws paircast::Error naming `path`, and asking for --up,
-// when neither axis leads by 25%.
+// outweigh its walls along one axis. When neither leads by 25% (the walls of many small rooms),
+// the axis along which the mesh is at least 20% shorter: a storey is lower than it is deep.
+// Throws paircast::Error naming `path`, and asking for --up, when neither cue decides.
 UpAxis guessUpAxis(const Mesh& mesh, const std::string& path);
+// What auto does, for the tools' --up help.
+inline constexpr const char* kUpAutoHelp =
+    "auto (the axis with the larger floor and ceiling area, else the one along which the scene is "
+    "lower)";
 
 // The limits guard against hostile or broken files: they are checked before assimp allocates
 // (file sizes, and the element counts a PLY header claims) and again after import.

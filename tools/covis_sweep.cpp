@@ -1,6 +1,7 @@
 // covis_sweep: CroCo's co-visibility ablation on your scenes, from one command.
 #include <cstdio>
 
+#include "render/scene_loader.h"
 #include "sweep/covis_sweep.h"
 #include "tool_main.h"
 
@@ -51,9 +52,7 @@ int main(int argc, char** argv) {
                  "Baselines trained like the sets: mae (view 1 alone, no reference view)")
       ->delimiter(',');
   std::string up = "y";
-  app.add_option("--up", up,
-                 "Up axis of the scenes: y, z, or auto (the axis with the larger floor and "
-                 "ceiling area)")
+  app.add_option("--up", up, std::string("Up axis of the scenes: y, z, or ") + kUpAutoHelp)
       ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--jobs", c.jobs, "Render threads (0: all cores)");
   app.add_option("--eval-pairs", c.evalPairs, "Held-out pairs at covis ~0.5");

@@ -6,6 +6,7 @@
 #include "dataset/generate_job.h"
 #include "dataset/replay.h"
 #include "pair_flags.h"
+#include "render/scene_loader.h"
 #include "tool_main.h"
 
 using namespace paircast;
@@ -48,9 +49,7 @@ void addInputFlags(CLI::App& app, GenerateConfig& cfg, ReplayConfig& replay, Arg
   app.add_option("--scene-root", replay.sceneRoot,
                  "With --from-metadata: folder under which the metadata's scene paths are found");
   args.upOpt =
-      app.add_option("--up", args.up,
-                     "Up axis of the scenes: y, z, or auto (the axis with the larger floor and "
-                     "ceiling area)")
+      app.add_option("--up", args.up, std::string("Up axis of the scenes: y, z, or ") + kUpAutoHelp)
           ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--scale", cfg.load.scale, "Multiply scene positions by this (to metres)");
 }

@@ -76,9 +76,7 @@ int main(int argc, char** argv) {
   CLI::App app{"Render RGB, z-depth and normals of a mesh scene with Embree"};
   app.add_option("--scene", a.scene, "Scene file (glb, gltf, obj, ply, fbx, dae, ifc, ...)")
       ->required();
-  app.add_option(
-         "--up", a.up,
-         "Up axis of the scene: y, z, or auto (the axis with the larger floor and ceiling area)")
+  app.add_option("--up", a.up, std::string("Up axis of the scene: y, z, or ") + kUpAutoHelp)
       ->check(CLI::IsMember({"y", "z", "auto"}));
   app.add_option("--scale", a.scale, "Multiply positions by this (file units to metres)");
   auto* cam = app.add_option("--camera", a.camera,

@@ -108,7 +108,16 @@ TEST(UpAxis, AutoPicksTheAxisAcrossFloorsAndCeilings) {
     const std::string path = writeScan(smallScan(kind), dir);
     EXPECT_EQ(loadScene(path, o).up, UpAxis::Z) << path;
   }
-  // A cube has as much area across y as across z: no guess.
+  // A long plan of narrow rooms: its walls have as much area across z (353 m^2) as its floor and
+  // ceiling across y (348 m^2), but it is 3.1 m high and 7 m deep.
+  std::vector<testing::BoxSpec> plan = {{{0, -0.1f, 0}, {12, 0, 7}}, {{0, 2.9f, 0}, {12, 3, 7}}};
+  for (float z : {0.0f, 1.7f, 3.4f, 5.1f, 6.9f}) plan.push_back({{0, 0, z}, {12, 2.9f, z + 0.1f}});
+  for (bool z : {false, true}) {
+    const std::string path = dir + (z ? "/plan_z.obj" : "/plan_y.obj");
+    testing::writeBoxesObj(path, plan, z);
+    EXPECT_EQ(loadScene(path, o).up, z ? UpAxis::Z : UpAxis::Y) << path;
+  }
+  // A cube has as much area across y as across z, and is as high as it is deep: no guess.
   const std::string cube = dir + "/cube.obj";
   testing::writeBoxesObj(cube, {{{0, 0, 0}, {1, 1, 1}}});
   const std::string why = testing::refusalOf(cube, [&] { loadScene(cube, o); });
