@@ -180,8 +180,9 @@ DownstreamData prepareDownstreamData(const SweepConfig& c, const std::vector<std
   keepOnlyIfMadeWith(c, fs::path(c.out) / "ds", dataSettings(c));
   // Seeds apart from the pool's (c.seed), the held-out xv pairs' (+1) and the probes' (+3).
   if (c.finetunesOnWidePairs()) {
-    generateTruth(c, "train", train, c.finetunePairs, 0.5, 1.0, c.seed + 11);
-    generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, 0.1, 1.0, c.seed + 12);
+    generateTruth(c, "train", train, c.finetunePairs, kWideTrainMinCovis, 1.0, c.seed + 11);
+    generateTruth(c, "heldout", heldout, c.finetuneEvalPairs, kWideHeldoutMinCovis, 1.0,
+                  c.seed + 12);
   }
   if (c.flowOnFlowStylePairs()) {
     const auto near = SamplerOptions::Motion::kNear;

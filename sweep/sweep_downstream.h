@@ -29,6 +29,8 @@ class Distributed;
 constexpr double kDownstreamBandLo = 0.3, kDownstreamBandHi = 0.7, kDownstreamBinWidth = 0.1;
 // Flow-style pairs' least covis (as docs/finetune.md's pilot, generate_pairs --min-covis 0.6).
 constexpr double kFlowStyleMinCovis = 0.6;
+// The wide pairs' least covis: CroCo's band for the fine-tuning pairs, a wider one held out.
+constexpr double kWideTrainMinCovis = 0.5, kWideHeldoutMinCovis = 0.1;
 
 // The fine-tuning data, generated once (with --save-flow --save-depth) and then reused.
 struct DownstreamData {

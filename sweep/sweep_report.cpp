@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <map>
 
+#include "sweep/sweep_downstream.h"
 #include "sweep/sweep_stats.h"
 #include "util/atomic_file.h"
 #include "util/error.h"
@@ -693,17 +694,25 @@ std::string downstreamByCovisPlot(const nlohmann::json& rows) {
 }  // namespace
 
 std::string downstreamParagraph(const SweepConfig& c) {
+  const auto g = [](double x) {  // 0.5, not 0.500000
+    char b[32];
+    std::snprintf(b, sizeof b, "%g", x);
+    return std::string(b);
+  };
+  const std::string band = "covis " + g(kDownstreamBandLo) + "-" + g(kDownstreamBandHi);
+  const std::string wide = "wide pairs, covis >= " + g(kWideTrainMinCovis);
   std::vector<std::string> kinds, bands;  // each task's training pairs and held-out band
   if (c.flowOnFlowStylePairs()) {
-    kinds.push_back("flow: flow-style pairs, generate_pairs --motion near, covis >= 0.6");
+    kinds.push_back("flow: flow-style pairs, generate_pairs --motion near, covis >= " +
+                    g(kFlowStyleMinCovis));
     bands.push_back("flow on every flow-style pair");
   } else if (c.finetunes("flow")) {
-    kinds.push_back("flow: wide pairs, covis >= 0.5");
-    bands.push_back("flow at covis 0.3-0.7 (ft_flow_aepe_all: 0.1-1)");
+    kinds.push_back("flow: " + wide);
+    bands.push_back("flow at " + band + " (ft_flow_aepe_all: " + g(kWideHeldoutMinCovis) + "-1)");
   }
   if (c.finetunes("depth")) {
-    kinds.push_back("depth: wide pairs, covis >= 0.5");
-    bands.push_back("depth at covis 0.3-0.7");
+    kinds.push_back("depth: " + wide);
+    bands.push_back("depth at " + band);
   }
   return html::paragraph(
       "Fine-tuned (columns ft_*): every run, and each seed's random weights (fine-tuned from "
