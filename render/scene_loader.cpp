@@ -31,6 +31,7 @@ Eigen::Vector3f upVector(UpAxis up) {
 UpAxis guessUpAxis(const Mesh& mesh, const std::string& path) {
   const float cos30 = std::cos(static_cast<float>(M_PI) / 6.0f);
   double across[2] = {0.0, 0.0};  // area of surfaces across y, across z
+  Eigen::AlignedBox3f bounds;     // of those surfaces, whatever their direction
   for (const Eigen::Vector3i& t : mesh.triangles) {
     const Eigen::Vector3f& a = mesh.positions[t[0]];
     const Eigen::Vector3f n = (mesh.positions[t[1]] - a).cross(mesh.positions[t[2]] - a);
@@ -38,12 +39,13 @@ UpAxis guessUpAxis(const Mesh& mesh, const std::string& path) {
     if (!(area > 0.0f)) continue;
     if (std::abs(n.y()) >= cos30 * 2.0f * area) across[0] += area;
     if (std::abs(n.z()) >= cos30 * 2.0f * area) across[1] += area;
+    for (int k = 0; k < 3; ++k) bounds.extend(mesh.positions[t[k]]);
   }
   if (across[1] > 1.25 * across[0]) return UpAxis::Z;
   if (across[0] > 1.25 * across[1]) return UpAxis::Y;
   // Many rooms' walls can rival the floors and ceilings; a storey is still lower than it is deep.
-  const MeshStats stats = computeStats(mesh);
-  const Eigen::Vector3f extent = stats.boundsMax - stats.boundsMin;
+  const Eigen::Vector3f extent =
+      bounds.isEmpty() ? Eigen::Vector3f(Eigen::Vector3f::Zero()) : Eigen::Vector3f(bounds.sizes());
   if (extent.z() < 0.8f * extent.y()) return UpAxis::Z;
   if (extent.y() < 0.8f * extent.z()) return UpAxis::Y;
   throw Error(path, "cannot tell the up axis (" + std::to_string(across[0]) + " m^2 across y, " +

@@ -27,7 +27,7 @@ UpAxis guessUpAxis(const Mesh& mesh, const std::string& path);
 // What auto does, for the tools' --up help.
 inline constexpr const char* kUpAutoHelp =
     "auto (the axis with the larger floor and ceiling area, else the one along which the scene is "
-    "lower)";
+    "at least 20% shorter)";
 
 // The limits guard against hostile or broken files: they are checked before assimp allocates
 // (file sizes, and the element counts a PLY header claims) and again after import.

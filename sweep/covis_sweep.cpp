@@ -92,7 +92,7 @@ nlohmann::json downstreamSettings(const SweepConfig& c) {
           {"batch", c.finetuneBatch},
           {"blr", c.finetuneBlr},
           {"head", "linear"},
-          {"eval_covis", {0.1, 1.0}},
+          {"eval_covis", {kWideHeldoutMinCovis, 1.0}},
           {"band", {kDownstreamBandLo, kDownstreamBandHi}},
           {"flow_motion", c.finetuneFlowMotion}};
 }

@@ -1,7 +1,9 @@
-"""scripts/covis_ablation.sh refuses a BUDGET or SEEDS it does not know, in one line that names
-them, before it builds or renders anything (an empty one means the default)."""
+"""scripts/covis_ablation.sh refuses, in one line that names the culprit and before it builds or
+renders anything: a BUDGET or NSEEDS it does not know (an empty one means the default), and an
+OUT whose scenes were made with other options (FURNISH)."""
 
 import os
+import signal
 import subprocess
 
 import pytest
@@ -11,24 +13,55 @@ from conftest import SOURCE_DIR
 SCRIPT = SOURCE_DIR / "scripts" / "covis_ablation.sh"
 
 
-def run(tmp_path, **env):
-    out = tmp_path / "out"
-    done = subprocess.run(["bash", str(SCRIPT), str(out)], capture_output=True, text=True,
-                          env={**os.environ, **env}, timeout=60)
-    return done, out
+def run(out, **env):
+    """The script on OUT; if it got past its checks it is stopped, with whatever it started."""
+    proc = subprocess.Popen(["bash", str(SCRIPT), str(out)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, **env},
+                            start_new_session=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail("the script went past its checks")
+    return proc.returncode, stderr
 
 
 @pytest.mark.parametrize("budget", ["Flow", "fast", "study flow"])
 def test_an_unknown_budget_is_refused_naming_it(tmp_path, budget):
-    done, out = run(tmp_path, BUDGET=budget)
-    assert done.returncode == 2
-    assert done.stderr == f"covis_ablation.sh: BUDGET is study or flow, not '{budget}'\n"
-    assert not out.exists()
+    code, stderr = run(tmp_path / "out", BUDGET=budget)
+    assert code == 2
+    assert stderr == f"covis_ablation.sh: BUDGET is study or flow, not '{budget}'\n"
+    assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("seeds", ["0", "-1", "two", "1.5", "3 4", "07"])
-def test_seeds_must_be_a_positive_whole_number(tmp_path, seeds):
-    done, out = run(tmp_path, BUDGET="flow", SEEDS=seeds)
-    assert done.returncode == 2
-    assert done.stderr == f"covis_ablation.sh: SEEDS is a positive whole number, not '{seeds}'\n"
-    assert not out.exists()
+@pytest.mark.parametrize("seeds", ["0", "-1", "two", "1.5", "3 4", "07", "1000"])
+def test_nseeds_must_be_a_whole_number_from_1_to_999(tmp_path, seeds):
+    code, stderr = run(tmp_path / "out", BUDGET="flow", NSEEDS=seeds)
+    assert code == 2
+    assert stderr == f"covis_ablation.sh: NSEEDS is a whole number from 1 to 999, not '{seeds}'\n"
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("budget,folder", [("study", "heldout"), ("flow", "heldout"),
+                                           ("study", ""), ("flow", "plans40"), ("flow", "plans80")])
+def test_scenes_made_with_other_options_are_refused(tmp_path, budget, folder):
+    # Furnished scenes (FURNISH=1) in an OUT now run without FURNISH: nothing is reused or remade.
+    scenes = tmp_path / "out" / "scenes"
+    made = scenes / folder
+    made.mkdir(parents=True)
+    furnished = {"heldout": "make_scenes --random 1 --seed 99 --furnish --models heldout",
+                 "": "study --furnish --models train",
+                 "plans40": "make_scenes --random 40 --seed 5 --furnish --models train",
+                 "plans80": "make_scenes --random 80 --seed 6 --furnish --models train"}[folder]
+    (made / ".done").write_text(furnished + "\n")
+    code, stderr = run(tmp_path / "out", BUDGET=budget)
+    assert code == 2
+    plain = furnished.replace(" --furnish --models heldout", "").replace(
+        " --furnish --models train", "")
+    if folder == "":
+        plain += " "
+    assert stderr == (f"covis_ablation.sh: {str(made).rstrip('/')} was made with '{furnished}', "
+                      f"not '{plain}': give another OUT\n")
+    assert sorted(p.name for p in scenes.rglob("*")) == sorted(
+        [p.name for p in [made, made / ".done"] if p != scenes])

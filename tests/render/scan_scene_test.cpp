@@ -121,7 +121,9 @@ TEST(UpAxis, AutoPicksTheAxisAcrossFloorsAndCeilings) {
   const std::string cube = dir + "/cube.obj";
   testing::writeBoxesObj(cube, {{{0, 0, 0}, {1, 1, 1}}});
   const std::string why = testing::refusalOf(cube, [&] { loadScene(cube, o); });
-  EXPECT_NE(why.find("pass --up y or --up z"), std::string::npos) << why;
+  EXPECT_NE(why.find("1.000000 m along y, 1.000000 m along z): pass --up y or --up z"),
+            std::string::npos)
+      << why;
   EXPECT_ERROR_CONTAINS(parseUpAxis("x"), "invalid up axis 'x'");
 }
 
