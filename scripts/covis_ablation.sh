@@ -47,7 +47,7 @@ fi
 heldout_opts=(--random 1 --seed 99 "${heldout_furnish[@]}")
 plans40_opts=(--random 40 --seed 5 "${furnish[@]}")
 plans80_opts=(--random 80 --seed 6 "${furnish[@]}")
-study_scenes="study ${furnish[*]}"  # the six plans and two scans of the 3-seed study
+study_scenes="study${furnish[*]:+ ${furnish[*]}}"  # the six plans and two scans of the study
 
 made_with() {  # DIR WHAT: true when DIR/.done says it was made with WHAT; refuses other options
   local dir=$1 what=$2 made
