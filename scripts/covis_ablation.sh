@@ -15,26 +15,34 @@
 # BUDGET=flow runs the study at the budget that learns flow (docs/finetune.md, "The regime that
 # learns flow"): 16 px patches, 18,300 pairs per set and 20,000 steps of 16 on the shipped room
 # and apartment plus 120 random floor plans, then every run and each seed's random weights
-# fine-tuned for flow alone, 20,000 steps of 8 on 6,300 flow-style pairs. About 10 hours on 2
-# cores; NSEEDS=1 first gives one seed of every set in about 3.5 hours, and the same line with
-# NSEEDS=3 later adds the other two.
+# fine-tuned for flow alone, 20,000 steps of 8 on 6,300 flow-style pairs. About 10 hours of one
+# process on 2 cores, and about 6 in two; NSEEDS=1 first gives one seed of every set, and the
+# same line with NSEEDS=3 later adds the other two.
 # NSEEDS is how many seeds each set and baseline trains with (covis_sweep --seeds; 3), not a
 # list of seeds as flow_pilot.sh's SEEDS is.
+# PROCESSES (2) is how many runs train at once (covis_sweep --processes), each on cores / PROCESSES
+# threads: on 2 cores two one-thread runs train 1.7x faster than one two-thread run.
 # Precision: covis_sweep's --amp auto (bf16 on CPUs with bf16 units). The 3-seed study's figures
 # in docs/covis_ablation.md were measured with --amp none (float32), which the extra options
 # take; the flow budget runs with auto.
-# Usage: [BUDGET=study|flow] [NSEEDS=3] scripts/covis_ablation.sh [OUT] [extra covis_sweep options]
+# Usage: [BUDGET=study|flow] [NSEEDS=3] [PROCESSES=2] scripts/covis_ablation.sh [OUT]
+#        [extra covis_sweep options]
 # (OUT: runs/ablation). Rerun the same line to resume a killed sweep.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 budget=${BUDGET:-study}
 seeds=${NSEEDS:-3}
+processes=${PROCESSES:-2}
 if [[ $budget != study && $budget != flow ]]; then
   echo "covis_ablation.sh: BUDGET is study or flow, not '$budget'" >&2
   exit 2
 fi
 if [[ ! $seeds =~ ^[1-9][0-9]{0,2}$ ]]; then
   echo "covis_ablation.sh: NSEEDS is a whole number from 1 to 999, not '$seeds'" >&2
+  exit 2
+fi
+if [[ ! $processes =~ ^[1-9][0-9]?$ ]] || ((processes > 64)); then
+  echo "covis_ablation.sh: PROCESSES is a whole number from 1 to 64, not '$processes'" >&2
   exit 2
 fi
 OUT=${1:-runs/ablation}
@@ -91,7 +99,7 @@ if [[ $budget == study ]]; then
     --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds "$seeds" \
     --img-size 64 --patch-size 8 --resolution 73 --pairs-per-set 1024 --steps 640 \
     --downstream flow,depth --finetune-steps 200 --finetune-pairs 512 --finetune-eval-pairs 256 \
-    --out "$OUT/sweep" "$@"
+    --processes "$processes" --out "$OUT/sweep" "$@"
 fi
 make_once "$SCENES/plans40" "${plans40_opts[@]}"
 make_once "$SCENES/plans80" "${plans80_opts[@]}"
@@ -100,4 +108,4 @@ exec build/tools/covis_sweep \
   --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds "$seeds" \
   --img-size 64 --patch-size 16 --resolution 73 --pairs-per-set 18300 --steps 20000 \
   --downstream flow --finetune-steps 20000 --finetune-pairs 6300 --finetune-eval-pairs 256 \
-  --out "$OUT/sweep-flow" "$@"
+  --processes "$processes" --out "$OUT/sweep-flow" "$@"

@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <filesystem>
 #include <set>
+
+#include <omp.h>
 #include <thread>
 
 #include "dataset/dataset_report.h"
@@ -23,6 +25,7 @@
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/timer.h"
+#include "util/work_claims.h"
 
 namespace paircast {
 namespace fs = std::filesystem;
@@ -54,14 +57,18 @@ CroCoConfig modelConfig(const SweepConfig& c) {
   return m;
 }
 
+// Whether a run's pre-training is complete.
+bool pretrained(const SweepConfig& c, const fs::path& runDir) {
+  const nlohmann::json done = readSweepState((runDir / "summary.json").string());
+  return done.is_object() && done.value("steps", int64_t{0}) >= c.steps &&
+         !done.value("interrupted", false);
+}
+
 // Pre-trains (or resumes) one run, unless it is complete. Every rank of a multi-process sweep
 // calls it for every run, in the same order: runPretrain is data-parallel.
 void trainRun(const SweepConfig& c, const CroCoConfig& mc, const SweepRun& run, Distributed* dist) {
   const fs::path out(c.out);
-  const nlohmann::json done = readSweepState((run.dir / "summary.json").string());
-  if (done.is_object() && done.value("steps", int64_t{0}) >= c.steps &&
-      !done.value("interrupted", false))
-    return;
+  if (pretrained(c, run.dir)) return;
   TrainConfig t;
   t.shards = {(out / "pool" / "pool-*.tar").string()};
   t.keysFile = (out / "sets" / (run.keysSet + ".keys")).string();
@@ -175,6 +182,57 @@ nlohmann::json followSweep(const SweepConfig& c, const CroCoConfig& mc,
       runFinetuneJob(c, mc, data, job, dist.get());
   }
   return {{"rank", rank}, {"runs_trained", runs.size()}};
+}
+
+// The claim file of a unit of work (a run's training, a fine-tune): <out>/claims/<label>.lock.
+std::string claimFile(const SweepConfig& c, std::string label) {
+  std::replace(label.begin(), label.end(), ' ', '-');
+  return (fs::path(c.out) / "claims" / (label + ".lock")).string();
+}
+
+// One of the --processes worker processes, started by the sweep once its pool, sets and held-out
+// data are ready. It trains every run that no other worker holds, in order, then fine-tunes
+// likewise; a fine-tune of a run another worker is training waits for it. Returns what it ran.
+nlohmann::json workOnClaims(const SweepConfig& c, const CroCoConfig& mc,
+                            const std::vector<SweepRun>& runs) {
+  stopWithParent();
+  int trained = 0, finetuned = 0;
+  for (const SweepRun& run : runs) {
+    const auto claim = WorkClaim::tryTake(claimFile(c, run.label()));
+    if (claim && !pretrained(c, run.dir)) trainRun(c, mc, run, nullptr), ++trained;
+  }
+  if (!c.downstream.empty()) {
+    const DownstreamData data = openDownstreamData(c);
+    for (const FinetuneJob& job : planFinetunes(c, runs)) {
+      const auto run = std::find_if(runs.begin(), runs.end(), [&](const SweepRun& r) {
+        return (r.dir / "checkpoint-last.pth").string() == job.init;
+      });
+      if (run != runs.end()) {
+        WorkClaim::take(claimFile(c, run->label()));  // its training, wherever it runs, is over
+        if (!pretrained(c, run->dir)) continue;       // it failed: the sweep says so
+      }
+      const auto claim = WorkClaim::tryTake(claimFile(c, job.label));
+      if (claim) finetuned += runFinetuneJob(c, mc, data, job, nullptr);
+    }
+  }
+  sweepSay(c, "done: " + std::to_string(trained) + " runs trained, " + std::to_string(finetuned) +
+                  " fine-tunes");
+  return {{"worker", c.worker}, {"runs_trained", trained}, {"finetunes", finetuned}};
+}
+
+// With --processes N: N workers (workOnClaims) train and fine-tune every run, each on its share
+// of the cores. On a few cores, N independent runs go faster than one on all of them.
+void trainInWorkers(const SweepConfig& c) {
+  const int threads = std::max(1, omp_get_num_procs() / c.processes);
+  sweepSay(c, "training and fine-tuning in " + std::to_string(c.processes) + " processes of " +
+                  std::to_string(threads) + (threads == 1 ? " thread" : " threads"));
+  try {
+    runWorkerProcesses(c.command, "--worker", c.processes, threads);
+  } catch (const Error& e) {
+    throw Error(c.out, std::string(e.what()) +
+                           " (its error is above); run covis_sweep again to "
+                           "resume");
+  }
 }
 
 // ---- the stages of runCovisSweep, in order ----
@@ -425,6 +483,7 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   const std::vector<SweepSet> sets = planSets(c);
   const std::vector<SweepRun> runs = planRuns(c, sets);
   const SceneFiles scenes = sceneFiles(c);
+  if (c.worker > 0) return workOnClaims(c, mc, runs);
   const int rank = environmentRole().rank;
   if (rank != 0) return followSweep(c, mc, runs, rank);
   makeDirs(c.out);
@@ -448,7 +507,10 @@ nlohmann::json runCovisSweep(const SweepConfig& c) {
   nlohmann::json randomRuns = randomEncoderRuns(c, mc, h);
 
   // 4. Train and evaluate every run (each set and baseline with each seed), with the other ranks.
+  //    With --processes, the workers train (and fine-tune) every run first; what follows here
+  //    finds them done.
   releaseOtherRanks(c);
+  if (c.processes > 1) trainInWorkers(c);
   const auto dist = Distributed::fromEnvironment(c.device);
   nlohmann::json rows = nlohmann::json::array();
   for (const SweepRun& run : runs) {
@@ -543,6 +605,15 @@ void SweepConfig::validate() const {
   if (evalPairs < 1) throw OptionError("eval_pairs", "held-out pairs must be >= 1");
   if (probeViews < 4) throw OptionError("probe_views", "the depth probe needs at least 4 views");
   if (seeds < 1 || seeds > 1000) throw OptionError("seeds", "seeds must be in 1..1000");
+  if (processes < 1 || processes > 64) throw OptionError("processes", "processes must be in 1..64");
+  if (processes > 1 && environmentRole().world > 1)
+    throw OptionError("processes",
+                      "--processes runs independent workers; it does not combine with a "
+                      "multi-process launch (WORLD_SIZE > 1)");
+  if (processes > 1 && command.empty())
+    throw OptionError("processes", "--processes needs the command line to start its workers");
+  if (worker < 0 || worker > processes)
+    throw OptionError("worker", "--worker is for the workers that --processes starts");
   for (size_t i = 0; i < downstream.size(); ++i) {
     if (downstream[i] == "pose")
       throw OptionError("downstream",

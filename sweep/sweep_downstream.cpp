@@ -254,7 +254,7 @@ FinetuneConfig finetuneConfig(const SweepConfig& c, const CroCoConfig& mc,
   return f;
 }
 
-void runFinetuneJob(const SweepConfig& c, const CroCoConfig& mc, const DownstreamData& data,
+bool runFinetuneJob(const SweepConfig& c, const CroCoConfig& mc, const DownstreamData& data,
                     const FinetuneJob& job, Distributed* dist) {
   const int world = dist ? dist->worldSize() : 1;
   if (!dist || dist->rank() == 0) keepOnlyIfMadeWith(c, job.dir, jobSettings(c, job, world));
@@ -262,11 +262,12 @@ void runFinetuneJob(const SweepConfig& c, const CroCoConfig& mc, const Downstrea
   const nlohmann::json done = readSweepState((job.dir / "summary.json").string());
   if (done.is_object() && done.value("steps", int64_t{0}) >= c.finetuneSteps &&
       !done.value("interrupted", false) && fs::exists(job.dir / "heldout.json"))
-    return;
+    return false;
   sweepSay(c, "fine-tuning " + job.label + " (" + std::to_string(c.finetuneSteps) + " steps)");
   const nlohmann::json r = runFinetune(finetuneConfig(c, mc, data, job, world), dist);
   if (r.value("interrupted", false))
     throw Error(job.dir.string(), "interrupted; run covis_sweep again to resume");
+  return true;
 }
 
 nlohmann::json downstreamFigures(const SweepConfig& c, const DownstreamData& d,

@@ -84,8 +84,8 @@ FinetuneConfig finetuneConfig(const SweepConfig& config, const CroCoConfig& mode
 
 // Fine-tunes (or resumes) a job unless it is complete. Every rank of a multi-process sweep calls
 // it for every job, in the same order; rank 0 alone removes a fine-tune made with other
-// settings (then all wait for it).
-void runFinetuneJob(const SweepConfig& config, const CroCoConfig& model, const DownstreamData& data,
+// settings (then all wait for it). Returns whether it fine-tuned (false: it was complete).
+bool runFinetuneJob(const SweepConfig& config, const CroCoConfig& model, const DownstreamData& data,
                     const FinetuneJob& job, Distributed* dist);
 
 // A run's downstream figures from its fine-tunes' heldout.json: ft_flow_aepe,

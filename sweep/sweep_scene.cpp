@@ -54,7 +54,11 @@ int sweepThreads(const SweepConfig& c) {
 }
 
 void sweepSay(const SweepConfig& c, const std::string& line) {
-  if (c.progress) std::fprintf(stderr, "[covis_sweep] %s\n", line.c_str());
+  if (!c.progress) return;
+  if (c.worker > 0)
+    std::fprintf(stderr, "[covis_sweep] worker %d: %s\n", c.worker, line.c_str());
+  else
+    std::fprintf(stderr, "[covis_sweep] %s\n", line.c_str());
 }
 
 void setSweepSchedule(TrainConfig& t, int64_t steps, int64_t pairs, int batch, int world) {

@@ -1,5 +1,5 @@
 """scripts/covis_ablation.sh refuses, in one line that names the culprit and before it builds or
-renders anything: a BUDGET or NSEEDS it does not know (an empty one means the default), and an
+renders anything: a BUDGET, NSEEDS or PROCESSES it does not know (an empty one means the default), and an
 OUT whose scenes were made with other options (FURNISH)."""
 
 import os
@@ -40,6 +40,15 @@ def test_nseeds_must_be_a_whole_number_from_1_to_999(tmp_path, seeds):
     code, stderr = run(tmp_path / "out", BUDGET="flow", NSEEDS=seeds)
     assert code == 2
     assert stderr == f"covis_ablation.sh: NSEEDS is a whole number from 1 to 999, not '{seeds}'\n"
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("processes", ["0", "65", "two", "2 2", "02"])
+def test_processes_must_be_a_whole_number_from_1_to_64(tmp_path, processes):
+    code, stderr = run(tmp_path / "out", PROCESSES=processes)
+    assert code == 2
+    assert stderr == ("covis_ablation.sh: PROCESSES is a whole number from 1 to 64, "
+                      f"not '{processes}'\n")
     assert not (tmp_path / "out").exists()
 
 

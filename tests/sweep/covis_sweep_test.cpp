@@ -1,7 +1,10 @@
 #include "sweep/covis_sweep.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -505,6 +508,103 @@ TEST(CovisSweep, SeedsAndMaeEndToEnd) {
   EXPECT_NE(r["runs"][0]["train_loss"], r["runs"][5]["train_loss"]);  // its seeds 0 and 1
   expectResumesRunByRun(clean);
   expectKilledSweepEndsAsThisDid(clean);
+}
+
+// The sweep of the worker tests: two bins and mae, flow fine-tunes; 3 runs and 4 fine-tunes.
+std::vector<std::string> workersArgs(const std::string& out) {
+  auto a = miniArgs(out);
+  // float32, so that equal arithmetic gives equal bytes however the processes interleave.
+  a.insert(a.end(), {"--sets", "bin_0.45,bin_0.75", "--baseline", "mae", "--no-reports",
+                     "--downstream", "flow", "--finetune-steps", "4", "--finetune-pairs", "16",
+                     "--finetune-eval-pairs", "24", "--amp", "none"});
+  return a;
+}
+
+// The processes whose PAIRCAST_WORKER_PARENT is `lead`.
+int workersOf(pid_t lead) {
+  const std::string mark = std::string("PAIRCAST_WORKER_PARENT=") + std::to_string(lead);
+  int n = 0;
+  for (const auto& e : fs::directory_iterator("/proc")) {
+    std::ifstream in(e.path() / "environ", std::ios::binary);
+    std::string var;
+    while (std::getline(in, var, '\0'))
+      if (var == mark) ++n;
+  }
+  return n;
+}
+
+size_t lineCount(const std::string& path) {
+  const std::string text = readFile(path);
+  return std::count(text.begin(), text.end(), '\n');
+}
+
+// Every run and fine-tune of `out` has the weights of `ref`'s, and one training's log.
+void expectSameWeightsAndLogs(const std::string& ref, const std::string& out) {
+  int compared = 0;
+  for (const auto& [path, time] : checkpointTimes(ref)) {
+    const std::string rel = fs::relative(path, ref).string();
+    EXPECT_LT(testing::weightDifference(path, out + "/" + rel), 1e-6) << rel;
+    const std::string log = (fs::path(rel).parent_path() / "log.jsonl").string();
+    EXPECT_EQ(lineCount(out + "/" + log), lineCount(ref + "/" + log))
+        << log << ": trained more than once";
+    ++compared;
+  }
+  EXPECT_EQ(compared, 7);  // 3 runs, 3 fine-tunes of them and 1 of the random weights
+}
+
+TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
+  const std::string dir = testing::scratchDir("workers");
+  // One process on as many threads as each of two workers: the same arithmetic, run by run.
+  const std::string threads = std::to_string(std::max(1, omp_get_num_procs() / 2));
+  ASSERT_EQ(testing::runProcess(workersArgs(dir + "/one"), -1, {"OMP_NUM_THREADS=" + threads}), 0);
+  ASSERT_EQ(testing::runProcess(withOption(workersArgs(dir + "/two"), "--processes", "2")), 0);
+  expectSameWeightsAndLogs(dir + "/one", dir + "/two");
+  int claims = 0;
+  for (const auto& e : fs::directory_iterator(dir + "/two/claims"))
+    claims += e.path().extension() == ".lock";
+  EXPECT_EQ(claims, 7);
+  const auto one = nlohmann::json::parse(readFile(dir + "/one/results.json"));
+  const auto two = nlohmann::json::parse(readFile(dir + "/two/results.json"));
+  ASSERT_EQ(two["runs"].size(), 3u);
+  for (size_t i = 0; i < 3; ++i)
+    for (const char* figure : {"xv_loss", "ft_flow_aepe"})
+      EXPECT_NEAR(two["runs"][i][figure].get<double>(), one["runs"][i][figure].get<double>(), 1e-4)
+          << i << " " << figure;
+
+  // The command killed once its workers run: they stop with it, none is left behind, and the
+  // same command finishes the sweep as the uninterrupted one did.
+  const std::string killed = dir + "/killed";
+  const pid_t lead = testing::spawnProcess(withOption(workersArgs(killed), "--processes", "2"));
+  for (int i = 0; i < 6000 && workersOf(lead) < 2; ++i) usleep(10 * 1000);
+  ASSERT_EQ(workersOf(lead), 2) << "the workers never started";
+  usleep(500 * 1000);
+  kill(lead, SIGKILL);
+  EXPECT_EQ(testing::waitProcess(lead), -SIGKILL);
+  for (int i = 0; i < 12000 && workersOf(lead) > 0; ++i) usleep(10 * 1000);
+  ASSERT_EQ(workersOf(lead), 0) << "a worker outlived the command that started it";
+  ASSERT_EQ(testing::runProcess(withOption(workersArgs(killed), "--processes", "2")), 0);
+  expectSameWeightsAndLogs(dir + "/one", killed);
+}
+
+TEST(CovisSweep, BadProcessesAreRefused) {
+  const std::string out = testing::scratchDir("bad_processes");
+  for (const char* n : {"0", "65", "two"})
+    EXPECT_EQ(testing::runProcess(withOption(miniArgs(out), "--processes", n)), 2) << n;
+  EXPECT_EQ(testing::runProcess(withOption(miniArgs(out), "--processes", "2"), -1,
+                                {"WORLD_SIZE=2", "RANK=0"}),
+            2);
+  SweepConfig c = miniSweep(out);
+  c.processes = 2;  // without the command line to start workers with
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "--processes needs the command line");
+  c.command = {"/bin/true"};
+  c.worker = 3;
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "--worker is for the workers that --processes starts");
+  EXPECT_FALSE(fs::exists(out + "/pool"));
+  // A worker started by hand, not by --processes: refused before it claims anything.
+  EXPECT_EQ(testing::runProcess(
+                withOption(withOption(miniArgs(out), "--processes", "2"), "--worker", "1")),
+            1);
+  EXPECT_FALSE(fs::exists(out + "/claims"));
 }
 
 TEST(CovisSweep, BadSeedsAndBaselinesAreRefused) {
