@@ -24,7 +24,8 @@
 # threads: on 2 cores two one-thread runs train 1.7x faster than one two-thread run.
 # Precision: covis_sweep's --amp auto (bf16 on CPUs with bf16 units). The 3-seed study's figures
 # in docs/covis_ablation.md were measured with --amp none (float32), which the extra options
-# take; the flow budget runs with auto.
+# take, in one process (PROCESSES=1; two differ from it in floating-point order alone); the flow
+# budget runs with auto.
 # Usage: [BUDGET=study|flow] [NSEEDS=3] [PROCESSES=2] scripts/covis_ablation.sh [OUT]
 #        [extra covis_sweep options]
 # (OUT: runs/ablation). Rerun the same line to resume a killed sweep.

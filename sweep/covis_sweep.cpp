@@ -192,18 +192,27 @@ std::string claimFile(const SweepConfig& c, std::string label) {
 
 // One of the --processes worker processes, started by the sweep once its pool, sets and held-out
 // data are ready. It trains every run that no other worker holds, in order, then fine-tunes
-// likewise; a fine-tune of a run another worker is training waits for it. Returns what it ran.
+// likewise; a fine-tune of a run another worker is training waits for it. Before each unit it
+// stops when asked to (SIGINT, SIGTERM, or the command that started it gone). It writes what it
+// ran to claims/worker-<k>.json.
 nlohmann::json workOnClaims(const SweepConfig& c, const CroCoConfig& mc,
                             const std::vector<SweepRun>& runs) {
   stopWithParent();
+  auto stopIfAsked = [&] {
+    if (workerShouldStop())
+      throw Error(c.out, "worker " + std::to_string(c.worker) +
+                             " stopped; run covis_sweep again to resume");
+  };
   int trained = 0, finetuned = 0;
   for (const SweepRun& run : runs) {
+    stopIfAsked();
     const auto claim = WorkClaim::tryTake(claimFile(c, run.label()));
     if (claim && !pretrained(c, run.dir)) trainRun(c, mc, run, nullptr), ++trained;
   }
   if (!c.downstream.empty()) {
     const DownstreamData data = openDownstreamData(c);
     for (const FinetuneJob& job : planFinetunes(c, runs)) {
+      stopIfAsked();
       const auto run = std::find_if(runs.begin(), runs.end(), [&](const SweepRun& r) {
         return (r.dir / "checkpoint-last.pth").string() == job.init;
       });
@@ -217,21 +226,27 @@ nlohmann::json workOnClaims(const SweepConfig& c, const CroCoConfig& mc,
   }
   sweepSay(c, "done: " + std::to_string(trained) + " runs trained, " + std::to_string(finetuned) +
                   " fine-tunes");
-  return {{"worker", c.worker}, {"runs_trained", trained}, {"finetunes", finetuned}};
+  const nlohmann::json done = {
+      {"worker", c.worker}, {"runs_trained", trained}, {"finetunes", finetuned}};
+  const fs::path record =
+      fs::path(c.out) / "claims" / ("worker-" + std::to_string(c.worker) + ".json");
+  writeFileAtomic(record.string(), done.dump() + "\n");
+  return done;
 }
 
 // With --processes N: N workers (workOnClaims) train and fine-tune every run, each on its share
-// of the cores. On a few cores, N independent runs go faster than one on all of them.
+// of our threads (OMP_NUM_THREADS, else the cores). On a few cores, N independent runs go faster
+// than one on all of them.
 void trainInWorkers(const SweepConfig& c) {
-  const int threads = std::max(1, omp_get_num_procs() / c.processes);
+  const int threads = std::max(1, omp_get_max_threads() / c.processes);
   sweepSay(c, "training and fine-tuning in " + std::to_string(c.processes) + " processes of " +
                   std::to_string(threads) + (threads == 1 ? " thread" : " threads"));
+  for (int k = 1; k <= c.processes; ++k)  // a previous sweep's records
+    fs::remove(fs::path(c.out) / "claims" / ("worker-" + std::to_string(k) + ".json"));
   try {
-    runWorkerProcesses(c.command, "--worker", c.processes, threads);
+    runWorkerProcesses(kSelfExecutable, c.command, "--worker", c.processes, threads);
   } catch (const Error& e) {
-    throw Error(c.out, std::string(e.what()) +
-                           " (its error is above); run covis_sweep again to "
-                           "resume");
+    throw Error(c.out, std::string(e.what()) + "; run covis_sweep again to resume");
   }
 }
 

@@ -4,7 +4,6 @@
 #include "render/scene_loader.h"
 #include "sweep/covis_sweep.h"
 #include "tool_main.h"
-#include "util/work_claims.h"
 
 using namespace paircast;
 
@@ -104,8 +103,7 @@ int main(int argc, char** argv) {
     c.mechanismMaxCovis = mechanismCovis[1];
     c.reports = !noReports;
     c.progress = !quiet;
-    c.command = {selfExecutable()};
-    c.command.insert(c.command.end(), argv + 1, argv + argc);
+    c.command.assign(argv, argv + argc);
     if (!quiet && c.worker == 0)
       logLaunch("covis_sweep", launchRole(processEnvironment()).describe());
     const nlohmann::json r = runCovisSweep(c);

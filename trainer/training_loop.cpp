@@ -39,8 +39,14 @@ constexpr auto since = secondsSince;
 constexpr int64_t kProfileWarmupSteps = 2;
 
 std::atomic<int> gSignal{0};
+// The handlers StopSignals replaced, called too: a worker process's own stop flag then hears a
+// signal that lands after the loop's last look.
+using Handler = void (*)(int);
+std::atomic<Handler> gOuterInt{nullptr}, gOuterTerm{nullptr};
 void onSignal(int sig) {
   gSignal = sig;
+  const Handler outer = sig == SIGINT ? gOuterInt.load() : gOuterTerm.load();
+  if (outer) outer(sig);
 }
 
 // AdamW state, by parameter position, as "optimizer/state/<i>/{exp_avg,exp_avg_sq,step}".
@@ -100,15 +106,21 @@ class StopSignals {
     gSignal = 0;
     oldInt_ = signal(SIGINT, onSignal);
     oldTerm_ = signal(SIGTERM, onSignal);
+    gOuterInt = callable(oldInt_);
+    gOuterTerm = callable(oldTerm_);
   }
   ~StopSignals() {
     signal(SIGINT, oldInt_);
     signal(SIGTERM, oldTerm_);
+    gOuterInt = nullptr;
+    gOuterTerm = nullptr;
   }
   bool raised() const { return gSignal != 0; }
 
  private:
-  using Handler = void (*)(int);
+  static Handler callable(Handler h) {
+    return h == SIG_DFL || h == SIG_IGN || h == SIG_ERR ? nullptr : h;
+  }
   Handler oldInt_, oldTerm_;
 };
 

@@ -1,6 +1,7 @@
 #include "util/work_claims.h"
 
 #include <fcntl.h>
+#include <pthread.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/file.h>
@@ -22,7 +23,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr const char* kParentVariable = "PAIRCAST_WORKER_PARENT";
+constexpr const char* kParentVariable = "PAIRCAST_WORKER_PARENT=";
 
 int openClaimFile(const std::string& path) {
   std::error_code ec;
@@ -32,29 +33,38 @@ int openClaimFile(const std::string& path) {
   return fd;
 }
 
-// The workers of the one runWorkerProcesses in flight, for the signal handler.
+// The workers of the one runWorkerProcesses in flight, for the signal handler: a reaped one's
+// pid is set to 0. And the last signal it passed on.
 constexpr int kMaxWorkers = 256;
 volatile sig_atomic_t gWorkerCount = 0;
-pid_t gWorkers[kMaxWorkers];
+volatile pid_t gWorkers[kMaxWorkers];
+volatile sig_atomic_t gPassedOn = 0;
 
 void passSignalOn(int sig) {
-  for (sig_atomic_t i = 0; i < gWorkerCount; ++i) ::kill(gWorkers[i], sig);
+  const int saved = errno;
+  gPassedOn = sig;
+  for (sig_atomic_t i = 0; i < gWorkerCount; ++i)
+    if (gWorkers[i] > 0) ::kill(gWorkers[i], sig);
+  errno = saved;
 }
 
-// Holds SIGINT and SIGTERM for the workers while they run; restores the old handlers after.
+// Passes SIGINT and SIGTERM on to the workers while they run; restores the old handlers after.
 class PassSignalsOn {
  public:
   PassSignalsOn() {
+    gWorkerCount = 0;
+    gPassedOn = 0;
     struct sigaction sa {};
     sa.sa_handler = passSignalOn;
+    sa.sa_flags = SA_RESTART;
     sigemptyset(&sa.sa_mask);
     sigaction(SIGINT, &sa, &oldInt_);
     sigaction(SIGTERM, &sa, &oldTerm_);
   }
   ~PassSignalsOn() {
-    gWorkerCount = 0;
     sigaction(SIGINT, &oldInt_, nullptr);
     sigaction(SIGTERM, &oldTerm_, nullptr);
+    gWorkerCount = 0;
   }
 
  private:
@@ -62,14 +72,36 @@ class PassSignalsOn {
   }, oldTerm_{};
 };
 
-// Our environment, with OMP_NUM_THREADS and the parent variable set.
+// SIGINT and SIGTERM held back while workers are started and entered for the handler: none is
+// lost between two spawns.
+class HoldStopSignals {
+ public:
+  HoldStopSignals() {
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &set, &old_);
+  }
+  ~HoldStopSignals() { pthread_sigmask(SIG_SETMASK, &old_, nullptr); }
+
+ private:
+  sigset_t old_;
+};
+
+// Our environment, with the thread counts and the parent variable set.
 std::vector<std::string> workerEnvironment(int threads) {
   std::vector<std::string> env;
+  auto replaced = [](const char* e) {
+    for (const char* name : {"OMP_NUM_THREADS=", "OPENBLAS_NUM_THREADS=", kParentVariable})
+      if (std::strncmp(e, name, std::strlen(name)) == 0) return true;
+    return false;
+  };
   for (char** e = environ; *e; ++e)
-    if (std::strncmp(*e, "OMP_NUM_THREADS=", 16) && std::strncmp(*e, kParentVariable, 22))
-      env.emplace_back(*e);
+    if (!replaced(*e)) env.emplace_back(*e);
   env.push_back("OMP_NUM_THREADS=" + std::to_string(threads));
-  env.push_back(std::string(kParentVariable) + "=" + std::to_string(::getpid()));
+  env.push_back("OPENBLAS_NUM_THREADS=" + std::to_string(threads));
+  env.push_back(kParentVariable + std::to_string(::getpid()));
   return env;
 }
 
@@ -80,26 +112,71 @@ std::vector<char*> pointers(std::vector<std::string>& strings) {
   return p;
 }
 
-pid_t spawnWorker(std::vector<std::string> args, std::vector<std::string> env) {
+pid_t spawnWorker(const std::string& executable, std::vector<std::string> args,
+                  std::vector<std::string> env) {
   std::vector<char*> argv = pointers(args), envp = pointers(env);
   pid_t pid = 0;
-  const int rc = posix_spawn(&pid, argv[0], nullptr, nullptr, argv.data(), envp.data());
-  if (rc != 0) throw Error(args[0], std::string("cannot start a worker: ") + std::strerror(rc));
+  const int rc = posix_spawn(&pid, executable.c_str(), nullptr, nullptr, argv.data(), envp.data());
+  if (rc != 0)
+    throw Error(executable, "cannot start a worker of " + args[0] + ": " + std::strerror(rc));
   return pid;
 }
 
-// Waits for one worker; a signal handled meanwhile does not end the wait.
-int waitFor(pid_t pid) {
-  int status = 0;
-  while (::waitpid(pid, &status, 0) < 0)
-    if (errno != EINTR) return -1;
-  return status;
+struct Ended {
+  int index;
+  pid_t pid;
+  int status;  // waitpid's, or -1 when it could not wait
+};
+
+// The first of `pids` to end (its slot then set to 0), polled every 50 ms.
+Ended waitForAny(std::vector<pid_t>& pids) {
+  while (true) {
+    for (size_t k = 0; k < pids.size(); ++k) {
+      if (pids[k] <= 0) continue;
+      int status = 0;
+      const pid_t r = ::waitpid(pids[k], &status, WNOHANG);
+      if (r == pids[k] || (r < 0 && errno != EINTR)) {
+        const Ended ended{static_cast<int>(k), pids[k], r < 0 ? -1 : status};
+        gWorkers[k] = 0;  // never signalled again: its pid may be reused
+        pids[k] = 0;
+        return ended;
+      }
+    }
+    ::usleep(50 * 1000);
+  }
 }
 
 std::string describeExit(int status) {
-  if (WIFEXITED(status)) return "exited with status " + std::to_string(WEXITSTATUS(status));
-  if (WIFSIGNALED(status)) return std::string("was killed by ") + strsignal(WTERMSIG(status));
+  if (status != -1 && WIFEXITED(status))
+    return "exited with status " + std::to_string(WEXITSTATUS(status));
+  if (status != -1 && WIFSIGNALED(status))
+    return std::string("was killed by ") + strsignal(WTERMSIG(status));
   return "could not be waited for";
+}
+
+// Starts the workers, with SIGINT and SIGTERM held until each is known to the handler. Those
+// already started are stopped and waited for when one cannot start.
+std::vector<pid_t> startWorkers(const std::string& executable,
+                                const std::vector<std::string>& command,
+                                const std::string& workerFlag, int count, int threads) {
+  const std::vector<std::string> env = workerEnvironment(threads);
+  HoldStopSignals hold;
+  std::vector<pid_t> pids;
+  for (int k = 1; k <= count; ++k) {
+    std::vector<std::string> args = command;
+    args.insert(args.end(), {workerFlag, std::to_string(k)});
+    try {
+      pids.push_back(spawnWorker(executable, args, env));
+    } catch (const Error&) {
+      for (pid_t p : pids) ::kill(p, SIGTERM);  // they save and stop
+      for (pid_t p : pids) ::waitpid(p, nullptr, 0);
+      gWorkerCount = 0;
+      throw;
+    }
+    gWorkers[k - 1] = pids.back();
+    gWorkerCount = k;
+  }
+  return pids;
 }
 
 }  // namespace
@@ -132,52 +209,53 @@ WorkClaim::~WorkClaim() {
   if (fd_ >= 0) ::close(fd_);  // closing the only descriptor releases the lock
 }
 
-void runWorkerProcesses(const std::vector<std::string>& command, const std::string& workerFlag,
-                        int count, int threads) {
+void runWorkerProcesses(const std::string& executable, const std::vector<std::string>& command,
+                        const std::string& workerFlag, int count, int threads) {
   PAIRCAST_CHECK(!command.empty() && count >= 1 && count <= kMaxWorkers && threads >= 1);
-  const std::vector<std::string> env = workerEnvironment(threads);
   PassSignalsOn pass;
-  std::vector<pid_t> pids;
-  for (int k = 1; k <= count; ++k) {
-    std::vector<std::string> args = command;
-    args.insert(args.end(), {workerFlag, std::to_string(k)});
-    try {
-      pids.push_back(spawnWorker(args, env));
-    } catch (const Error&) {
-      passSignalOn(SIGTERM);  // those already started save and stop
-      for (pid_t p : pids) waitFor(p);
-      throw;
-    }
-    gWorkers[k - 1] = pids.back();
-    gWorkerCount = k;
-  }
+  std::vector<pid_t> pids = startWorkers(executable, command, workerFlag, count, threads);
   std::string failed;
-  for (int k = 1; k <= count; ++k) {
-    const int status = waitFor(pids[k - 1]);
-    if (failed.empty() && !(WIFEXITED(status) && WEXITSTATUS(status) == 0))
-      failed = "worker " + std::to_string(k) + " of " + std::to_string(count) + " (pid " +
-               std::to_string(pids[k - 1]) + ") " + describeExit(status);
+  for (int left = count; left > 0; --left) {
+    const Ended e = waitForAny(pids);
+    if (!failed.empty() || (WIFEXITED(e.status) && WEXITSTATUS(e.status) == 0)) continue;
+    failed = "worker " + std::to_string(e.index + 1) + " of " + std::to_string(count) + " (pid " +
+             std::to_string(e.pid) + ") " + describeExit(e.status);
+    for (pid_t p : pids)
+      if (p > 0) ::kill(p, SIGTERM);  // the others save and stop
   }
-  if (!failed.empty()) throw Error(command[0], failed);
+  if (!failed.empty()) throw Error(failed);
+  if (gPassedOn) throw Error(std::string("stopped by ") + strsignal(gPassedOn));
 }
 
+namespace {
+volatile sig_atomic_t gStopAsked = 0;
+pid_t gParent = 0;
+void askToStop(int) {
+  gStopAsked = 1;
+}
+}  // namespace
+
 void stopWithParent() {
-  const char* parent = std::getenv(kParentVariable);
+  const char* parent = std::getenv("PAIRCAST_WORKER_PARENT");
   if (!parent || !*parent)
-    throw Error(std::string(kParentVariable) +
-                " is not set: workers are started by the command "
-                "itself, not by hand");
+    throw Error(
+        "PAIRCAST_WORKER_PARENT is not set: workers are started by the command itself, "
+        "not by hand");
+  gParent = static_cast<pid_t>(std::atoll(parent));
+  struct sigaction sa {};
+  sa.sa_handler = askToStop;
+  sa.sa_flags = SA_RESTART;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
   ::prctl(PR_SET_PDEATHSIG, SIGTERM);
   // The parent may have died before the line above: then we were re-parented.
-  if (std::to_string(::getppid()) != parent)
+  if (::getppid() != gParent)
     throw Error("the process that started this worker (pid " + std::string(parent) + ") is gone");
 }
 
-std::string selfExecutable() {
-  std::error_code ec;
-  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
-  if (ec) throw Error("/proc/self/exe", "cannot find the running executable: " + ec.message());
-  return p.string();
+bool workerShouldStop() {
+  return gStopAsked || ::getppid() != gParent;
 }
 
 }  // namespace paircast

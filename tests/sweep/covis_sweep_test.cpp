@@ -555,7 +555,7 @@ void expectSameWeightsAndLogs(const std::string& ref, const std::string& out) {
 TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
   const std::string dir = testing::scratchDir("workers");
   // One process on as many threads as each of two workers: the same arithmetic, run by run.
-  const std::string threads = std::to_string(std::max(1, omp_get_num_procs() / 2));
+  const std::string threads = std::to_string(std::max(1, omp_get_max_threads() / 2));
   ASSERT_EQ(testing::runProcess(workersArgs(dir + "/one"), -1, {"OMP_NUM_THREADS=" + threads}), 0);
   ASSERT_EQ(testing::runProcess(withOption(workersArgs(dir + "/two"), "--processes", "2")), 0);
   expectSameWeightsAndLogs(dir + "/one", dir + "/two");
@@ -563,6 +563,17 @@ TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
   for (const auto& e : fs::directory_iterator(dir + "/two/claims"))
     claims += e.path().extension() == ".lock";
   EXPECT_EQ(claims, 7);
+  // The workers trained and fine-tuned it all between them, each its share, none twice.
+  int trained = 0, finetuned = 0;
+  for (int k = 1; k <= 2; ++k) {
+    const auto w =
+        nlohmann::json::parse(readFile(dir + "/two/claims/worker-" + std::to_string(k) + ".json"));
+    EXPECT_GE(w["runs_trained"].get<int>() + w["finetunes"].get<int>(), 1) << "worker " << k;
+    trained += w["runs_trained"].get<int>();
+    finetuned += w["finetunes"].get<int>();
+  }
+  EXPECT_EQ(trained, 3);
+  EXPECT_EQ(finetuned, 4);
   const auto one = nlohmann::json::parse(readFile(dir + "/one/results.json"));
   const auto two = nlohmann::json::parse(readFile(dir + "/two/results.json"));
   ASSERT_EQ(two["runs"].size(), 3u);
@@ -575,9 +586,17 @@ TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
   // same command finishes the sweep as the uninterrupted one did.
   const std::string killed = dir + "/killed";
   const pid_t lead = testing::spawnProcess(withOption(workersArgs(killed), "--processes", "2"));
-  for (int i = 0; i < 6000 && workersOf(lead) < 2; ++i) usleep(10 * 1000);
-  ASSERT_EQ(workersOf(lead), 2) << "the workers never started";
-  usleep(500 * 1000);
+  // Killed once a first run is trained: the workers are then training or fine-tuning.
+  auto trainedRuns = [&] {  // while the workers write: no error stops the count
+    std::error_code ec;
+    size_t n = 0;
+    for (fs::recursive_directory_iterator it(killed + "/runs", ec), end; !ec && it != end;
+         it.increment(ec))
+      n += it->path().filename() == "checkpoint-last.pth";
+    return n;
+  };
+  for (int i = 0; i < 12000 && trainedRuns() == 0; ++i) usleep(10 * 1000);
+  ASSERT_EQ(workersOf(lead), 2) << "the workers are not running";
   kill(lead, SIGKILL);
   EXPECT_EQ(testing::waitProcess(lead), -SIGKILL);
   for (int i = 0; i < 12000 && workersOf(lead) > 0; ++i) usleep(10 * 1000);

@@ -64,14 +64,14 @@ TEST(WorkClaim, TakeWaitsForTheHolder) {
   const std::string path = dir + "/a.lock", released = dir + "/released";
   const pid_t pid = fork();
   if (pid == 0) {
-    auto claim = WorkClaim::tryTake(path);
-    if (!claim) _exit(3);
+    const WorkClaim claim = WorkClaim::take(path);
     usleep(300 * 1000);
     std::ofstream(released) << "1";  // written while it still holds the claim
     _exit(0);
   }
   // Until the child holds it, take() could win; wait for that first.
-  while (WorkClaim::tryTake(path).has_value()) usleep(1000);
+  for (int i = 0; i < 10000 && WorkClaim::tryTake(path).has_value(); ++i) usleep(1000);
+  ASSERT_FALSE(WorkClaim::tryTake(path).has_value()) << "the child never took the claim";
   const WorkClaim claim = WorkClaim::take(path);
   EXPECT_TRUE(fs::exists(released)) << "take() returned while the child held the claim";
   int status = 0;
@@ -88,58 +88,111 @@ TEST(WorkClaim, AnUnwritableFolderIsNamed) {
 
 TEST(WorkerProcesses, EachGetsItsIndexItsThreadsAndOurPid) {
   const std::string dir = testing::scratchDir("workers");
-  // $0 is the flag, $1 the worker's index.
+  // $0 is argv[0] ("sh"); the flag and the worker's index follow.
   const std::string script =
-      "echo \"$0 $1 $OMP_NUM_THREADS $PAIRCAST_WORKER_PARENT\" > " + dir + "/worker-$1";
-  runWorkerProcesses({"/bin/sh", "-c", script}, "--worker", 3, 2);
+      "echo \"$1 $2 $OMP_NUM_THREADS $OPENBLAS_NUM_THREADS "
+      "$PAIRCAST_WORKER_PARENT\" > " +
+      dir + "/worker-$2";
+  setenv("OPENBLAS_NUM_THREADS", "7", 1);  // ours is replaced, not added to
+  runWorkerProcesses("/bin/sh", {"sh", "-c", script, "sh"}, "--worker", 3, 2);
+  unsetenv("OPENBLAS_NUM_THREADS");
   for (int k = 1; k <= 3; ++k) {
     std::ifstream in(dir + "/worker-" + std::to_string(k));
     std::string flag, parent;
-    int index = 0, threads = 0;
-    in >> flag >> index >> threads >> parent;
+    int index = 0, threads = 0, blasThreads = 0;
+    in >> flag >> index >> threads >> blasThreads >> parent;
     EXPECT_EQ(flag, "--worker");
     EXPECT_EQ(index, k);
     EXPECT_EQ(threads, 2);
+    EXPECT_EQ(blasThreads, 2);
     EXPECT_EQ(parent, std::to_string(getpid()));
   }
 }
 
-TEST(WorkerProcesses, TheFirstFailureIsNamedAfterAllHaveEnded) {
-  const std::string dir = testing::scratchDir("workers");
-  // Worker 1 fails at once; worker 2 runs on, and must have ended when the error comes.
-  const std::string script =
-      "if [ $1 = 1 ]; then exit 4; fi; sleep 0.3; echo done > " + dir + "/second";
-  EXPECT_ERROR_CONTAINS(runWorkerProcesses({"/bin/sh", "-c", script}, "--worker", 2, 1),
-                        "worker 1 of 2 (pid ", ") exited with status 4");
-  EXPECT_TRUE(fs::exists(dir + "/second"));
-  EXPECT_ERROR_CONTAINS(
-      runWorkerProcesses({"/bin/sh", "-c", "[ $1 = 2 ] && kill -9 $$; exit 0"}, "-w", 2, 1),
-      "worker 2 of 2", "was killed by Killed");
-  EXPECT_ERROR_CONTAINS(runWorkerProcesses({"/nonexistent/covis_sweep"}, "--worker", 1, 1),
-                        "/nonexistent/covis_sweep: cannot start a worker: No such file");
+// A worker script that notes SIGTERM in DIR/term-$2 and exits 0; it gives up after 20 s.
+std::string waitForTerm(const std::string& dir) {
+  return "trap 'echo > " + dir + "/term-$2; exit 0' TERM; touch " + dir +
+         "/up-$2; i=0; while [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; exit 9";
 }
 
-TEST(WorkerProcesses, SigintToUsReachesThemAndTheyStop) {
+TEST(WorkerProcesses, TheFirstFailureIsNamedAndStopsTheOthers) {
   const std::string dir = testing::scratchDir("workers");
-  // Each worker waits for SIGINT, notes it, and exits 0; we send ours to this process.
-  const std::string script = "trap 'echo int > " + dir + "/int-$1; exit 0' INT; touch " + dir +
-                             "/up-$1; while true; do sleep 0.05; done";
-  const pid_t self = getpid();
-  const pid_t sender = fork();
-  if (sender == 0) {
-    for (int i = 0; i < 2000 && !(fs::exists(dir + "/up-1") && fs::exists(dir + "/up-2")); ++i)
-      usleep(10 * 1000);
-    kill(self, SIGINT);
+  const std::string script = "if [ $2 = 2 ]; then while [ ! -e " + dir +
+                             "/up-1 ]; do sleep 0.01; done; exit 4; fi; " + waitForTerm(dir);
+  EXPECT_ERROR_CONTAINS(runWorkerProcesses("/bin/sh", {"sh", "-c", script, "sh"}, "--w", 2, 1),
+                        "worker 2 of 2 (pid ", ") exited with status 4");
+  EXPECT_TRUE(fs::exists(dir + "/term-1")) << "worker 1 was not stopped";
+  EXPECT_ERROR_CONTAINS(
+      runWorkerProcesses("/bin/sh", {"sh", "-c", "[ $2 = 2 ] && kill -9 $$; exit 0", "sh"}, "-w", 2,
+                         1),
+      "worker 2 of 2", "was killed by Killed");
+  EXPECT_ERROR_CONTAINS(
+      runWorkerProcesses("/nonexistent/covis_sweep", {"covis_sweep"}, "--worker", 1, 1),
+      "/nonexistent/covis_sweep: cannot start a worker of covis_sweep: No such file");
+}
+
+TEST(WorkerProcesses, SignalsToUsReachThemAndEndTheWait) {
+  const std::string dir = testing::scratchDir("workers");
+  for (int sig : {SIGINT, SIGTERM}) {
+    // Each worker notes the signal and exits 0; the wait still ends in an error.
+    const std::string script =
+        "trap 'echo > " + dir + "/sig-$2; exit 0' INT TERM; touch " + dir +
+        "/up-$2; i=0; while [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; exit 9";
+    const pid_t self = getpid();
+    const pid_t sender = fork();
+    if (sender == 0) {
+      for (int i = 0; i < 2000 && !(fs::exists(dir + "/up-1") && fs::exists(dir + "/up-2")); ++i)
+        usleep(10 * 1000);
+      kill(self, sig);
+      _exit(0);
+    }
+    EXPECT_ERROR_CONTAINS(
+        runWorkerProcesses("/bin/sh", {"sh", "-c", script, "sh"}, "--worker", 2, 1),
+        std::string("stopped by ") + strsignal(sig));
+    waitpid(sender, nullptr, 0);
+    for (const char* f : {"/sig-1", "/sig-2", "/up-1", "/up-2"}) {
+      EXPECT_TRUE(fs::exists(dir + f)) << f << " " << sig;
+      fs::remove(dir + f);
+    }
+    // Our own handling is back as it was (gtest's default: none).
+    struct sigaction now {};
+    sigaction(sig, nullptr, &now);
+    EXPECT_EQ(now.sa_handler, SIG_DFL);
+  }
+}
+
+TEST(WorkerProcesses, AWorkerHearsItsStopAndItsParentsEnd) {
+  const std::string dir = testing::scratchDir("workers");
+  // A worker of this process: SIGTERM is a request it reads, not its end.
+  const pid_t worker = fork();
+  if (worker == 0) {
+    setenv("PAIRCAST_WORKER_PARENT", std::to_string(getppid()).c_str(), 1);
+    stopWithParent();
+    const bool before = workerShouldStop();
+    raise(SIGTERM);
+    _exit(!before && workerShouldStop() ? 0 : 1);
+  }
+  int status = 0;
+  waitpid(worker, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  // A worker whose parent ends: it hears it.
+  const pid_t parent = fork();
+  if (parent == 0) {
+    const pid_t child = fork();
+    if (child == 0) {
+      setenv("PAIRCAST_WORKER_PARENT", std::to_string(getppid()).c_str(), 1);
+      stopWithParent();
+      std::ofstream(dir + "/started") << "1";
+      for (int i = 0; i < 1000 && !workerShouldStop(); ++i) usleep(10 * 1000);
+      if (workerShouldStop()) std::ofstream(dir + "/heard") << "1";
+      _exit(0);
+    }
+    for (int i = 0; i < 1000 && !fs::exists(dir + "/started"); ++i) usleep(10 * 1000);
     _exit(0);
   }
-  runWorkerProcesses({"/bin/sh", "-c", script}, "--worker", 2, 1);
-  waitpid(sender, nullptr, 0);
-  EXPECT_TRUE(fs::exists(dir + "/int-1"));
-  EXPECT_TRUE(fs::exists(dir + "/int-2"));
-  // Our own SIGINT handling is back as it was (gtest's default: none).
-  struct sigaction now {};
-  sigaction(SIGINT, nullptr, &now);
-  EXPECT_EQ(now.sa_handler, SIG_DFL);
+  waitpid(parent, nullptr, 0);
+  for (int i = 0; i < 1000 && !fs::exists(dir + "/heard"); ++i) usleep(10 * 1000);
+  EXPECT_TRUE(fs::exists(dir + "/heard"));
 }
 
 TEST(WorkerProcesses, AWorkerStartedByHandIsRefused) {
