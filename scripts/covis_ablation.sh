@@ -15,13 +15,14 @@
 # BUDGET=flow runs the study at the budget that learns flow (docs/finetune.md, "The regime that
 # learns flow"): 16 px patches, 18,300 pairs per set and 20,000 steps of 16 on the shipped room
 # and apartment plus 120 random floor plans, then every run and each seed's random weights
-# fine-tuned for flow alone, 20,000 steps of 8 on 6,300 flow-style pairs. About 10 hours of one
-# process on 2 cores, and about 6 in two; NSEEDS=1 first gives one seed of every set, and the
-# same line with NSEEDS=3 later adds the other two.
+# fine-tuned for flow alone, 20,000 steps of 8 on 6,344 flow-style pairs (6,300 asked for).
+# About 10 hours of one process on 2 cores, and about 6 in two; NSEEDS=1 first gives one seed of
+# every set, and the same line with NSEEDS=3 later adds the other two.
 # NSEEDS is how many seeds each set and baseline trains with (covis_sweep --seeds; 3), not a
 # list of seeds as flow_pilot.sh's SEEDS is.
-# PROCESSES (2) is how many runs train at once (covis_sweep --processes), each on cores / PROCESSES
-# threads: on 2 cores two one-thread runs train 1.7x faster than one two-thread run.
+# PROCESSES (2) is how many runs train at once (covis_sweep --processes), each on 1/PROCESSES of
+# the threads (OMP_NUM_THREADS, else the cores): on 2 cores two one-thread runs train 1.7x
+# faster than one two-thread run.
 # Precision: covis_sweep's --amp auto (bf16 on CPUs with bf16 units). The 3-seed study's figures
 # in docs/covis_ablation.md were measured with --amp none (float32), which the extra options
 # take, in one process (PROCESSES=1; two differ from it in floating-point order alone); the flow
