@@ -112,11 +112,36 @@ std::vector<char*> pointers(std::vector<std::string>& strings) {
   return p;
 }
 
+// Workers start with SIGINT and SIGTERM unblocked and at their default action, whatever ours
+// are: a spawned process inherits the signal mask (HoldStopSignals blocks both while spawning)
+// and the signals we ignore (a shell's background job ignores SIGINT).
+class CleanSignals {
+ public:
+  CleanSignals() {
+    posix_spawnattr_init(&attr_);
+    sigset_t none, stop;
+    sigemptyset(&none);
+    sigemptyset(&stop);
+    sigaddset(&stop, SIGINT);
+    sigaddset(&stop, SIGTERM);
+    posix_spawnattr_setsigmask(&attr_, &none);
+    posix_spawnattr_setsigdefault(&attr_, &stop);
+    posix_spawnattr_setflags(&attr_, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+  }
+  ~CleanSignals() { posix_spawnattr_destroy(&attr_); }
+  const posix_spawnattr_t* get() const { return &attr_; }
+
+ private:
+  posix_spawnattr_t attr_;
+};
+
 pid_t spawnWorker(const std::string& executable, std::vector<std::string> args,
                   std::vector<std::string> env) {
   std::vector<char*> argv = pointers(args), envp = pointers(env);
   pid_t pid = 0;
-  const int rc = posix_spawn(&pid, executable.c_str(), nullptr, nullptr, argv.data(), envp.data());
+  const CleanSignals attr;
+  const int rc =
+      posix_spawn(&pid, executable.c_str(), nullptr, attr.get(), argv.data(), envp.data());
   if (rc != 0)
     throw Error(executable, "cannot start a worker of " + args[0] + ": " + std::strerror(rc));
   return pid;

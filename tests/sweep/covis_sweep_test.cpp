@@ -582,11 +582,10 @@ TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
       EXPECT_NEAR(two["runs"][i][figure].get<double>(), one["runs"][i][figure].get<double>(), 1e-4)
           << i << " " << figure;
 
-  // The command killed once its workers run: they stop with it, none is left behind, and the
-  // same command finishes the sweep as the uninterrupted one did.
+  // The command stopped (SIGINT), then killed (SIGKILL), each time once its workers have trained
+  // a run: they stop with it, before the work is done, and none is left behind. The same command
+  // then finishes the sweep as the uninterrupted one did.
   const std::string killed = dir + "/killed";
-  const pid_t lead = testing::spawnProcess(withOption(workersArgs(killed), "--processes", "2"));
-  // Killed once a first run is trained: the workers are then training or fine-tuning.
   auto trainedRuns = [&] {  // while the workers write: no error stops the count
     std::error_code ec;
     size_t n = 0;
@@ -595,12 +594,18 @@ TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
       n += it->path().filename() == "checkpoint-last.pth";
     return n;
   };
-  for (int i = 0; i < 12000 && trainedRuns() == 0; ++i) usleep(10 * 1000);
-  ASSERT_EQ(workersOf(lead), 2) << "the workers are not running";
-  kill(lead, SIGKILL);
-  EXPECT_EQ(testing::waitProcess(lead), -SIGKILL);
-  for (int i = 0; i < 12000 && workersOf(lead) > 0; ++i) usleep(10 * 1000);
-  ASSERT_EQ(workersOf(lead), 0) << "a worker outlived the command that started it";
+  for (const int sig : {SIGINT, SIGKILL}) {
+    const size_t before = trainedRuns();
+    const pid_t lead = testing::spawnProcess(withOption(workersArgs(killed), "--processes", "2"));
+    for (int i = 0; i < 12000 && trainedRuns() == before; ++i) usleep(10 * 1000);
+    ASSERT_EQ(workersOf(lead), 2) << "the workers are not running";
+    kill(lead, sig);
+    EXPECT_EQ(testing::waitProcess(lead), sig == SIGINT ? 1 : -SIGKILL);
+    for (int i = 0; i < 12000 && workersOf(lead) > 0; ++i) usleep(10 * 1000);
+    ASSERT_EQ(workersOf(lead), 0) << "a worker outlived the command that started it";
+    for (const char* record : {"/claims/worker-1.json", "/claims/worker-2.json"})
+      EXPECT_FALSE(fs::exists(killed + record)) << "a worker did all its work after " << sig;
+  }
   ASSERT_EQ(testing::runProcess(withOption(workersArgs(killed), "--processes", "2")), 0);
   expectSameWeightsAndLogs(dir + "/one", killed);
 }

@@ -115,6 +115,43 @@ std::string waitForTerm(const std::string& dir) {
          "/up-$2; i=0; while [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; exit 9";
 }
 
+// The bits of SIGINT and SIGTERM in a /proc/<pid>/status mask ("SigBlk:\t0000000000004002").
+uint64_t stopBits(const std::string& line) {
+  const uint64_t mask = std::stoull(line.substr(line.find(':') + 1), nullptr, 16);
+  return mask & ((uint64_t{1} << (SIGINT - 1)) | (uint64_t{1} << (SIGTERM - 1)));
+}
+
+TEST(WorkerProcesses, TheyHearSigintAndSigtermThoughWeBlockOrIgnoreThem) {
+  const std::string dir = testing::scratchDir("workers");
+  // As a shell's background job ignores SIGINT; and SIGTERM blocked, as while spawning.
+  struct sigaction ignore {};
+  struct sigaction oldInt {};
+  ignore.sa_handler = SIG_IGN;
+  sigaction(SIGINT, &ignore, &oldInt);
+  sigset_t term, oldMask;
+  sigemptyset(&term);
+  sigaddset(&term, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &term, &oldMask);
+  // Python, not a shell: a shell may unblock signals itself, and so hide what it was given.
+  const std::string copyStatus =
+      "import sys; open('" + dir +
+      "/sig-' + sys.argv[2], 'w').write(open('/proc/self/status').read())";
+  runWorkerProcesses("/usr/bin/python3", {"python3", "-c", copyStatus}, "--worker", 2, 1);
+  pthread_sigmask(SIG_SETMASK, &oldMask, nullptr);
+  sigaction(SIGINT, &oldInt, nullptr);
+  for (int k = 1; k <= 2; ++k) {
+    std::ifstream in(dir + "/sig-" + std::to_string(k));
+    std::string line;
+    int masks = 0;
+    while (std::getline(in, line)) {
+      if (line.rfind("SigBlk:", 0) != 0 && line.rfind("SigIgn:", 0) != 0) continue;
+      ++masks;
+      EXPECT_EQ(stopBits(line), 0u) << "worker " << k << ": " << line;
+    }
+    EXPECT_EQ(masks, 2) << "worker " << k;
+  }
+}
+
 TEST(WorkerProcesses, TheFirstFailureIsNamedAndStopsTheOthers) {
   const std::string dir = testing::scratchDir("workers");
   const std::string script = "if [ $2 = 2 ]; then while [ ! -e " + dir +
