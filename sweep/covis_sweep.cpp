@@ -192,7 +192,8 @@ std::string claimFile(const SweepConfig& c, std::string label) {
 
 // One of the --processes worker processes, started by the sweep once its pool, sets and held-out
 // data are ready. It trains every run that no other worker holds, in order, then fine-tunes
-// likewise; a fine-tune of a run another worker is training waits for it. Before each unit it
+// likewise; a fine-tune of a run another worker is training waits for it (and trains it, if that
+// worker was killed part way). Before each unit it
 // stops when asked to (SIGINT, SIGTERM, or the command that started it gone). It writes what it
 // ran to claims/worker-<k>.json.
 nlohmann::json workOnClaims(const SweepConfig& c, const CroCoConfig& mc,
@@ -217,8 +218,10 @@ nlohmann::json workOnClaims(const SweepConfig& c, const CroCoConfig& mc,
         return (r.dir / "checkpoint-last.pth").string() == job.init;
       });
       if (run != runs.end()) {
-        WorkClaim::take(claimFile(c, run->label()));  // its training, wherever it runs, is over
-        if (!pretrained(c, run->dir)) continue;       // it failed: the sweep says so
+        // Its training, wherever it ran, is over. When it is not complete, the worker that held
+        // it was killed (a failing worker stops them all): its run is trained here.
+        const WorkClaim training = WorkClaim::take(claimFile(c, run->label()));
+        if (!pretrained(c, run->dir)) trainRun(c, mc, *run, nullptr), ++trained;
       }
       const auto claim = WorkClaim::tryTake(claimFile(c, job.label));
       if (claim) finetuned += runFinetuneJob(c, mc, data, job, nullptr);

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -26,6 +27,7 @@
 #include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/plot.h"
+#include "util/work_claims.h"
 
 namespace paircast {
 namespace {
@@ -552,12 +554,32 @@ void expectSameWeightsAndLogs(const std::string& ref, const std::string& out) {
   EXPECT_EQ(compared, 7);  // 3 runs, 3 fine-tunes of them and 1 of the random weights
 }
 
+// The checkpoints under OUT/runs, counted while workers write there (no error stops the count).
+size_t trainedRuns(const std::string& out) {
+  std::error_code ec;
+  size_t n = 0;
+  for (fs::recursive_directory_iterator it(out + "/runs", ec), end; !ec && it != end;
+       it.increment(ec))
+    n += it->path().filename() == "checkpoint-last.pth";
+  return n;
+}
+
 TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
   const std::string dir = testing::scratchDir("workers");
   // One process on as many threads as each of two workers: the same arithmetic, run by run.
   const std::string threads = std::to_string(std::max(1, omp_get_max_threads() / 2));
   ASSERT_EQ(testing::runProcess(workersArgs(dir + "/one"), -1, {"OMP_NUM_THREADS=" + threads}), 0);
-  ASSERT_EQ(testing::runProcess(withOption(workersArgs(dir + "/two"), "--processes", "2")), 0);
+  // Two workers; the first run's claim is held here, as by a worker killed before it trained it,
+  // until they have trained the other two: then one of them trains it before its fine-tune.
+  const std::string twoDir = dir + "/two";
+  std::optional<WorkClaim> held = WorkClaim::tryTake(twoDir + "/claims/bin_0.45-seed-0.lock");
+  ASSERT_TRUE(held.has_value());
+  const pid_t lead = testing::spawnProcess(withOption(workersArgs(twoDir), "--processes", "2"));
+  for (int i = 0; i < 12000 && trainedRuns(twoDir) < 2; ++i) usleep(10 * 1000);
+  EXPECT_EQ(trainedRuns(twoDir), 2u) << "the workers did not train the other runs";
+  EXPECT_FALSE(fs::exists(twoDir + "/runs/bin_0.45/seed-0/checkpoint-last.pth"));
+  held.reset();
+  ASSERT_EQ(testing::waitProcess(lead), 0);
   expectSameWeightsAndLogs(dir + "/one", dir + "/two");
   int claims = 0;
   for (const auto& e : fs::directory_iterator(dir + "/two/claims"))
@@ -586,18 +608,10 @@ TEST(CovisSweep, WorkerProcessesShareTheRunsAndEndAsOneProcessDoes) {
   // a run: they stop with it, before the work is done, and none is left behind. The same command
   // then finishes the sweep as the uninterrupted one did.
   const std::string killed = dir + "/killed";
-  auto trainedRuns = [&] {  // while the workers write: no error stops the count
-    std::error_code ec;
-    size_t n = 0;
-    for (fs::recursive_directory_iterator it(killed + "/runs", ec), end; !ec && it != end;
-         it.increment(ec))
-      n += it->path().filename() == "checkpoint-last.pth";
-    return n;
-  };
   for (const int sig : {SIGINT, SIGKILL}) {
-    const size_t before = trainedRuns();
+    const size_t before = trainedRuns(killed);
     const pid_t lead = testing::spawnProcess(withOption(workersArgs(killed), "--processes", "2"));
-    for (int i = 0; i < 12000 && trainedRuns() == before; ++i) usleep(10 * 1000);
+    for (int i = 0; i < 12000 && trainedRuns(killed) == before; ++i) usleep(10 * 1000);
     ASSERT_EQ(workersOf(lead), 2) << "the workers are not running";
     kill(lead, sig);
     EXPECT_EQ(testing::waitProcess(lead), sig == SIGINT ? 1 : -SIGKILL);
