@@ -5,9 +5,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <set>
+#include <thread>
 
 #include <omp.h>
-#include <thread>
 
 #include "dataset/dataset_report.h"
 #include "dataset/generate_job.h"
@@ -190,12 +190,16 @@ std::string claimFile(const SweepConfig& c, std::string label) {
   return (fs::path(c.out) / "claims" / (label + ".lock")).string();
 }
 
+// What worker k ran: <out>/claims/worker-<k>.json.
+fs::path workerRecord(const SweepConfig& c, int k) {
+  return fs::path(c.out) / "claims" / ("worker-" + std::to_string(k) + ".json");
+}
+
 // One of the --processes worker processes, started by the sweep once its pool, sets and held-out
 // data are ready. It trains every run that no other worker holds, in order, then fine-tunes
 // likewise; a fine-tune of a run another worker is training waits for it (and trains it, if that
-// worker was killed part way). Before each unit it
-// stops when asked to (SIGINT, SIGTERM, or the command that started it gone). It writes what it
-// ran to claims/worker-<k>.json.
+// worker was killed part way). Before each unit it stops when asked to (SIGINT, SIGTERM, or the
+// command that started it gone). It writes what it ran to claims/worker-<k>.json.
 nlohmann::json workOnClaims(const SweepConfig& c, const CroCoConfig& mc,
                             const std::vector<SweepRun>& runs) {
   stopWithParent();
@@ -231,9 +235,7 @@ nlohmann::json workOnClaims(const SweepConfig& c, const CroCoConfig& mc,
                   " fine-tunes");
   const nlohmann::json done = {
       {"worker", c.worker}, {"runs_trained", trained}, {"finetunes", finetuned}};
-  const fs::path record =
-      fs::path(c.out) / "claims" / ("worker-" + std::to_string(c.worker) + ".json");
-  writeFileAtomic(record.string(), done.dump() + "\n");
+  writeFileAtomic(workerRecord(c, c.worker).string(), done.dump() + "\n");
   return done;
 }
 
@@ -245,7 +247,7 @@ void trainInWorkers(const SweepConfig& c) {
   sweepSay(c, "training and fine-tuning in " + std::to_string(c.processes) + " processes of " +
                   std::to_string(threads) + (threads == 1 ? " thread" : " threads"));
   for (int k = 1; k <= c.processes; ++k)  // a previous sweep's records
-    fs::remove(fs::path(c.out) / "claims" / ("worker-" + std::to_string(k) + ".json"));
+    fs::remove(workerRecord(c, k));
   try {
     runWorkerProcesses(kSelfExecutable, c.command, "--worker", c.processes, threads);
   } catch (const Error& e) {

@@ -107,7 +107,8 @@ struct SweepConfig {
   bool reports = true;  // a dataset report per set
   bool progress = true;
   // Independent worker processes that share the training and fine-tuning, each run by one of
-  // them, each worker on cores / processes threads (on 2 cores, 2 train 1.7x faster than 1).
+  // them, each worker on 1/processes of the threads (OMP_NUM_THREADS, else the cores; on 2
+  // cores, 2 train 1.7x faster than 1).
   // They rerun `command` (the tool's own argv, argv[0] its executable) with --worker k.
   int processes = 1;
   std::vector<std::string> command;

@@ -91,7 +91,8 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--processes", c.processes,
                  "Worker processes that share the training and fine-tuning, one run each at a "
-                 "time, each on cores / N threads (on 2 cores, 2 run about 1.7x faster than 1)")
+                 "time, each on 1/N of the threads (OMP_NUM_THREADS, else the cores; on 2 cores, "
+                 "2 run about 1.7x faster than 1)")
       ->check(CLI::Range(1, 64));
   app.add_option("--worker", c.worker, "")->group("");  // set by --processes for its workers
   bool noReports = false, quiet = false;

@@ -23,7 +23,27 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr const char* kParentVariable = "PAIRCAST_WORKER_PARENT=";
+constexpr const char* kParentName = "PAIRCAST_WORKER_PARENT";
+const std::string kParentVariable = std::string(kParentName) + "=";
+
+// SIGINT and SIGTERM, the signals that stop a worker.
+sigset_t stopSignals() {
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  return set;
+}
+
+// `handler` for SIGINT and SIGTERM (system calls restarted), the old actions into `old`.
+void handleStopSignals(void (*handler)(int), struct sigaction* oldInt, struct sigaction* oldTerm) {
+  struct sigaction sa {};
+  sa.sa_handler = handler;
+  sa.sa_flags = SA_RESTART;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, oldInt);
+  sigaction(SIGTERM, &sa, oldTerm);
+}
 
 int openClaimFile(const std::string& path) {
   std::error_code ec;
@@ -54,12 +74,7 @@ class PassSignalsOn {
   PassSignalsOn() {
     gWorkerCount = 0;
     gPassedOn = 0;
-    struct sigaction sa {};
-    sa.sa_handler = passSignalOn;
-    sa.sa_flags = SA_RESTART;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, &oldInt_);
-    sigaction(SIGTERM, &sa, &oldTerm_);
+    handleStopSignals(passSignalOn, &oldInt_, &oldTerm_);
   }
   ~PassSignalsOn() {
     sigaction(SIGINT, &oldInt_, nullptr);
@@ -77,11 +92,8 @@ class PassSignalsOn {
 class HoldStopSignals {
  public:
   HoldStopSignals() {
-    sigset_t set;
-    sigemptyset(&set);
-    sigaddset(&set, SIGINT);
-    sigaddset(&set, SIGTERM);
-    pthread_sigmask(SIG_BLOCK, &set, &old_);
+    const sigset_t stop = stopSignals();
+    pthread_sigmask(SIG_BLOCK, &stop, &old_);
   }
   ~HoldStopSignals() { pthread_sigmask(SIG_SETMASK, &old_, nullptr); }
 
@@ -93,7 +105,7 @@ class HoldStopSignals {
 std::vector<std::string> workerEnvironment(int threads) {
   std::vector<std::string> env;
   auto replaced = [](const char* e) {
-    for (const char* name : {"OMP_NUM_THREADS=", "OPENBLAS_NUM_THREADS=", kParentVariable})
+    for (const char* name : {"OMP_NUM_THREADS=", "OPENBLAS_NUM_THREADS=", kParentVariable.c_str()})
       if (std::strncmp(e, name, std::strlen(name)) == 0) return true;
     return false;
   };
@@ -119,11 +131,9 @@ class CleanSignals {
  public:
   CleanSignals() {
     posix_spawnattr_init(&attr_);
-    sigset_t none, stop;
+    sigset_t none;
     sigemptyset(&none);
-    sigemptyset(&stop);
-    sigaddset(&stop, SIGINT);
-    sigaddset(&stop, SIGTERM);
+    const sigset_t stop = stopSignals();
     posix_spawnattr_setsigmask(&attr_, &none);
     posix_spawnattr_setsigdefault(&attr_, &stop);
     posix_spawnattr_setflags(&attr_, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
@@ -195,8 +205,7 @@ std::vector<pid_t> startWorkers(const std::string& executable,
     } catch (const Error&) {
       for (pid_t p : pids) ::kill(p, SIGTERM);  // they save and stop
       for (pid_t p : pids) ::waitpid(p, nullptr, 0);
-      gWorkerCount = 0;
-      throw;
+      throw;  // PassSignalsOn forgets them
     }
     gWorkers[k - 1] = pids.back();
     gWorkerCount = k;
@@ -261,18 +270,12 @@ void askToStop(int) {
 }  // namespace
 
 void stopWithParent() {
-  const char* parent = std::getenv("PAIRCAST_WORKER_PARENT");
+  const char* parent = std::getenv(kParentName);
   if (!parent || !*parent)
-    throw Error(
-        "PAIRCAST_WORKER_PARENT is not set: workers are started by the command itself, "
-        "not by hand");
+    throw Error(std::string(kParentName) +
+                " is not set: workers are started by the command itself, not by hand");
   gParent = static_cast<pid_t>(std::atoll(parent));
-  struct sigaction sa {};
-  sa.sa_handler = askToStop;
-  sa.sa_flags = SA_RESTART;
-  sigemptyset(&sa.sa_mask);
-  sigaction(SIGINT, &sa, nullptr);
-  sigaction(SIGTERM, &sa, nullptr);
+  handleStopSignals(askToStop, nullptr, nullptr);
   ::prctl(PR_SET_PDEATHSIG, SIGTERM);
   // The parent may have died before the line above: then we were re-parented.
   if (::getppid() != gParent)

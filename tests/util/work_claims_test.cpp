@@ -109,9 +109,11 @@ TEST(WorkerProcesses, EachGetsItsIndexItsThreadsAndOurPid) {
   }
 }
 
-// A worker script that notes SIGTERM in DIR/term-$2 and exits 0; it gives up after 20 s.
-std::string waitForTerm(const std::string& dir) {
-  return "trap 'echo > " + dir + "/term-$2; exit 0' TERM; touch " + dir +
+// A worker script that notes the signals `traps` in DIR/<mark>-$2 and exits 0, once it has
+// touched DIR/up-$2; it gives up after 20 s.
+std::string waitForSignals(const std::string& dir, const std::string& traps,
+                           const std::string& mark) {
+  return "trap 'echo > " + dir + "/" + mark + "-$2; exit 0' " + traps + "; touch " + dir +
          "/up-$2; i=0; while [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; exit 9";
 }
 
@@ -155,7 +157,8 @@ TEST(WorkerProcesses, TheyHearSigintAndSigtermThoughWeBlockOrIgnoreThem) {
 TEST(WorkerProcesses, TheFirstFailureIsNamedAndStopsTheOthers) {
   const std::string dir = testing::scratchDir("workers");
   const std::string script = "if [ $2 = 2 ]; then while [ ! -e " + dir +
-                             "/up-1 ]; do sleep 0.01; done; exit 4; fi; " + waitForTerm(dir);
+                             "/up-1 ]; do sleep 0.01; done; exit 4; fi; " +
+                             waitForSignals(dir, "TERM", "term");
   EXPECT_ERROR_CONTAINS(runWorkerProcesses("/bin/sh", {"sh", "-c", script, "sh"}, "--w", 2, 1),
                         "worker 2 of 2 (pid ", ") exited with status 4");
   EXPECT_TRUE(fs::exists(dir + "/term-1")) << "worker 1 was not stopped";
@@ -172,9 +175,7 @@ TEST(WorkerProcesses, SignalsToUsReachThemAndEndTheWait) {
   const std::string dir = testing::scratchDir("workers");
   for (int sig : {SIGINT, SIGTERM}) {
     // Each worker notes the signal and exits 0; the wait still ends in an error.
-    const std::string script =
-        "trap 'echo > " + dir + "/sig-$2; exit 0' INT TERM; touch " + dir +
-        "/up-$2; i=0; while [ $i -lt 400 ]; do sleep 0.05; i=$((i+1)); done; exit 9";
+    const std::string script = waitForSignals(dir, "INT TERM", "sig");
     const pid_t self = getpid();
     const pid_t sender = fork();
     if (sender == 0) {
