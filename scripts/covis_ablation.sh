@@ -19,7 +19,10 @@
 # About 10 hours of one process on 2 cores, and about 6 in two; NSEEDS=1 first gives one seed of
 # every set, and the same line with NSEEDS=3 later adds the other two.
 # NSEEDS is how many seeds each set and baseline trains with (covis_sweep --seeds; 3), not a
-# list of seeds as flow_pilot.sh's SEEDS is.
+# list of seeds as flow_pilot.sh's SEEDS is. FIRST_SEED (0) is the first seed's index
+# (covis_sweep --first-seed): a study can so run in parts, one seed or more each, on several
+# machines or days, each part in its own OUT; `build/tools/covis_sweep --merge PART/sweep-flow...
+# --out MERGED` then writes the report of all their seeds from the parts' results.json files.
 # PROCESSES (2) is how many runs train at once (covis_sweep --processes), each on 1/PROCESSES of
 # the threads (OMP_NUM_THREADS, else the cores): on 2 cores two one-thread runs train 1.7x
 # faster than one two-thread run.
@@ -27,13 +30,14 @@
 # in docs/covis_ablation.md were measured with --amp none (float32), which the extra options
 # take, in one process (PROCESSES=1; two differ from it in floating-point order alone); the flow
 # budget runs with auto.
-# Usage: [BUDGET=study|flow] [NSEEDS=3] [PROCESSES=2] scripts/covis_ablation.sh [OUT]
+# Usage: [BUDGET=study|flow] [NSEEDS=3] [FIRST_SEED=0] [PROCESSES=2] scripts/covis_ablation.sh [OUT]
 #        [extra covis_sweep options]
 # (OUT: runs/ablation). Rerun the same line to resume a killed sweep.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 budget=${BUDGET:-study}
 seeds=${NSEEDS:-3}
+first_seed=${FIRST_SEED:-0}
 processes=${PROCESSES:-2}
 if [[ $budget != study && $budget != flow ]]; then
   echo "covis_ablation.sh: BUDGET is study or flow, not '$budget'" >&2
@@ -41,6 +45,11 @@ if [[ $budget != study && $budget != flow ]]; then
 fi
 if [[ ! $seeds =~ ^[1-9][0-9]{0,2}$ ]]; then
   echo "covis_ablation.sh: NSEEDS is a whole number from 1 to 999, not '$seeds'" >&2
+  exit 2
+fi
+if [[ ! $first_seed =~ ^(0|[1-9][0-9]{0,2})$ ]] || ((first_seed + seeds > 1000)); then
+  echo "covis_ablation.sh: FIRST_SEED is a whole number from 0 and FIRST_SEED + NSEEDS at" \
+    "most 1000, not '$first_seed'" >&2
   exit 2
 fi
 if [[ ! $processes =~ ^[1-9][0-9]?$ ]] || ((processes > 64)); then
@@ -99,7 +108,8 @@ if [[ $budget == study ]]; then
     --scenes scenes/room scenes/apartment "$SCENES"/random_7_{0..5} "$SCENES/scan_replica_4" \
     "$SCENES/scan_scannet_3_vh_clean_2.ply" "${held[@]}" --up auto \
     --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds "$seeds" \
-    --img-size 64 --patch-size 8 --resolution 73 --pairs-per-set 1024 --steps 640 \
+    --first-seed "$first_seed" --img-size 64 --patch-size 8 --resolution 73 --pairs-per-set 1024 \
+    --steps 640 \
     --downstream flow,depth --finetune-steps 200 --finetune-pairs 512 --finetune-eval-pairs 256 \
     --processes "$processes" --out "$OUT/sweep" "$@"
 fi
@@ -108,6 +118,7 @@ make_once "$SCENES/plans80" "${plans80_opts[@]}"
 exec build/tools/covis_sweep \
   --scenes scenes/room scenes/apartment "$SCENES/plans40" "$SCENES/plans80" "${held[@]}" --up y \
   --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds "$seeds" \
-  --img-size 64 --patch-size 16 --resolution 73 --pairs-per-set 18300 --steps 20000 \
+  --first-seed "$first_seed" --img-size 64 --patch-size 16 --resolution 73 --pairs-per-set 18300 \
+  --steps 20000 \
   --downstream flow --finetune-steps 20000 --finetune-pairs 6300 --finetune-eval-pairs 256 \
   --processes "$processes" --out "$OUT/sweep-flow" "$@"

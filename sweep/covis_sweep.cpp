@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <numeric>
 #include <set>
 #include <thread>
 
@@ -122,6 +123,7 @@ nlohmann::json rankSettings(const SweepConfig& c) {
           {"device", c.device},
           {"amp", c.amp},
           {"seeds", c.seeds},
+          {"first_seed", c.firstSeed},
           {"baselines", c.baselines},
           {"sets", c.sets},
           {"downstream", downstreamSettings(c)}};
@@ -306,7 +308,7 @@ nlohmann::json writeSets(const SweepConfig& c, const std::vector<SweepSet>& sets
 // (runs/random/seed-<k>/eval.json).
 nlohmann::json randomEncoderRuns(const SweepConfig& c, const CroCoConfig& mc, const HeldOut& h) {
   nlohmann::json runs = nlohmann::json::array();
-  for (int k = 0; k < c.seeds; ++k) {
+  for (const int k : c.seedIndices()) {
     const fs::path dir = fs::path(c.out) / "runs" / "random" / seedFolder(k);
     nlohmann::json ev = readSweepState((dir / "eval.json").string());
     if (!evaluatedWith(ev, h)) {
@@ -387,14 +389,19 @@ nlohmann::json collectResults(const SweepConfig& c, const std::vector<SweepSet>&
                               {"centers", c.centers},
                               {"sets", c.sets},
                               {"seeds", c.seeds},
+                              {"first_seed", c.firstSeed},
                               {"baselines", c.baselines},
                               {"pairs_per_set", c.pairsPerSet},
                               {"steps", c.steps},
                               {"preset", c.preset},
                               {"img_size", c.imgSize},
+                              {"patch_size", c.patchSize},
+                              {"resolution", c.resolution},
                               {"batch_size", c.batchSize},
                               {"blr", c.blr},
                               {"seed", c.seed},
+                              {"amp", c.amp},
+                              {"precision", h.precision.toJson()},
                               {"eval_pairs", h.img1.size(0)},
                               {"probe_views", c.probeViews},
                               {"mechanism_pairs", h.mechanism.size()},
@@ -415,9 +422,9 @@ nlohmann::json fineTuneAll(const SweepConfig& c, const CroCoConfig& mc,
   const std::vector<FinetuneJob> jobs = planFinetunes(c, runs);
   for (const FinetuneJob& job : jobs) runFinetuneJob(c, mc, data, job, dist);
   for (size_t i = 0; i < runs.size(); ++i) rows[i].update(downstreamFigures(c, data, runs[i].dir));
-  for (int k = 0; k < c.seeds; ++k)
-    randomRuns[k].update(
-        downstreamFigures(c, data, fs::path(c.out) / "runs" / "random" / seedFolder(k)));
+  for (auto& random : randomRuns)
+    random.update(downstreamFigures(
+        c, data, fs::path(c.out) / "runs" / "random" / seedFolder(random.at("seed_index"))));
   return downstreamFigures(c, data, jobs.front().dir.parent_path(), true);
 }
 
@@ -577,7 +584,7 @@ std::string referenceSet(const std::vector<SweepSet>& sets) {
 std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>& sets) {
   std::vector<SweepRun> runs;
   const fs::path root = fs::path(c.out) / "runs";
-  for (int k = 0; k < c.seeds; ++k) {
+  for (const int k : c.seedIndices()) {
     auto add = [&](const std::string& name, const std::string& task, const std::string& keys) {
       runs.push_back({name, task, keys, k, runSeed(c, k), root / name / seedFolder(k)});
     };
@@ -585,6 +592,12 @@ std::vector<SweepRun> planRuns(const SweepConfig& c, const std::vector<SweepSet>
     for (const std::string& b : c.baselines) add(b, "mae", referenceSet(sets));
   }
   return runs;
+}
+
+std::vector<int> SweepConfig::seedIndices() const {
+  std::vector<int> k(std::max(seeds, 0));
+  std::iota(k.begin(), k.end(), firstSeed);
+  return k;
 }
 
 bool SweepConfig::finetunes(const std::string& task) const {
@@ -625,6 +638,10 @@ void SweepConfig::validate() const {
   if (evalPairs < 1) throw OptionError("eval_pairs", "held-out pairs must be >= 1");
   if (probeViews < 4) throw OptionError("probe_views", "the depth probe needs at least 4 views");
   if (seeds < 1 || seeds > 1000) throw OptionError("seeds", "seeds must be in 1..1000");
+  if (firstSeed < 0 || firstSeed + seeds > 1000)
+    throw OptionError("first_seed", "seed indices must lie in 0..999 (--first-seed " +
+                                        std::to_string(firstSeed) + ", --seeds " +
+                                        std::to_string(seeds) + ")");
   if (processes < 1 || processes > 64) throw OptionError("processes", "processes must be in 1..64");
   if (processes > 1 && environmentRole().world > 1)
     throw OptionError("processes",

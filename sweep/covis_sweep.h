@@ -52,6 +52,8 @@ struct SweepConfig {
   void validate() const;
   // Whether `task` (flow or depth) is in --downstream.
   bool finetunes(const std::string& task) const;
+  // firstSeed .. firstSeed + seeds - 1.
+  std::vector<int> seedIndices() const;
   // Whether flow is fine-tuned, on flow-style pairs of its own (finetuneFlowMotion "near").
   bool flowOnFlowStylePairs() const;
   // Whether a fine-tune reads depth's wide pairs (ds/train, ds/heldout): depth is fine-tuned, or
@@ -82,6 +84,10 @@ struct SweepConfig {
   double blr = 6e-3;  // high for so few steps: at 1.5e-3, 700 steps barely move the encoder
   uint64_t seed = 0;  // the pool and held-out data; run k of a set trains with seed + k
   int seeds = 1;      // runs per set and baseline, for the intervals of results.csv
+  // The seed index of the first run: this sweep trains seed indices firstSeed .. firstSeed +
+  // seeds - 1, so that a study's seeds can run as parts, on several machines, and be merged
+  // (mergeSweepParts, sweep_merge.h).
+  int firstSeed = 0;
   // Baselines trained like every set, each at most once: "mae" (auto-completion: view 1 alone,
   // no reference view, on the pairs of referenceSet).
   std::vector<std::string> baselines;

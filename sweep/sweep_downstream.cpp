@@ -217,7 +217,7 @@ fs::path finetuneDir(const fs::path& runDir, const std::string& task) {
 std::vector<FinetuneJob> planFinetunes(const SweepConfig& c, const std::vector<SweepRun>& runs) {
   std::vector<FinetuneJob> jobs;
   const fs::path root = fs::path(c.out) / "runs";
-  for (int k = 0; k < c.seeds; ++k) {
+  for (const int k : c.seedIndices()) {
     auto add = [&](const std::string& name, const std::string& init, const fs::path& runDir) {
       for (const std::string& task : c.downstream)
         jobs.push_back({name + " seed " + std::to_string(k) + " " + task, name, task, init,

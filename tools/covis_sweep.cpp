@@ -3,19 +3,35 @@
 
 #include "render/scene_loader.h"
 #include "sweep/covis_sweep.h"
+#include "sweep/sweep_merge.h"
 #include "tool_main.h"
 
 using namespace paircast;
+
+namespace {
+
+int mergeParts(const std::vector<std::string>& parts, const std::string& out) {
+  const nlohmann::json r = mergeSweepParts(parts, out);
+  std::printf("%s\n", nlohmann::json({{"results", out + "/results.csv"},
+                                      {"summary", out + "/summary.html"},
+                                      {"seeds", r["config"]["seeds"]},
+                                      {"parts", parts.size()}})
+                          .dump()
+                          .c_str());
+  return 0;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   SweepConfig c;
   std::vector<double> mechanismCovis = {c.mechanismMinCovis, c.mechanismMaxCovis};
   CLI::App app{
       "Pre-train on sets of pairs binned by co-visibility, and evaluate each on held-out scenes"};
-  app.add_option("--scenes", c.scenes, "Training scenes (files, folders or .txt lists)")
-      ->required();
-  app.add_option("--heldout", c.heldout, "Held-out scenes for evaluation (never trained on)")
-      ->required();
+  app.add_option("--scenes", c.scenes,
+                 "Training scenes (files, folders or .txt lists); required but with --merge");
+  app.add_option("--heldout", c.heldout,
+                 "Held-out scenes for evaluation (never trained on); required but with --merge");
   app.add_option("--out", c.out, "Output folder (rerun with the same folder to resume)")
       ->required();
   app.add_option("--mode", c.modes, "bin, uniform, or bin,uniform")
@@ -48,6 +64,14 @@ int main(int argc, char** argv) {
       "--seed", c.seed,
       "Random seed of the pool and held-out data; run k of every set trains with seed + k");
   app.add_option("--seeds", c.seeds, "Runs per set and baseline, for the 95 % intervals");
+  app.add_option("--first-seed", c.firstSeed,
+                 "Seed index of the first run: this sweep runs seeds first-seed .. first-seed + "
+                 "seeds - 1, a part of a study that --merge joins");
+  std::vector<std::string> merge;
+  app.add_option("--merge", merge,
+                 "Merge finished sweeps of one study, each with its own seeds (their folders or "
+                 "results.json files), into the report of --out; no other option is used")
+      ->expected(1, -1);
   app.add_option("--baseline", c.baselines,
                  "Baselines trained like the sets: mae (view 1 alone, no reference view)")
       ->delimiter(',');
@@ -105,6 +129,7 @@ int main(int argc, char** argv) {
     c.reports = !noReports;
     c.progress = !quiet;
     c.command.assign(argv, argv + argc);
+    if (!merge.empty()) return mergeParts(merge, c.out);
     if (!quiet && c.worker == 0)
       logLaunch("covis_sweep", launchRole(processEnvironment()).describe());
     const nlohmann::json r = runCovisSweep(c);

@@ -1,5 +1,5 @@
 """scripts/covis_ablation.sh refuses, in one line that names the culprit and before it builds or
-renders anything: a BUDGET, NSEEDS or PROCESSES it does not know (an empty one means the default), and an
+renders anything: a BUDGET, NSEEDS, FIRST_SEED or PROCESSES it does not know (an empty one means the default), and an
 OUT whose scenes were made with other options (FURNISH)."""
 
 import os
@@ -40,6 +40,16 @@ def test_nseeds_must_be_a_whole_number_from_1_to_999(tmp_path, seeds):
     code, stderr = run(tmp_path / "out", BUDGET="flow", NSEEDS=seeds)
     assert code == 2
     assert stderr == f"covis_ablation.sh: NSEEDS is a whole number from 1 to 999, not '{seeds}'\n"
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("first,seeds", [("-1", "3"), ("one", "3"), ("01", "3"), ("1 2", "3"),
+                                         ("998", "3"), ("1000", "1")])
+def test_first_seed_must_leave_every_seed_index_below_1000(tmp_path, first, seeds):
+    code, stderr = run(tmp_path / "out", BUDGET="flow", NSEEDS=seeds, FIRST_SEED=first)
+    assert code == 2
+    assert stderr == ("covis_ablation.sh: FIRST_SEED is a whole number from 0 and FIRST_SEED + "
+                      f"NSEEDS at most 1000, not '{first}'\n")
     assert not (tmp_path / "out").exists()
 
 

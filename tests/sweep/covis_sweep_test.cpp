@@ -18,6 +18,7 @@
 #include "shard/shard_index.h"
 #include "sweep/depth_probe.h"
 #include "sweep/sweep_downstream.h"
+#include "sweep/sweep_merge.h"
 #include "sweep/sweep_report.h"
 #include "sweep/sweep_stats.h"
 #include "test_checkpoints.h"
@@ -654,8 +655,17 @@ TEST(CovisSweep, BadSeedsAndBaselinesAreRefused) {
   EXPECT_ERROR_CONTAINS(runCovisSweep(c), "unknown baseline 'simclr' (use mae)");
   c.baselines = {"mae", "mae"};
   EXPECT_ERROR_CONTAINS(runCovisSweep(c), "baseline 'mae' is given twice");
+  c.baselines = {"mae"};
+  c.firstSeed = 999;
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c),
+                        "seed indices must lie in 0..999 (--first-seed 999, --seeds 2)");
+  c.firstSeed = -1;
+  EXPECT_ERROR_CONTAINS(runCovisSweep(c), "seed indices must lie in 0..999");
+  c.firstSeed = 0;
   // The command refuses them before any work, with exit 2.
-  for (const auto& [option, value] : {std::pair{"--seeds", "0"}, std::pair{"--baseline", "byol"}})
+  for (const auto& [option, value] :
+       {std::pair{"--seeds", "0"}, std::pair{"--baseline", "byol"}, std::pair{"--first-seed", "-1"},
+        std::pair{"--first-seed", "999"}})
     EXPECT_EQ(testing::runProcess(withOption(seededArgs(c.out), option, value)), 2) << option;
   EXPECT_FALSE(fs::exists(c.out + "/pool"));
   c.baselines = {"mae"};
@@ -692,6 +702,15 @@ TEST(CovisSweep, RunsGoSeedBySeedAndMaeTrainsOnTheSetNearestHalf) {
   EXPECT_EQ(runs[7].label(), "uniform_0.15 seed 1");
   EXPECT_EQ(runs[7].seed, 11u);
   EXPECT_EQ(runs[20].dir, fs::path("/tmp/out/runs/mae/seed-2"));
+  // A part of the study from seed 3 (--first-seed 3): its seeds' runs, as the whole study has.
+  c.firstSeed = 3;
+  c.seeds = 2;
+  const std::vector<SweepRun> part = planRuns(c, sets);
+  ASSERT_EQ(part.size(), 14u);
+  EXPECT_EQ(part[0].label(), "uniform_0.15 seed 3");
+  EXPECT_EQ(part[0].seed, 13u);
+  EXPECT_EQ(part[13].dir, fs::path("/tmp/out/runs/mae/seed-4"));
+  EXPECT_EQ(c.seedIndices(), (std::vector<int>{3, 4}));
 }
 
 // ---- --downstream ----
@@ -821,6 +840,103 @@ void expectKilledFineTunesEndAsTheseDid(const std::string& clean) {
   ASSERT_EQ(testing::runProcess(downstreamArgs(killed)), 0);
   for (const char* f : {"results.csv", "results_runs.csv", "downstream_by_covis.csv"})
     EXPECT_EQ(readFile(killed + "/" + f), readFile(clean + "/" + f)) << f;
+}
+
+// ---- a study in parts: --first-seed and --merge ----
+
+// Writes `results` to `dir`/results.json, as a part's folder holds it.
+std::string writePart(const std::string& dir, const nlohmann::json& results) {
+  fs::create_directories(dir);
+  writeFileAtomic(dir + "/results.json", results.dump(1) + "\n");
+  return dir;
+}
+
+// Parts that are not parts of one study, or not results at all, are refused naming the part.
+void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
+  const std::string merged = testing::scratchDir("parts_bad_merged");
+  const nlohmann::json r = nlohmann::json::parse(readFile(part1 + "/results.json"));
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, part0 + "/results.json"}, merged),
+                        part0 + "/results.json: seed 0 is in " + part0 +
+                            "/results.json too: merge each seed from one part");
+  nlohmann::json other = r;
+  other["config"]["steps"] = 5;
+  const std::string steps = writePart(testing::scratchDir("parts_bad_steps"), other);
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, steps}, merged),
+                        steps + "/results.json: is not a part of the study of " + part0 +
+                            "/results.json: its setting 'steps' is 5, not 4");
+  other = r;
+  other["finetune_baselines"]["ft_flow_aepe"] =
+      r["finetune_baselines"]["ft_flow_aepe"].get<double>() * 1.01;
+  const std::string data = writePart(testing::scratchDir("parts_bad_data"), other);
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, data}, merged),
+                        "its held-out data (zero flow's and constant depth's figures) is");
+  other = r;
+  other["config"]["scenes"] = nlohmann::json::array({"/elsewhere/apartment"});
+  const std::string scenes = writePart(testing::scratchDir("parts_bad_scenes"), other);
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, scenes}, merged),
+                        "its scene files is [\"apartment\"], not [\"");
+  const std::string truncated = testing::scratchDir("parts_truncated");
+  const std::string text = readFile(part1 + "/results.json");
+  fs::create_directories(truncated);
+  writeFileAtomic(truncated + "/results.json", text.substr(0, text.size() / 2));
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, truncated}, merged),
+                        truncated + "/results.json: is not a JSON object (truncated?)");
+  const std::string notResults =
+      writePart(testing::scratchDir("parts_not_results"),
+                {{"config", r["config"]}, {"runs", nlohmann::json::array()}});
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({notResults}, merged),
+                        "has no runs in 'runs': not the results.json of a finished covis_sweep");
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, merged + "/nowhere"}, merged),
+                        merged + "/nowhere: no such file");
+  EXPECT_FALSE(fs::exists(merged + "/results.json"));
+  // The command: exit 1 for a bad part, 2 without --out.
+  EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", part0, truncated, "--out", merged}),
+            1);
+  EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", part0}), 2);
+  EXPECT_FALSE(fs::exists(merged + "/results.json"));
+}
+
+// A study's seeds run as parts, each in its own folder (the later seed first: a part needs no
+// other), and merged from their results.json files, give the report of one sweep over all the
+// seeds: the same runs, intervals, verdicts and by-covis rows, to the byte.
+TEST(CovisSweep, SeedsRunInPartsMergeToTheSweepOfAllTheSeeds) {
+  const std::string whole = testing::scratchDir("parts_whole");
+  SweepConfig c = downstreamSweep(whole);
+  c.downstream = {"flow"};
+  const nlohmann::json all = runCovisSweep(c);
+  std::map<std::string, std::string> files;
+  const std::vector<std::string> names = {"results.csv", "results_runs.csv", "probe_by_covis.csv",
+                                          "downstream_by_covis.csv"};
+  for (const std::string& f : names) files[f] = readFile(whole + "/" + f);
+
+  SweepConfig part1 = c;
+  part1.out = testing::scratchDir("parts_seed1");
+  part1.firstSeed = 1;
+  part1.seeds = 1;
+  const nlohmann::json one = runCovisSweep(part1);
+  EXPECT_FALSE(fs::exists(part1.out + "/runs/bin_0.45/seed-0"));
+  EXPECT_EQ(one["runs"][0]["seed_index"], 1);
+  EXPECT_EQ(one["config"]["first_seed"], 1);
+  c.seeds = 1;  // the whole study's folder, now a part with seed 0: nothing trains again
+  runCovisSweep(c);
+
+  const std::string merged = testing::scratchDir("parts_merged");
+  const nlohmann::json m = mergeSweepParts({part1.out, whole + "/results.json"}, merged);
+  for (const std::string& f : names) EXPECT_EQ(readFile(merged + "/" + f), files[f]) << f;
+  EXPECT_EQ(m["verdicts"], all["verdicts"]);
+  EXPECT_EQ(m["rows"].dump(), all["rows"].dump());  // NaN (a column no run has) is never ==
+  EXPECT_EQ(m["random_encoder"].dump(), all["random_encoder"].dump());
+  EXPECT_EQ(m["config"]["seeds"], 2);
+  ASSERT_EQ(m["config"]["parts"].size(), 2u);
+  EXPECT_EQ(m["config"]["parts"][0]["seeds"], nlohmann::json::array({1}));
+  EXPECT_EQ(m["config"]["parts"][1]["results"], whole + "/results.json");
+  EXPECT_TRUE(fs::exists(merged + "/summary.html"));
+  EXPECT_TRUE(fs::exists(merged + "/plot_downstream_by_covis.svg"));
+  // The command merges the same.
+  const std::string cli = testing::scratchDir("parts_merged_cli");
+  ASSERT_EQ(testing::runProcess({covisSweepTool(), "--merge", whole, part1.out, "--out", cli}), 0);
+  EXPECT_EQ(readFile(cli + "/results.csv"), files["results.csv"]);
+  expectBadPartsRefused(whole, part1.out);
 }
 
 // Also: a killed sweep resumes fine-tune by fine-tune (expectKilledFineTunesEndAsTheseDid).

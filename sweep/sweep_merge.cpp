@@ -1,0 +1,196 @@
+#include "sweep/sweep_merge.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <set>
+
+#include "sweep/covis_sweep.h"
+#include "sweep/sweep_report.h"
+#include "util/atomic_file.h"
+#include "util/error.h"
+
+namespace paircast {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Part {
+  std::string file;  // its results.json
+  nlohmann::json results;
+  std::set<int> seeds;
+};
+
+// The config keys that may differ between the parts of one study: the seeds, the scene paths
+// (compared by file name) and the precision each machine chose.
+const std::set<std::string> kPartKeys = {"seeds", "first_seed", "scenes", "heldout", "precision"};
+
+void requireArrayOfRuns(const std::string& file, const nlohmann::json& j, const char* key) {
+  const auto it = j.find(key);
+  if (it == j.end() || !it->is_array() || it->empty())
+    throw Error(file, std::string("has no runs in '") + key +
+                          "': not the results.json of a finished covis_sweep");
+  for (const auto& run : *it)
+    if (!run.is_object() || !run.contains("set") || !run["set"].is_string() ||
+        !run.contains("seed_index") || !run["seed_index"].is_number_integer())
+      throw Error(file, std::string("a run of '") + key + "' has no set or seed_index");
+}
+
+Part readPart(const std::string& path) {
+  std::error_code ec;
+  const fs::path file =
+      fs::is_directory(path, ec) ? fs::path(path) / "results.json" : fs::path(path);
+  if (!fs::is_regular_file(file, ec))
+    throw Error(file.string(),
+                "no such file: give a finished covis_sweep's folder or its "
+                "results.json");
+  Part p{file.string(), nlohmann::json::parse(readFile(file.string()), nullptr, false), {}};
+  if (p.results.is_discarded() || !p.results.is_object())
+    throw Error(p.file, "is not a JSON object (truncated?)");
+  if (!p.results.contains("config") || !p.results["config"].is_object())
+    throw Error(p.file, "has no config: not the results.json of a finished covis_sweep");
+  requireArrayOfRuns(p.file, p.results, "runs");
+  requireArrayOfRuns(p.file, p.results, "random_runs");
+  for (const auto& run : p.results["random_runs"]) p.seeds.insert(run["seed_index"].get<int>());
+  return p;
+}
+
+// Equal, numbers to a relative 1e-4 (one held-out set rendered on two CPUs).
+bool nearlyEqual(const nlohmann::json& a, const nlohmann::json& b) {
+  if (a.is_number() && b.is_number()) {
+    const double x = a.get<double>(), y = b.get<double>();
+    return std::abs(x - y) <= 1e-4 * std::max({1.0, std::abs(x), std::abs(y)});
+  }
+  if (a.type() != b.type() || a.size() != b.size()) return false;
+  if (a.is_array()) {
+    for (size_t i = 0; i < a.size(); ++i)
+      if (!nearlyEqual(a[i], b[i])) return false;
+    return true;
+  }
+  if (a.is_object()) {
+    for (auto it = a.begin(); it != a.end(); ++it)
+      if (!b.contains(it.key()) || !nearlyEqual(it.value(), b[it.key()])) return false;
+    return true;
+  }
+  return a == b;
+}
+
+nlohmann::json fileNames(const nlohmann::json& paths) {
+  nlohmann::json names = nlohmann::json::array();
+  if (paths.is_array())
+    for (const auto& p : paths)
+      names.push_back(p.is_string() ? fs::path(p.get<std::string>()).filename().string() : "");
+  return names;
+}
+
+// What must agree between two parts of one study, by name, in the order it is checked.
+std::vector<std::pair<std::string, nlohmann::json>> studyIdentity(const nlohmann::json& results) {
+  const nlohmann::json& config = results["config"];
+  std::vector<std::pair<std::string, nlohmann::json>> id;
+  for (auto it = config.begin(); it != config.end(); ++it)
+    if (!kPartKeys.count(it.key())) id.emplace_back("setting '" + it.key() + "'", it.value());
+  id.emplace_back("scene files", fileNames(config.value("scenes", nlohmann::json())));
+  id.emplace_back("held-out scene files", fileNames(config.value("heldout", nlohmann::json())));
+  id.emplace_back("pool", results.value("pool_pairs", nlohmann::json()));
+  id.emplace_back("sets' mean covis", [&] {
+    nlohmann::json sets = nlohmann::json::object();
+    for (const auto& row : results.value("rows", nlohmann::json::array()))
+      if (row.is_object() && row.contains("set"))
+        sets[row["set"].get<std::string>()] = row.value("mean_covis", nlohmann::json());
+    return sets;
+  }());
+  id.emplace_back("held-out data (zero flow's and constant depth's figures)",
+                  nlohmann::json::array({results.value("finetune_baselines", nlohmann::json()),
+                                         results.value("constant_depth", nlohmann::json())}));
+  return id;
+}
+
+void checkSameStudy(const Part& first, const Part& part) {
+  const auto want = studyIdentity(first.results), got = studyIdentity(part.results);
+  std::map<std::string, nlohmann::json> have(got.begin(), got.end());
+  for (const auto& [name, value] : want) {
+    const auto it = have.find(name);
+    const nlohmann::json other = it == have.end() ? nlohmann::json() : it->second;
+    if (!nearlyEqual(value, other))
+      throw Error(part.file, "is not a part of the study of " + first.file + ": its " + name +
+                                 " is " + other.dump() + ", not " + value.dump());
+    have.erase(name);
+  }
+  if (!have.empty())
+    throw Error(part.file, "is not a part of the study of " + first.file + ": it has the " +
+                               have.begin()->first + ", which " + first.file + " lacks");
+}
+
+void checkSeedsOnce(const std::vector<Part>& parts) {
+  std::map<int, std::string> from;
+  for (const Part& p : parts)
+    for (const int k : p.seeds)
+      if (const auto [it, fresh] = from.emplace(k, p.file); !fresh)
+        throw Error(p.file, "seed " + std::to_string(k) + " is in " + it->second +
+                                " too: merge each seed from one part");
+}
+
+nlohmann::json bySeed(const std::vector<Part>& parts, const char* key) {
+  nlohmann::json all = nlohmann::json::array();
+  for (const Part& p : parts)
+    for (const auto& run : p.results[key]) all.push_back(run);
+  std::stable_sort(all.begin(), all.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
+    return a["seed_index"].get<int>() < b["seed_index"].get<int>();
+  });
+  return all;
+}
+
+// The options that the report's page describes, as the parts ran them.
+SweepConfig reportConfig(const nlohmann::json& config, const std::string& out) {
+  SweepConfig c;
+  c.out = out;
+  c.reports = false;  // the parts' per-set dataset reports stay with them
+  c.seeds = config.value("seeds", 1);
+  c.pairsPerSet = config.value("pairs_per_set", c.pairsPerSet);
+  c.steps = config.value("steps", c.steps);
+  c.preset = config.value("preset", c.preset);
+  c.imgSize = config.value("img_size", c.imgSize);
+  c.batchSize = config.value("batch_size", c.batchSize);
+  const nlohmann::json d = config.value("downstream", nlohmann::json());
+  if (d.is_object()) {
+    c.downstream = d.value("tasks", std::vector<std::string>{});
+    c.finetuneSteps = d.value("steps", c.finetuneSteps);
+    c.finetunePairs = d.value("pairs", c.finetunePairs);
+    c.finetuneBatch = d.value("batch", c.finetuneBatch);
+    c.finetuneFlowMotion = d.value("flow_motion", c.finetuneFlowMotion);
+  }
+  return c;
+}
+
+}  // namespace
+
+nlohmann::json mergeSweepParts(const std::vector<std::string>& paths, const std::string& out) {
+  if (paths.empty()) throw OptionError("merge", "give the parts to merge");
+  if (out.empty()) throw OptionError("out", "an output folder is required");
+  std::vector<Part> parts;
+  for (const std::string& path : paths) parts.push_back(readPart(path));
+  for (const Part& part : parts) checkSameStudy(parts.front(), part);
+  checkSeedsOnce(parts);
+
+  nlohmann::json merged = parts.front().results;
+  merged["runs"] = bySeed(parts, "runs");
+  merged["random_runs"] = bySeed(parts, "random_runs");
+  merged["rows"] = aggregateRuns(merged["runs"]);
+  merged["random_encoder"] = aggregateRuns(merged["random_runs"]).at(0);
+  nlohmann::json& config = merged["config"];
+  config["seeds"] = merged["random_runs"].size();
+  config["first_seed"] = merged["random_runs"][0]["seed_index"];
+  config["parts"] = nlohmann::json::array();
+  for (const Part& p : parts)
+    config["parts"].push_back(
+        {{"results", p.file},
+         {"seeds", p.seeds},
+         {"precision", p.results["config"].value("precision", nlohmann::json())}});
+  merged["verdicts"] = sweepVerdicts(merged);
+  makeDirs(out);
+  writeSweepReport(reportConfig(config, out), merged);
+  return merged;
+}
+
+}  // namespace paircast
