@@ -56,6 +56,15 @@ Part readPart(const std::string& path) {
   return p;
 }
 
+// The merged report goes elsewhere: written into a part's folder, it would replace that part's
+// results.json, its only record once the checkpoints are gone.
+void refuseToOverwrite(const Part& part, const std::string& out) {
+  std::error_code ec;
+  if (fs::equivalent(fs::path(part.file).parent_path(), out, ec))
+    throw OptionError("out", out + " holds the part " + part.file +
+                                 ", which the merge would overwrite: give another folder");
+}
+
 // Equal, numbers to a relative 1e-4 (one held-out set rendered on two CPUs).
 bool nearlyEqual(const nlohmann::json& a, const nlohmann::json& b) {
   if (a.is_number() && b.is_number()) {
@@ -170,6 +179,7 @@ nlohmann::json mergeSweepParts(const std::vector<std::string>& paths, const std:
   if (out.empty()) throw OptionError("out", "an output folder is required");
   std::vector<Part> parts;
   for (const std::string& path : paths) parts.push_back(readPart(path));
+  for (const Part& part : parts) refuseToOverwrite(part, out);
   for (const Part& part : parts) checkSameStudy(parts.front(), part);
   checkSeedsOnce(parts);
 

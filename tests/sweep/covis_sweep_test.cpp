@@ -889,6 +889,11 @@ void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, merged + "/nowhere"}, merged),
                         merged + "/nowhere: no such file");
   EXPECT_FALSE(fs::exists(merged + "/results.json"));
+  const std::string before = readFile(part1 + "/results.json");
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, part1}, part1),
+                        part1 + " holds the part " + part1 +
+                            "/results.json, which the merge would overwrite: give another folder");
+  EXPECT_EQ(readFile(part1 + "/results.json"), before);
   // The command: exit 1 for a bad part, 2 without --out.
   EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", part0, truncated, "--out", merged}),
             1);
