@@ -296,8 +296,8 @@ PairOptions plainTolerance(PairOptions o) {
 
 TEST(NoRenderWasted, ScaledTolerancesWasteFewerRendersAndTurnDownNoMoreThatWouldBeKept) {
   const PairOptions o = fullSizeOptions();
-  const GenerationCost scaled = apartment().run(o, 40);
-  const GenerationCost plain = apartment().run(plainTolerance(o), 40);
+  const GenerationCost scaled = apartment().run(o, 80);
+  const GenerationCost plain = apartment().run(plainTolerance(o), 80);
   ASSERT_GT(plain.wastedCandidateRenders, 5u) << "too few failures: the test tests nothing";
   EXPECT_LT(2 * scaled.wastedCandidateRenders, plain.wastedCandidateRenders);
   EXPECT_LE(scaled.falseRejections, plain.falseRejections + 1);
@@ -387,8 +387,11 @@ TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
   o.maxAttempts = 20;
   o.maxReferences = 1;
   const PairGenerator gen(room.scene, room.caster, room.sampler, o);
+  // Such references are rare (6 of the first 600 indices on one of our machines, more on another:
+  // the sampled views follow the renders' last bits, which differ between CPUs), so indices are
+  // drawn until 12 have failed.
   int failed = 0, failedAtOnce = 0;
-  for (int i = 0; i < 300; ++i) {
+  for (int i = 0; i < 3000 && failed < 12; ++i) {
     GenerationCost c;
     const bool found = gen.generate(5, i, &c).has_value();
     const FunnelStage& fine = c.referenceFunnel.back();
@@ -398,7 +401,7 @@ TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
     ++failed;
     failedAtOnce += c.candidateFunnel.front().entered == 0;
   }
-  ASSERT_GT(failed, 5) << "no reference near the bound: the test tests nothing";
+  ASSERT_EQ(failed, 12) << "too few references near the bound: the test tests nothing";
   EXPECT_GT(failedAtOnce * 2, failed) << "most failed their fine check after candidates";
 }
 

@@ -110,29 +110,43 @@ TEST(FinetuneData, ShardsWithoutFlowAreRefusedNamingThem) {
   EXPECT_ERROR_CONTAINS(TruthPairs::fromShards({out + "/nothing-*.tar"}), "no shard matches");
 }
 
-TEST(FinetuneRun, FlowBeatsZeroFlowOnHeldOutPairs) {
-  const nlohmann::json s = runFinetune(smallRun("flow", testing::scratchDir("flow")));
-  std::printf("held-out flow %s\n", s["heldout"].dump().c_str());
-  EXPECT_EQ(heldOut(s, "model", "pairs"), 16);
-  // Measured with seeds 0, 1, 2: AEPE 8.875, 8.845, 8.800 px against zero flow's 9.836 (ratios
-  // 0.894-0.902, a spread of 0.008); covisible 8.787, 8.736, 8.666 against 9.794. The bound,
-  // 0.93, lies 3.5 spreads above the worst seed. Pairs of one scene: part of what is learnt is
-  // the scene's typical flow (flow-style pairs, whose motions have no typical direction, are
-  // not learnt at this budget: docs/finetune.md).
-  EXPECT_LT(heldOut(s, "model", "aepe"), 0.93 * heldOut(s, "baseline", "aepe"));
-  EXPECT_LT(heldOut(s, "model", "aepe_covisible"), 0.93 * heldOut(s, "baseline", "aepe_covisible"));
-  EXPECT_LT(heldOut(s, "model", "px5"), 0.93 * heldOut(s, "baseline", "px5"));  // 0.72-0.74 / 0.84
+// Flow and depth fine-tuned at this budget (40 epochs of 64 wide pairs of the apartment) learn
+// their training pairs by margins far outside the spread of data draws and seeds, measured below
+// (2026-12-07, float32, an AMD EPYC with AVX2; generate_pairs --seed 3 is the test's data, 4-6
+// other draws). On 16 held-out pairs of the same scene they do not learn at this budget: over
+// those draws held-out flow AEPE ranged from 0.955 to 1.065 of zero flow's, and depth's delta1
+// from 0.10 below the constant's to 0.13 above, so no held-out figure is asserted here. The
+// held-out learning of flow is the learning test's (tests/learning/flow_learns.sh: at most 0.7 of
+// zero flow's, at the budget of docs/finetune.md's pilot), too long for the suite.
+FinetuneConfig onTrainingPairs(FinetuneConfig c) {
+  c.evalData = c.data;
+  return c;
 }
 
-TEST(FinetuneRun, DepthBeatsAConstantOnHeldOutPairs) {
-  const nlohmann::json s = runFinetune(smallRun("depth", testing::scratchDir("depth")));
-  std::printf("held-out depth %s\n", s["heldout"].dump().c_str());
-  // Measured with seeds 0, 1, 2: delta1 0.364, 0.371, 0.361 against the constant's 0.243 (a
-  // spread of 0.010; the bound, 0.243 + 0.09, lies 3 spreads below the worst seed); RMSE 0.890,
-  // 0.868, 0.903 m against 1.186 (bound 0.85 x 1.186 = 1.008, 3 spreads above). AbsRel, 0.827,
-  // 0.767, 0.856 against 0.870, varies more between seeds than it gains, and is not asserted.
-  EXPECT_GT(heldOut(s, "model", "delta1"), heldOut(s, "baseline", "delta1") + 0.09);
-  EXPECT_LT(heldOut(s, "model", "rmse"), 0.85 * heldOut(s, "baseline", "rmse"));
+TEST(FinetuneRun, FlowLearnsItsTrainingPairs) {
+  const nlohmann::json s =
+      runFinetune(onTrainingPairs(smallRun("flow", testing::scratchDir("flow"))));
+  std::printf("flow on its training pairs %s\n", s["heldout"].dump().c_str());
+  EXPECT_EQ(heldOut(s, "model", "pairs"), 64);
+  // AEPE over zero flow's: 0.694, 0.683, 0.693 with seeds 0, 1, 2; 0.705, 0.753, 0.694 with seed
+  // 0 on the other draws (covisible pixels within 0.005 of these). px5 over zero flow's:
+  // 0.680-0.762. The bound, 0.85, lies 0.1 above the worst, beyond the whole range (0.07).
+  EXPECT_LT(heldOut(s, "model", "aepe"), 0.85 * heldOut(s, "baseline", "aepe"));
+  EXPECT_LT(heldOut(s, "model", "aepe_covisible"), 0.85 * heldOut(s, "baseline", "aepe_covisible"));
+  EXPECT_LT(heldOut(s, "model", "px5"), 0.88 * heldOut(s, "baseline", "px5"));
+}
+
+TEST(FinetuneRun, DepthLearnsItsTrainingPairs) {
+  const nlohmann::json s =
+      runFinetune(onTrainingPairs(smallRun("depth", testing::scratchDir("depth"))));
+  std::printf("depth on its training pairs %s\n", s["heldout"].dump().c_str());
+  // delta1 over the constant's: +0.222, +0.155, +0.163 with seeds 0, 1, 2; +0.269, +0.121,
+  // +0.251 on the other draws (bound +0.06, half the smallest). RMSE over the constant's: 0.707,
+  // 0.759, 0.758; 0.680, 0.776, 0.733 (bound 0.88, 0.1 above the worst). AbsRel: 0.45-0.56 of
+  // the constant's.
+  EXPECT_GT(heldOut(s, "model", "delta1"), heldOut(s, "baseline", "delta1") + 0.06);
+  EXPECT_LT(heldOut(s, "model", "rmse"), 0.88 * heldOut(s, "baseline", "rmse"));
+  EXPECT_LT(heldOut(s, "model", "absrel"), 0.75 * heldOut(s, "baseline", "absrel"));
 }
 
 double median(std::vector<double> v) {
@@ -166,7 +180,9 @@ TEST(FinetuneRun, PoseBeatsTheIdentityOnHeldOutPairs) {
   // Measured with seeds 0, 1, 2: 23.75, 21.88 and 26.72 degrees against the identity's 28.29,
   // 0.819, 0.771 and 0.798 m against its 0.904. The seeds spread over 4.8 degrees and 0.048 m,
   // as much as the worst seed gains: pose learns weakly at this budget, and the bounds (0.97 and
-  // 0.95 of the identity's) lie about a third of a spread beyond the worst seed.
+  // 0.95 of the identity's) lie about a third of a spread beyond the worst seed. On a CPU whose
+  // renders draw other pairs (AVX2, 2026-12-07), seed 0: 27.43 against 33.86 degrees (0.81),
+  // 0.968 against 1.136 m (0.85).
   EXPECT_LT(heldOut(s, "model", "median_rot_err"), 0.97 * heldOut(s, "baseline", "median_rot_err"));
   EXPECT_LT(heldOut(s, "model", "median_trans_err"),
             0.95 * heldOut(s, "baseline", "median_trans_err"));
