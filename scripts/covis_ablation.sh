@@ -30,8 +30,8 @@
 # in docs/covis_ablation.md were measured with --amp none (float32), which the extra options
 # take, in one process (PROCESSES=1; two differ from it in floating-point order alone); the flow
 # budget runs with auto.
-# Usage: [BUDGET=study|flow] [NSEEDS=3] [FIRST_SEED=0] [PROCESSES=2] scripts/covis_ablation.sh [OUT]
-#        [extra covis_sweep options]
+# Usage: [BUDGET=study|flow] [NSEEDS=3] [FIRST_SEED=0] [PROCESSES=2]
+#        scripts/covis_ablation.sh [OUT] [extra covis_sweep options]
 # (OUT: runs/ablation). Rerun the same line to resume a killed sweep.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -108,8 +108,8 @@ if [[ $budget == study ]]; then
     --scenes scenes/room scenes/apartment "$SCENES"/random_7_{0..5} "$SCENES/scan_replica_4" \
     "$SCENES/scan_scannet_3_vh_clean_2.ply" "${held[@]}" --up auto \
     --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds "$seeds" \
-    --first-seed "$first_seed" --img-size 64 --patch-size 8 --resolution 73 --pairs-per-set 1024 \
-    --steps 640 \
+    --first-seed "$first_seed" --img-size 64 --patch-size 8 --resolution 73 \
+    --pairs-per-set 1024 --steps 640 \
     --downstream flow,depth --finetune-steps 200 --finetune-pairs 512 --finetune-eval-pairs 256 \
     --processes "$processes" --out "$OUT/sweep" "$@"
 fi
@@ -118,7 +118,7 @@ make_once "$SCENES/plans80" "${plans80_opts[@]}"
 exec build/tools/covis_sweep \
   --scenes scenes/room scenes/apartment "$SCENES/plans40" "$SCENES/plans80" "${held[@]}" --up y \
   --sets bin_0.15,bin_0.55,bin_0.95,uniform_0.50 --baseline mae --seeds "$seeds" \
-  --first-seed "$first_seed" --img-size 64 --patch-size 16 --resolution 73 --pairs-per-set 18300 \
-  --steps 20000 \
+  --first-seed "$first_seed" --img-size 64 --patch-size 16 --resolution 73 \
+  --pairs-per-set 18300 --steps 20000 \
   --downstream flow --finetune-steps 20000 --finetune-pairs 6300 --finetune-eval-pairs 256 \
   --processes "$processes" --out "$OUT/sweep-flow" "$@"

@@ -43,8 +43,7 @@ Part readPart(const std::string& path) {
       fs::is_directory(path, ec) ? fs::path(path) / "results.json" : fs::path(path);
   if (!fs::is_regular_file(file, ec))
     throw Error(file.string(),
-                "no such file: give a finished covis_sweep's folder or its "
-                "results.json");
+                "no such file: give a finished covis_sweep's folder or its results.json");
   Part p{file.string(), nlohmann::json::parse(readFile(file.string()), nullptr, false), {}};
   if (p.results.is_discarded() || !p.results.is_object())
     throw Error(p.file, "is not a JSON object (truncated?)");

@@ -1,6 +1,6 @@
 """scripts/covis_ablation.sh refuses, in one line that names the culprit and before it builds or
-renders anything: a BUDGET, NSEEDS, FIRST_SEED or PROCESSES it does not know (an empty one means the default), and an
-OUT whose scenes were made with other options (FURNISH)."""
+renders anything: a BUDGET, NSEEDS, FIRST_SEED or PROCESSES it does not know (an empty one means
+the default), and an OUT whose scenes were made with other options (FURNISH)."""
 
 import os
 import signal

@@ -844,17 +844,22 @@ void expectKilledFineTunesEndAsTheseDid(const std::string& clean) {
 
 // ---- a study in parts: --first-seed and --merge ----
 
-// Writes `results` to `dir`/results.json, as a part's folder holds it.
-std::string writePart(const std::string& dir, const nlohmann::json& results) {
+// Writes `text` to `dir`/results.json, as a part's folder holds it.
+std::string writePart(const std::string& dir, const std::string& text) {
   fs::create_directories(dir);
-  writeFileAtomic(dir + "/results.json", results.dump(1) + "\n");
+  writeFileAtomic(dir + "/results.json", text);
   return dir;
+}
+
+std::string writePart(const std::string& dir, const nlohmann::json& results) {
+  return writePart(dir, results.dump(1) + "\n");
 }
 
 // Parts that are not parts of one study, or not results at all, are refused naming the part.
 void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
   const std::string merged = testing::scratchDir("parts_bad_merged");
-  const nlohmann::json r = nlohmann::json::parse(readFile(part1 + "/results.json"));
+  const std::string text = readFile(part1 + "/results.json");
+  const nlohmann::json r = nlohmann::json::parse(text);
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, part0 + "/results.json"}, merged),
                         part0 + "/results.json: seed 0 is in " + part0 +
                             "/results.json too: merge each seed from one part");
@@ -875,10 +880,8 @@ void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
   const std::string scenes = writePart(testing::scratchDir("parts_bad_scenes"), other);
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, scenes}, merged),
                         "its scene files is [\"apartment\"], not [\"");
-  const std::string truncated = testing::scratchDir("parts_truncated");
-  const std::string text = readFile(part1 + "/results.json");
-  fs::create_directories(truncated);
-  writeFileAtomic(truncated + "/results.json", text.substr(0, text.size() / 2));
+  const std::string truncated =
+      writePart(testing::scratchDir("parts_truncated"), text.substr(0, text.size() / 2));
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, truncated}, merged),
                         truncated + "/results.json: is not a JSON object (truncated?)");
   const std::string notResults =
@@ -889,11 +892,10 @@ void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, merged + "/nowhere"}, merged),
                         merged + "/nowhere: no such file");
   EXPECT_FALSE(fs::exists(merged + "/results.json"));
-  const std::string before = readFile(part1 + "/results.json");
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, part1}, part1),
                         part1 + " holds the part " + part1 +
                             "/results.json, which the merge would overwrite: give another folder");
-  EXPECT_EQ(readFile(part1 + "/results.json"), before);
+  EXPECT_EQ(readFile(part1 + "/results.json"), text);
   // The command: exit 1 for a bad part, 2 without --out.
   EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", part0, truncated, "--out", merged}),
             1);
