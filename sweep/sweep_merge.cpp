@@ -26,6 +26,9 @@ struct Part {
 // (compared by file name) and the precision each machine chose.
 const std::set<std::string> kPartKeys = {"seeds", "first_seed", "scenes", "heldout", "precision"};
 
+const char* const kOtherDrawsHint =
+    " (drawn on a CPU that draws other pairs? --other-draws merges parts whose settings agree)";
+
 void requireArrayOfRuns(const std::string& file, const nlohmann::json& j, const char* key) {
   const auto it = j.find(key);
   if (it == j.end() || !it->is_array() || it->empty())
@@ -92,42 +95,64 @@ nlohmann::json fileNames(const nlohmann::json& paths) {
   return names;
 }
 
-// What must agree between two parts of one study, by name, in the order it is checked.
-std::vector<std::pair<std::string, nlohmann::json>> studyIdentity(const nlohmann::json& results) {
+// What must agree between two parts of one study, by name, in the order it is checked. The
+// settings must agree; the draw (the pairs a machine drew, which differ between CPUs of other
+// kinds) must agree unless the merge accepts other draws.
+struct Identity {
+  std::string name;
+  nlohmann::json value;
+  bool draw = false;
+};
+
+nlohmann::json setsMeanCovis(const nlohmann::json& results) {
+  nlohmann::json sets = nlohmann::json::object();
+  for (const auto& row : results.value("rows", nlohmann::json::array()))
+    if (row.is_object() && row.contains("set"))
+      sets[row["set"].get<std::string>()] = row.value("mean_covis", nlohmann::json());
+  return sets;
+}
+
+std::vector<Identity> studyIdentity(const nlohmann::json& results) {
   const nlohmann::json& config = results["config"];
-  std::vector<std::pair<std::string, nlohmann::json>> id;
+  std::vector<Identity> id;
   for (auto it = config.begin(); it != config.end(); ++it)
-    if (!kPartKeys.count(it.key())) id.emplace_back("setting '" + it.key() + "'", it.value());
-  id.emplace_back("scene files", fileNames(config.value("scenes", nlohmann::json())));
-  id.emplace_back("held-out scene files", fileNames(config.value("heldout", nlohmann::json())));
-  id.emplace_back("pool", results.value("pool_pairs", nlohmann::json()));
-  id.emplace_back("sets' mean covis", [&] {
-    nlohmann::json sets = nlohmann::json::object();
-    for (const auto& row : results.value("rows", nlohmann::json::array()))
-      if (row.is_object() && row.contains("set"))
-        sets[row["set"].get<std::string>()] = row.value("mean_covis", nlohmann::json());
-    return sets;
-  }());
-  id.emplace_back("held-out data (zero flow's and constant depth's figures)",
-                  nlohmann::json::array({results.value("finetune_baselines", nlohmann::json()),
-                                         results.value("constant_depth", nlohmann::json())}));
+    if (!kPartKeys.count(it.key())) id.push_back({"setting '" + it.key() + "'", it.value()});
+  id.push_back({"scene files", fileNames(config.value("scenes", nlohmann::json()))});
+  id.push_back({"held-out scene files", fileNames(config.value("heldout", nlohmann::json()))});
+  id.push_back({"pool", results.value("pool_pairs", nlohmann::json())});
+  id.push_back({"sets' mean covis", setsMeanCovis(results), true});
+  id.push_back({"held-out data (zero flow's and constant depth's figures)",
+                nlohmann::json::array({results.value("finetune_baselines", nlohmann::json()),
+                                       results.value("constant_depth", nlohmann::json())}),
+                true});
   return id;
 }
 
-void checkSameStudy(const Part& first, const Part& part) {
+// Whether `part` drew other pairs than `first`. Throws for other settings, and for another draw
+// unless otherDraws.
+bool checkSameStudy(const Part& first, const Part& part, bool otherDraws) {
   const auto want = studyIdentity(first.results), got = studyIdentity(part.results);
-  std::map<std::string, nlohmann::json> have(got.begin(), got.end());
-  for (const auto& [name, value] : want) {
-    const auto it = have.find(name);
-    const nlohmann::json other = it == have.end() ? nlohmann::json() : it->second;
-    if (!nearlyEqual(value, other))
-      throw Error(part.file, "is not a part of the study of " + first.file + ": its " + name +
-                                 " is " + other.dump() + ", not " + value.dump());
-    have.erase(name);
+  std::map<std::string, nlohmann::json> have;
+  for (const Identity& i : got) have[i.name] = i.value;
+  bool drawDiffers = false;
+  for (const Identity& i : want) {
+    const auto it = have.find(i.name);
+    const bool present = it != have.end();
+    const nlohmann::json other = present ? it->second : nlohmann::json();
+    have.erase(i.name);
+    if (nearlyEqual(i.value, other)) continue;
+    if (i.draw && otherDraws && present) {
+      drawDiffers = true;
+      continue;
+    }
+    throw Error(part.file, "is not a part of the study of " + first.file + ": its " + i.name +
+                               " is " + other.dump() + ", not " + i.value.dump() +
+                               (i.draw ? std::string(kOtherDrawsHint) : ""));
   }
   if (!have.empty())
     throw Error(part.file, "is not a part of the study of " + first.file + ": it has the " +
                                have.begin()->first + ", which " + first.file + " lacks");
+  return drawDiffers;
 }
 
 void checkSeedsOnce(const std::vector<Part>& parts) {
@@ -137,6 +162,63 @@ void checkSeedsOnce(const std::vector<Part>& parts) {
       if (const auto [it, fresh] = from.emplace(k, p.file); !fresh)
         throw Error(p.file, "seed " + std::to_string(k) + " is in " + it->second +
                                 " too: merge each seed from one part");
+}
+
+// The seed-weighted mean of the parts' figures: numbers averaged, arrays and objects element by
+// element, anything else (names, nulls, figures equal in every part) as the first part has it.
+nlohmann::json weightedMean(const std::vector<std::pair<nlohmann::json, double>>& items) {
+  const nlohmann::json& first = items.front().first;
+  if (first.is_number()) {
+    double sum = 0, weight = 0;
+    for (const auto& [value, w] : items) {
+      if (!value.is_number()) return first;
+      sum += w * value.get<double>(), weight += w;
+    }
+    const bool same = std::all_of(items.begin(), items.end(),
+                                  [&](const auto& item) { return item.first == first; });
+    return same ? first : nlohmann::json(sum / weight);
+  }
+  if (!first.is_object() && !first.is_array()) return first;
+  nlohmann::json out = first;
+  for (auto it = out.begin(); it != out.end(); ++it) {
+    std::vector<std::pair<nlohmann::json, double>> children;
+    const std::string key = first.is_object() ? it.key() : "";
+    const size_t index = first.is_array() ? static_cast<size_t>(it - out.begin()) : 0;
+    for (const auto& [value, w] : items)
+      if (first.is_object() && value.is_object() && value.contains(key))
+        children.emplace_back(value[key], w);
+      else if (first.is_array() && value.is_array() && value.size() == first.size())
+        children.emplace_back(value[index], w);
+    *it = weightedMean(children);
+  }
+  return out;
+}
+
+// Parts that drew their pairs apart: the held-out baselines are the seed-weighted means of the
+// parts', each set's mean covis the mean of its runs', and the config lists each part's draw.
+void mergeDraws(const std::vector<Part>& parts, nlohmann::json& merged) {
+  for (const char* key : {"finetune_baselines", "constant_depth"}) {
+    std::vector<std::pair<nlohmann::json, double>> items;
+    for (const Part& p : parts)
+      items.emplace_back(p.results.value(key, nlohmann::json()), double(p.seeds.size()));
+    merged[key] = weightedMean(items);
+  }
+  for (auto& row : merged["rows"]) {
+    double sum = 0;
+    int n = 0;
+    for (const auto& run : merged["runs"])
+      if (run.value("set", "") == row.value("set", "") && run.contains("mean_covis") &&
+          run["mean_covis"].is_number())
+        sum += run["mean_covis"].get<double>(), ++n;
+    if (n > 0) row["mean_covis"] = sum / n;
+  }
+  nlohmann::json& config = merged["config"];
+  config["other_draws"] = true;
+  for (size_t i = 0; i < parts.size(); ++i)
+    config["parts"][i]["draw"] = {
+        {"sets_mean_covis", setsMeanCovis(parts[i].results)},
+        {"finetune_baselines", parts[i].results.value("finetune_baselines", nlohmann::json())},
+        {"constant_depth", parts[i].results.value("constant_depth", nlohmann::json())}};
 }
 
 nlohmann::json bySeed(const std::vector<Part>& parts, const char* key) {
@@ -173,13 +255,16 @@ SweepConfig reportConfig(const nlohmann::json& config, const std::string& out) {
 
 }  // namespace
 
-nlohmann::json mergeSweepParts(const std::vector<std::string>& paths, const std::string& out) {
+nlohmann::json mergeSweepParts(const std::vector<std::string>& paths, const std::string& out,
+                               bool otherDraws) {
   if (paths.empty()) throw OptionError("merge", "give the parts to merge");
   if (out.empty()) throw OptionError("out", "an output folder is required");
   std::vector<Part> parts;
   for (const std::string& path : paths) parts.push_back(readPart(path));
   for (const Part& part : parts) refuseToOverwrite(part, out);
-  for (const Part& part : parts) checkSameStudy(parts.front(), part);
+  bool drawsDiffer = false;
+  for (const Part& part : parts)
+    drawsDiffer = checkSameStudy(parts.front(), part, otherDraws) || drawsDiffer;
   checkSeedsOnce(parts);
 
   nlohmann::json merged = parts.front().results;
@@ -196,6 +281,7 @@ nlohmann::json mergeSweepParts(const std::vector<std::string>& paths, const std:
         {{"results", p.file},
          {"seeds", p.seeds},
          {"precision", p.results["config"].value("precision", nlohmann::json())}});
+  if (drawsDiffer) mergeDraws(parts, merged);
   merged["verdicts"] = sweepVerdicts(merged);
   makeDirs(out);
   writeSweepReport(reportConfig(config, out), merged);

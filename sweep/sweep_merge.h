@@ -17,12 +17,20 @@ namespace paircast {
 //
 // Parts of one study have the same settings (results.json's config, but for the seeds, the
 // scene folders, which may lie elsewhere on another machine, and the precision the machine
-// chose), the same scene files by name, the same pool and the same held-out data (their
-// baselines equal to 1e-4). Each seed comes from one part. The merged config lists the parts,
-// each with its seeds and precision.
+// chose), the same scene files by name and the same pool size, and by default the same draw:
+// the sets' mean covis and the held-out data's baselines equal to 1e-4. Each seed comes from one
+// part. The merged config lists the parts, each with its seeds and precision.
+//
+// The same seed draws some other pairs on a CPU of another kind (AVX-512 against AVX2). With
+// otherDraws, parts whose settings agree are merged whatever their draws: each seed's runs are
+// still compared on that seed's own data; the merged baselines (zero flow, the constant depth)
+// are the seed-weighted means of the parts', each set's mean covis the mean over its runs, and
+// the config says "other_draws" and keeps each part's draw.
 //
 // Throws Error naming the part for a part that is missing, not JSON, or not a sweep's results,
-// for one made with other settings or data, and for a seed two parts both ran.
-nlohmann::json mergeSweepParts(const std::vector<std::string>& parts, const std::string& out);
+// for one made with other settings (or, without otherDraws, another draw), and for a seed two
+// parts both ran.
+nlohmann::json mergeSweepParts(const std::vector<std::string>& parts, const std::string& out,
+                               bool otherDraws = false);
 
 }  // namespace paircast

@@ -10,8 +10,8 @@ using namespace paircast;
 
 namespace {
 
-int mergeParts(const std::vector<std::string>& parts, const std::string& out) {
-  const nlohmann::json r = mergeSweepParts(parts, out);
+int mergeParts(const std::vector<std::string>& parts, const std::string& out, bool otherDraws) {
+  const nlohmann::json r = mergeSweepParts(parts, out, otherDraws);
   std::printf("%s\n", nlohmann::json({{"results", out + "/results.csv"},
                                       {"summary", out + "/summary.html"},
                                       {"seeds", r["config"]["seeds"]},
@@ -68,10 +68,16 @@ int main(int argc, char** argv) {
                  "Seed index of the first run: this sweep runs seeds first-seed .. first-seed + "
                  "seeds - 1, a part of a study that --merge joins");
   std::vector<std::string> merge;
-  app.add_option("--merge", merge,
-                 "Merge finished sweeps of one study, each with its own seeds (their folders or "
-                 "results.json files), into the report of --out; no other option is used")
-      ->expected(1, -1);
+  CLI::Option* mergeOption =
+      app.add_option("--merge", merge,
+                     "Merge finished sweeps of one study, each with its own seeds (their folders "
+                     "or results.json files), into the report of --out; no other option is used");
+  mergeOption->expected(1, -1);
+  bool otherDraws = false;
+  app.add_flag("--other-draws", otherDraws,
+               "With --merge: merge parts whose settings agree but whose pairs were drawn apart "
+               "(the same seed draws some other pairs on a CPU of another kind)")
+      ->needs(mergeOption);
   app.add_option("--baseline", c.baselines,
                  "Baselines trained like the sets: mae (view 1 alone, no reference view)")
       ->delimiter(',');
@@ -129,7 +135,7 @@ int main(int argc, char** argv) {
     c.reports = !noReports;
     c.progress = !quiet;
     c.command.assign(argv, argv + argc);
-    if (!merge.empty()) return mergeParts(merge, c.out);
+    if (!merge.empty()) return mergeParts(merge, c.out, otherDraws);
     if (!quiet && c.worker == 0)
       logLaunch("covis_sweep", launchRole(processEnvironment()).describe());
     const nlohmann::json r = runCovisSweep(c);

@@ -875,6 +875,11 @@ void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
   const std::string data = writePart(testing::scratchDir("parts_bad_data"), other);
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, data}, merged),
                         "its held-out data (zero flow's and constant depth's figures) is");
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, data}, merged),
+                        "(drawn on a CPU that draws other pairs? --other-draws merges parts whose "
+                        "settings agree)");
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, steps}, merged, true),
+                        "its setting 'steps' is 5, not 4");  // a setting is never a draw
   other = r;
   other["config"]["scenes"] = nlohmann::json::array({"/elsewhere/apartment"});
   const std::string scenes = writePart(testing::scratchDir("parts_bad_scenes"), other);
@@ -901,6 +906,50 @@ void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
             1);
   EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", part0}), 2);
   EXPECT_FALSE(fs::exists(merged + "/results.json"));
+}
+
+// Parts drawn apart (on CPUs that draw other pairs from one seed) merge with --other-draws: the
+// runs as they are, the baselines the seed-weighted means of the parts', each set's mean covis
+// its runs' mean, and each part's draw in the config. Here a two-seed part and a one-seed part
+// (seed 1's runs as seed 2), its draw moved: zero flow 3 % higher, mean covis 0.01 higher.
+void expectOtherDrawsMerged(const nlohmann::json& twoSeeds, const std::string& seed1) {
+  nlohmann::json moved = nlohmann::json::parse(readFile(seed1 + "/results.json"));
+  for (const char* key : {"runs", "random_runs"})
+    for (auto& run : moved[key]) {
+      run["seed_index"] = 2;
+      if (run.contains("mean_covis")) run["mean_covis"] = run["mean_covis"].get<double>() + 0.01;
+    }
+  for (auto& row : moved["rows"])
+    if (row.contains("mean_covis")) row["mean_covis"] = row["mean_covis"].get<double>() + 0.01;
+  const double zero = twoSeeds["finetune_baselines"]["ft_flow_aepe"].get<double>();
+  moved["finetune_baselines"]["ft_flow_aepe"] = zero * 1.03;
+  const std::string a = writePart(testing::scratchDir("draws_a"), twoSeeds);
+  const std::string b = writePart(testing::scratchDir("draws_b"), moved);
+  const std::string merged = testing::scratchDir("draws_merged");
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({a, b}, merged), "its sets' mean covis is");
+  const nlohmann::json m = mergeSweepParts({a, b}, merged, true);
+  EXPECT_EQ(m["config"]["other_draws"], true);
+  EXPECT_EQ(m["config"]["seeds"], 3);
+  EXPECT_NEAR(m["finetune_baselines"]["ft_flow_aepe"].get<double>(), zero * (2 + 1.03) / 3, 1e-9);
+  EXPECT_EQ(m["constant_depth"], twoSeeds["constant_depth"]);  // equal in both: kept as it is
+  for (const auto& row : m["rows"]) {
+    double sum = 0;
+    int n = 0;
+    for (const auto& run : m["runs"])
+      if (run["set"] == row["set"]) sum += run["mean_covis"].get<double>(), ++n;
+    ASSERT_EQ(n, 3) << row["set"];
+    EXPECT_NEAR(row["mean_covis"].get<double>(), sum / 3, 1e-12) << row["set"];
+  }
+  EXPECT_EQ(m["config"]["parts"][1]["draw"]["finetune_baselines"], moved["finetune_baselines"]);
+  EXPECT_EQ(m["config"]["parts"][0]["draw"]["sets_mean_covis"].size(), twoSeeds["rows"].size());
+  // The command: --other-draws merges, and is refused without --merge.
+  const std::string cli = testing::scratchDir("draws_merged_cli");
+  EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", a, b, "--out", cli}), 1);
+  EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", a, b, "--other-draws", "--out", cli}),
+            0);
+  EXPECT_EQ(nlohmann::json::parse(readFile(cli + "/results.json"))["finetune_baselines"],
+            m["finetune_baselines"]);
+  EXPECT_EQ(testing::runProcess({covisSweepTool(), "--other-draws", "--out", cli}), 2);
 }
 
 // A study's seeds run as parts, each in its own folder (the later seed first: a part needs no
@@ -944,6 +993,7 @@ TEST(CovisSweep, SeedsRunInPartsMergeToTheSweepOfAllTheSeeds) {
   ASSERT_EQ(testing::runProcess({covisSweepTool(), "--merge", whole, part1.out, "--out", cli}), 0);
   EXPECT_EQ(readFile(cli + "/results.csv"), files["results.csv"]);
   expectBadPartsRefused(whole, part1.out);
+  expectOtherDrawsMerged(all, part1.out);
 }
 
 // Also: a killed sweep resumes fine-tune by fine-tune (expectKilledFineTunesEndAsTheseDid).
