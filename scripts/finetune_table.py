@@ -61,15 +61,15 @@ def flow_targets(runs, base, seeds):
              + ", ".join(f"{x:.3f}" for x in shares) + f"); at most 0.5: {verdict}"]
     quarter = statistics.fmean(aepe("random", s) - aepe("croco", s) for s in range(seeds)) / 4
     for other in ["random", "mae"]:
-        name = f"croco - {other}"
+        key, name = f"croco-{other}", f"croco - {other}"
         mean, half = interval([aepe("croco", s) - aepe(other, s) for s in range(seeds)])
         if half is None:
-            out[name] = {"met": False, "half_width": None, "quarter_gap": quarter}
+            out[key] = {"met": False, "half_width": None, "quarter_gap": quarter}
             lines.append(f"- {name}: one seed, no interval: not decided")
             continue
         ahead = mean + half < 0  # cross-view's AEPE lower, the whole interval below zero
         met = ahead and half <= quarter
-        out[name] = {"met": met, "half_width": half, "quarter_gap": quarter}
+        out[key] = {"met": met, "half_width": half, "quarter_gap": quarter}
         lines.append(f"- {name}: {fmt(mean, half)} px, half-width {half:.3f} against a quarter "
                      f"of the random-to-cross-view gap, {quarter:.3f}; the interval "
                      + ("is below zero" if ahead else "is not below zero") + ": "

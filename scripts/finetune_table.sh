@@ -27,9 +27,11 @@
 # make_scenes --random 40 --seed 5 and --random 80 --seed 6) and fine-tunes each seed for
 # FINETUNE_STEPS (default 20,000) steps of 8 on 150 flow-style pairs of each of the first 42,
 # held out on 100 of the studio; OUT/finetune/flow-INIT-SEED name its runs, and the table ends
-# with the flow targets, met or not. Precision is the tools' default, auto; HOMES, PATCH_SIZE, AMP
-# and the epochs apply to the small budget alone. On a 2-core machine with bf16 units the
-# pre-trainings took 17 and 14 minutes and a fine-tune 17, so three seeds take about 3 hours.
+# with the flow targets, met or not. Precision is the tools' default, auto. HOMES, PATCH_SIZE,
+# AMP, the epochs, POSE_BLR and PRETRAIN_ONLY are the small budget's and refused with
+# BUDGET=flow, and an OUT holds one budget's runs (OUT/budget says which). A killed call skips
+# the stages it finished. On a 2-core machine with bf16 units the pre-trainings took 17 and 14
+# minutes and a fine-tune 17, so three seeds take about 3 hours.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: [BUDGET=small|flow] scripts/finetune_table.sh OUT [SEEDS]}
@@ -47,6 +49,28 @@ if [[ $budget == flow && ${TASKS:-flow} != flow ]]; then
   echo "finetune_table.sh: BUDGET=flow fine-tunes flow alone, not TASKS '$TASKS'" >&2
   exit 2
 fi
+if [[ $budget == flow ]]; then  # the small budget's settings would be silently ignored
+  for name in HOMES PATCH_SIZE AMP PRETRAIN_EPOCHS FINETUNE_EPOCHS POSE_BLR PRETRAIN_ONLY; do
+    if [[ -n ${!name:-} ]]; then
+      echo "finetune_table.sh: BUDGET=flow has settings of its own; $name is for BUDGET=small" >&2
+      exit 2
+    fi
+  done
+  if [[ ! ${FINETUNE_STEPS:-20000} =~ ^[1-9][0-9]{0,6}$ ]]; then
+    echo "finetune_table.sh: FINETUNE_STEPS is a whole number from 1, not '$FINETUNE_STEPS'" >&2
+    exit 2
+  fi
+fi
+# An OUT holds one budget's runs: the flow budget's links would land in the small one's folders.
+if [[ -f $out/budget && $(cat "$out/budget") != "$budget" ]]; then
+  echo "finetune_table.sh: $out holds BUDGET=$(cat "$out/budget")'s runs, not $budget's:" \
+    "give another OUT" >&2
+  exit 2
+fi
+if [[ ! -f $out/budget && -d $out/finetune ]] && [[ $budget == flow ]]; then
+  echo "finetune_table.sh: $out holds BUDGET=small's runs, not flow's: give another OUT" >&2
+  exit 2
+fi
 bin=${BUILD_DIR:-build}/tools
 pretrain_epochs=${PRETRAIN_EPOCHS:-30}
 epochs=${FINETUNE_EPOCHS:-4}
@@ -54,23 +78,25 @@ read -r -a tasks <<< "${TASKS:-flow depth pose}"
 patch=${PATCH_SIZE:-16}
 amp=${AMP:-auto}
 mkdir -p "$out"
+echo "$budget" > "$out/budget"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 
 if [[ $budget == flow ]]; then  # the pilot's run D, seed by seed, as the table's runs
-  steps=${FINETUNE_STEPS:-20000}
-  PATCHES=16 SCALES=0 INITS="random mae croco" FLOORPLANS=40 PRETRAIN_FLOORPLANS=80 \
-    WIDE_PAIRS=150 FLOW_PAIRS=150 PRETRAIN_STEPS=20000 FINETUNE_STEPS=$steps \
+  steps=${FINETUNE_STEPS:-20000} pretrain_steps=20000 plans=40 more_plans=80 per_scene=150
+  PATCHES=16 SCALES=0 INITS="random mae croco" POS_EMBED=cosine MAX_RATIO='' \
+    FLOORPLANS=$plans PRETRAIN_FLOORPLANS=$more_plans WIDE_PAIRS=$per_scene \
+    FLOW_PAIRS=$per_scene PRETRAIN_STEPS=$pretrain_steps FINETUNE_STEPS=$steps \
     EVAL_EVERY=${EVAL_EVERY:-2000} SEEDS="$(seq -s ' ' 0 $((seeds - 1)))" \
     scripts/flow_pilot.sh "$out" > /dev/null
   mkdir -p "$out/finetune"
   for ((seed = 0; seed < seeds; ++seed)); do
-    for init in random mae croco; do
-      run=p16-scale0-$init-s20000-f40+80-n150-$steps
+    for init in random mae croco; do  # flow_pilot.sh's name for the run
+      run=p16-scale0-$init-s$pretrain_steps-f$plans+$more_plans-n$per_scene-$steps
       ((seed > 0)) && run+=-seed$seed
-      ln -sfn "$run" "$out/finetune/flow-$init-$seed"
+      ln -sfnT "$run" "$out/finetune/flow-$init-$seed"
     done
   done
-  exec python3 scripts/finetune_table.py "$out" "$seeds" flow
+  INITS=random,mae,croco exec python3 scripts/finetune_table.py "$out" "$seeds" flow
 fi
 
 truth() {  # OUT/NAME PAIRS [generate_pairs flags] -- SCENES...: pairs with flow and depth, 64 px

@@ -21,7 +21,7 @@ bin=${BUILD_DIR:-build}/tools
 mkdir -p "$out"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 
-PRETRAIN_ONLY=1 scripts/finetune_table.sh "$out/table"
+BUDGET=small PRETRAIN_ONLY=1 scripts/finetune_table.sh "$out/table"
 [[ -d $out/scenes/random_7_5 ]] ||
   "$bin/make_scenes" --random 6 --seed 7 --out "$out/scenes" > /dev/null
 [[ -d $out/scenes/scan_replica_4 ]] ||

@@ -49,9 +49,9 @@ def test_targets_met_when_cross_view_is_under_half_and_its_intervals_are_tight(t
     assert targets["croco_over_zero_flow_by_seed"] == pytest.approx([0.48, 0.50, 0.46])
     assert targets["half_of_zero_flow_met"]
     # croco - random is -2.1 at every seed: a half-width of 0; the gap 2.1, its quarter 0.525.
-    assert targets["croco - random"] == {"met": True, "half_width": pytest.approx(0.0),
+    assert targets["croco-random"] == {"met": True, "half_width": pytest.approx(0.0),
                                          "quarter_gap": pytest.approx(0.525)}
-    assert targets["croco - mae"]["met"]
+    assert targets["croco-mae"]["met"]
     assert "- cross-view's AEPE over zero flow's: 0.480 (by seed: 0.480, 0.500, 0.460); " \
         "at most 0.5: met" in text
     assert "- croco - random: -2.100 ± 0.000 px, half-width 0.000 against a quarter of the " \
@@ -71,33 +71,41 @@ def test_a_miss_says_by_how_much_and_a_wide_interval_is_not_met(tmp_path):
     assert "at most 0.5: missed by 0.016" in text
     # Differences -2.6, -0.5, -1.9, -0.4, -2.4: sd 1.0455, t(4) 2.776, half-width 1.298 against
     # a quarter of 1.56 = 0.39. The interval is below zero, the criterion is not met.
-    r = targets["croco - random"]
+    r = targets["croco-random"]
     assert r["half_width"] == pytest.approx(1.2979, abs=1e-3)
     assert r["quarter_gap"] == pytest.approx(0.39)
     assert not r["met"]
     assert "0.39" in text and "the interval is below zero: not met" in text
-    assert targets["croco - mae"]["met"]  # 1.0 ahead at every seed
+    assert targets["croco-mae"]["met"]  # 1.0 ahead at every seed
 
 
 def test_cross_view_behind_mae_is_not_met(tmp_path):
     _, flow = table(tmp_path, {"random": [4.5, 4.6, 4.4], "mae": [2.0, 2.1, 1.9],
                                "croco": [2.4, 2.5, 2.3]})
     # croco - mae is +0.4 at every seed: an interval clear of zero, but above it.
-    assert flow["targets"]["croco - mae"]["met"] is False
-    assert flow["targets"]["croco - random"]["met"] is True
+    assert flow["targets"]["croco-mae"]["met"] is False
+    assert flow["targets"]["croco-random"]["met"] is True
 
 
 def test_one_seed_decides_nothing_on_intervals(tmp_path):
     text, flow = table(tmp_path, {"random": [4.5], "mae": [4.4], "croco": [2.4]})
     assert flow["targets"]["half_of_zero_flow_met"]
-    assert flow["targets"]["croco - random"] == {"met": False, "half_width": None,
+    assert flow["targets"]["croco-random"] == {"met": False, "half_width": None,
                                                  "quarter_gap": pytest.approx(0.525)}
     assert "- croco - mae: one seed, no interval: not decided" in text
 
 
+# The scripts' settings, which a caller's environment must not bring into the tests.
+SETTINGS = ["BUDGET", "TASKS", "HOMES", "PATCH_SIZE", "AMP", "PRETRAIN_EPOCHS", "FINETUNE_EPOCHS",
+            "POSE_BLR", "PRETRAIN_ONLY", "FINETUNE_STEPS", "EVAL_EVERY", "INITS", "POS_EMBED",
+            "MAX_RATIO", "SEEDS", "PATCHES", "SCALES", "FLOORPLANS", "PRETRAIN_FLOORPLANS",
+            "WIDE_PAIRS", "FLOW_PAIRS", "PRETRAIN_STEPS", "BUILD_DIR"]
+
+
 def run_script(out, *args, **env):
+    clean = {k: v for k, v in os.environ.items() if k not in SETTINGS}
     return subprocess.run(["bash", str(SCRIPT), str(out), *args], capture_output=True, text=True,
-                          env={**os.environ, **env}, timeout=120)
+                          env={**clean, **env}, timeout=120)
 
 
 @pytest.mark.parametrize("budget", ["Flow", "large", "small flow"])
@@ -115,6 +123,40 @@ def test_seeds_must_be_a_whole_number_from_1_to_99(tmp_path, seeds):
     assert done.stderr == \
         f"finetune_table.sh: SEEDS is a whole number from 1 to 99, not '{seeds}'\n"
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("name,value", [("HOMES", "6"), ("PATCH_SIZE", "8"), ("AMP", "none"),
+                                        ("PRETRAIN_EPOCHS", "5"), ("FINETUNE_EPOCHS", "2"),
+                                        ("POSE_BLR", "1e-3"), ("PRETRAIN_ONLY", "1")])
+def test_the_flow_budget_refuses_the_small_budgets_settings(tmp_path, name, value):
+    done = run_script(tmp_path / "out", BUDGET="flow", **{name: value})
+    assert done.returncode == 2
+    assert done.stderr == f"finetune_table.sh: BUDGET=flow has settings of its own; {name} is " \
+        "for BUDGET=small\n"
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("steps", ["0", "-5", "2e4", "many"])
+def test_the_flow_budget_refuses_bad_finetune_steps(tmp_path, steps):
+    done = run_script(tmp_path / "out", BUDGET="flow", FINETUNE_STEPS=steps)
+    assert done.returncode == 2
+    assert done.stderr == \
+        f"finetune_table.sh: FINETUNE_STEPS is a whole number from 1, not '{steps}'\n"
+
+
+def test_an_out_holds_one_budgets_runs(tmp_path):
+    out = tmp_path / "out"
+    (out / "finetune" / "flow-croco-0").mkdir(parents=True)  # a small-budget OUT of before
+    done = run_script(out, BUDGET="flow")
+    assert done.returncode == 2
+    assert done.stderr == f"finetune_table.sh: {out} holds BUDGET=small's runs, not flow's: " \
+        "give another OUT\n"
+    (out / "budget").write_text("flow\n")
+    done = run_script(out)
+    assert done.returncode == 2
+    assert done.stderr == f"finetune_table.sh: {out} holds BUDGET=flow's runs, not small's: " \
+        "give another OUT\n"
+    assert sorted(p.name for p in out.iterdir()) == ["budget", "finetune"]
 
 
 def test_the_flow_budget_refuses_other_tasks(tmp_path):
@@ -163,8 +205,11 @@ def test_the_flow_budget_runs_the_pilots_run_d_seed_by_seed(tmp_path):
         path.write_text(FAKE_TOOL)
         path.chmod(path.stat().st_mode | stat.S_IXUSR)
     log, out = tmp_path / "calls.jsonl", tmp_path / "out"
+    # A caller's flow_pilot.sh settings are overridden: with these, the runs would have other
+    # names, mae would be missing and the pilot would fail its ratio check (exit 1).
     done = run_script(out, "2", BUDGET="flow", BUILD_DIR=str(tmp_path / "build"),
-                      FAKE_LOG=str(log))
+                      FAKE_LOG=str(log), INITS="random croco", POS_EMBED="RoPE100",
+                      MAX_RATIO="croco=0.1")
     assert done.returncode == 0, done.stderr
     calls = [json.loads(line) for line in log.read_text().splitlines()]
 
@@ -189,12 +234,17 @@ def test_the_flow_budget_runs_the_pilots_run_d_seed_by_seed(tmp_path):
     for c in finetunes:
         assert (opt(c, "--max-steps"), opt(c, "--flow-scale"), opt(c, "--batch-size")) == \
             ("20000", "0", "8")
-    assert os.readlink(out / "finetune" / "flow-croco-1") == \
-        "p16-scale0-croco-s20000-f40+80-n150-20000-seed1"
+    for init in ["random", "mae", "croco"]:
+        for seed in [0, 1]:
+            assert os.readlink(out / "finetune" / f"flow-{init}-{seed}") == \
+                f"p16-scale0-{init}-s20000-f40+80-n150-20000" + (f"-seed{seed}" if seed else "")
+    assert (out / "budget").read_text() == "flow\n"
     flow = json.loads((out / "table.json").read_text())["flow"]
+    assert flow["random"]["aepe"][0] == pytest.approx(4.705)
+    assert flow["mae"]["aepe"][0] == pytest.approx(4.605)
     assert flow["croco"]["aepe"][0] == pytest.approx(2.605)
     assert flow["targets"]["croco_over_zero_flow_by_seed"] == pytest.approx([2.6 / 5.5, 2.61 / 5.5])
-    assert flow["targets"]["croco - random"]["met"]
+    assert flow["targets"]["croco-random"]["met"]
     assert "at most 0.5: met" in done.stdout
     # A second call finds every run done and only writes the table again.
     rerun = run_script(out, "2", BUDGET="flow", BUILD_DIR=str(tmp_path / "build"),
