@@ -194,6 +194,44 @@ nlohmann::json weightedMean(const std::vector<std::pair<nlohmann::json, double>>
   return out;
 }
 
+// Zero flow by held-out covis over parts whose bins differ (a draw leaves out the bins it has no
+// pair in): bins matched by their bounds, each figure the mean over all the parts' pairs in the
+// bin, seed-weighted, and its pairs the seed-weighted mean count (0 where a part has none).
+nlohmann::json mergeByCovis(const std::vector<Part>& parts) {
+  struct Sums {
+    nlohmann::json bin;
+    double pairs = 0;
+    std::map<std::string, std::pair<double, double>> figures;  // sum and weight (pairs x seeds)
+  };
+  std::map<std::pair<double, double>, Sums> bins;
+  double seeds = 0;
+  for (const Part& p : parts) {
+    const double w = double(p.seeds.size());
+    seeds += w;
+    const nlohmann::json baselines = p.results.value("finetune_baselines", nlohmann::json());
+    if (!baselines.is_object() || !baselines.contains("ft_flow_by_covis")) continue;
+    for (const auto& bin : baselines["ft_flow_by_covis"]) {
+      Sums& sums = bins[{bin.value("covis_lo", 0.0), bin.value("covis_hi", 0.0)}];
+      if (sums.bin.is_null()) sums.bin = bin;
+      const double n = bin.value("pairs", 0.0);
+      sums.pairs += w * n;
+      for (auto it = bin.begin(); it != bin.end(); ++it)
+        if (it.value().is_number() && it.key().rfind("ft_", 0) == 0) {
+          auto& [sum, weight] = sums.figures[it.key()];
+          sum += w * n * it.value().get<double>(), weight += w * n;
+        }
+    }
+  }
+  nlohmann::json out = nlohmann::json::array();
+  for (auto& [bounds, sums] : bins) {
+    nlohmann::json bin = sums.bin;
+    for (const auto& [key, sum] : sums.figures) bin[key] = sum.first / sum.second;
+    bin["pairs"] = std::lround(sums.pairs / seeds);
+    out.push_back(bin);
+  }
+  return out;
+}
+
 // Parts that drew their pairs apart: the held-out baselines are the seed-weighted means of the
 // parts', each set's mean covis the mean of its runs', and the config lists each part's draw.
 void mergeDraws(const std::vector<Part>& parts, nlohmann::json& merged) {
@@ -203,6 +241,9 @@ void mergeDraws(const std::vector<Part>& parts, nlohmann::json& merged) {
       items.emplace_back(p.results.value(key, nlohmann::json()), double(p.seeds.size()));
     merged[key] = weightedMean(items);
   }
+  if (merged["finetune_baselines"].is_object() &&
+      merged["finetune_baselines"].contains("ft_flow_by_covis"))
+    merged["finetune_baselines"]["ft_flow_by_covis"] = mergeByCovis(parts);
   for (auto& row : merged["rows"]) {
     double sum = 0;
     int n = 0;

@@ -23,9 +23,10 @@ namespace paircast {
 //
 // The same seed draws some other pairs on a CPU of another kind (AVX-512 against AVX2). With
 // otherDraws, parts whose settings agree are merged whatever their draws: each seed's runs are
-// still compared on that seed's own data; the merged baselines (zero flow, the constant depth)
-// are the seed-weighted means of the parts', each set's mean covis the mean over its runs, and
-// the config says "other_draws" and keeps each part's draw.
+// still compared on that seed's own data. When the parts' draws differ, the merged baselines
+// (zero flow, also by held-out covis, and the constant depth) are the seed-weighted means of the
+// parts', each set's mean covis the mean over its runs, and the config says "other_draws" and
+// keeps each part's draw.
 //
 // Throws Error naming the part for a part that is missing, not JSON, or not a sweep's results,
 // for one made with other settings (or, without otherDraws, another draw), and for a seed two

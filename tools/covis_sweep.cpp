@@ -71,7 +71,8 @@ int main(int argc, char** argv) {
   CLI::Option* mergeOption =
       app.add_option("--merge", merge,
                      "Merge finished sweeps of one study, each with its own seeds (their folders "
-                     "or results.json files), into the report of --out; no other option is used");
+                     "or results.json files), into the report of --out; no other option but "
+                     "--other-draws is used");
   mergeOption->expected(1, -1);
   bool otherDraws = false;
   app.add_flag("--other-draws", otherDraws,

@@ -911,18 +911,31 @@ void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
 // Parts drawn apart (on CPUs that draw other pairs from one seed) merge with --other-draws: the
 // runs as they are, the baselines the seed-weighted means of the parts', each set's mean covis
 // its runs' mean, and each part's draw in the config. Here a two-seed part and a one-seed part
-// (seed 1's runs as seed 2), its draw moved: zero flow 3 % higher, mean covis 0.01 higher.
-void expectOtherDrawsMerged(const nlohmann::json& twoSeeds, const std::string& seed1) {
+// (seed 1's runs as seed 2), its draw moved: zero flow 3 % higher, mean covis 0.01 higher, its
+// first zero-flow covis bin empty (left out) and its second at 2 px more.
+nlohmann::json movedDraw(const std::string& seed1, bool move) {
   nlohmann::json moved = nlohmann::json::parse(readFile(seed1 + "/results.json"));
   for (const char* key : {"runs", "random_runs"})
     for (auto& run : moved[key]) {
       run["seed_index"] = 2;
-      if (run.contains("mean_covis")) run["mean_covis"] = run["mean_covis"].get<double>() + 0.01;
+      if (move && run.contains("mean_covis"))
+        run["mean_covis"] = run["mean_covis"].get<double>() + 0.01;
     }
+  if (!move) return moved;
   for (auto& row : moved["rows"])
     if (row.contains("mean_covis")) row["mean_covis"] = row["mean_covis"].get<double>() + 0.01;
-  const double zero = twoSeeds["finetune_baselines"]["ft_flow_aepe"].get<double>();
-  moved["finetune_baselines"]["ft_flow_aepe"] = zero * 1.03;
+  nlohmann::json& zero = moved["finetune_baselines"];
+  zero["ft_flow_aepe"] = zero["ft_flow_aepe"].get<double>() * 1.03;
+  nlohmann::json& bins = zero["ft_flow_by_covis"];
+  bins[1]["ft_flow_aepe"] = bins[1]["ft_flow_aepe"].get<double>() + 2;
+  bins.erase(0);
+  return moved;
+}
+
+void expectOtherDrawsMerged(const nlohmann::json& twoSeeds, const std::string& seed1) {
+  const nlohmann::json& zero = twoSeeds["finetune_baselines"];
+  ASSERT_GE(zero["ft_flow_by_covis"].size(), 2u);
+  const nlohmann::json moved = movedDraw(seed1, true);
   const std::string a = writePart(testing::scratchDir("draws_a"), twoSeeds);
   const std::string b = writePart(testing::scratchDir("draws_b"), moved);
   const std::string merged = testing::scratchDir("draws_merged");
@@ -930,18 +943,40 @@ void expectOtherDrawsMerged(const nlohmann::json& twoSeeds, const std::string& s
   const nlohmann::json m = mergeSweepParts({a, b}, merged, true);
   EXPECT_EQ(m["config"]["other_draws"], true);
   EXPECT_EQ(m["config"]["seeds"], 3);
-  EXPECT_NEAR(m["finetune_baselines"]["ft_flow_aepe"].get<double>(), zero * (2 + 1.03) / 3, 1e-9);
+  const nlohmann::json& z = m["finetune_baselines"];
+  EXPECT_NEAR(z["ft_flow_aepe"].get<double>(), zero["ft_flow_aepe"].get<double>() * 3.03 / 3, 1e-9);
   EXPECT_EQ(m["constant_depth"], twoSeeds["constant_depth"]);  // equal in both: kept as it is
+  // By covis: the first bin is part a's alone (its 2 seeds of 3 give 2/3 of its pairs); the
+  // second pools a's pairs, 2 seeds, with b's, 1 seed, at 2 px more.
+  const nlohmann::json& bin0 = zero["ft_flow_by_covis"][0];
+  const nlohmann::json& bin1 = zero["ft_flow_by_covis"][1];
+  ASSERT_EQ(z["ft_flow_by_covis"].size(), zero["ft_flow_by_covis"].size());
+  EXPECT_EQ(z["ft_flow_by_covis"][0]["covis_lo"], bin0["covis_lo"]);
+  EXPECT_NEAR(z["ft_flow_by_covis"][0]["ft_flow_aepe"].get<double>(),
+              bin0["ft_flow_aepe"].get<double>(), 1e-9);
+  EXPECT_EQ(z["ft_flow_by_covis"][0]["pairs"], std::lround(2 * bin0["pairs"].get<double>() / 3));
+  const double n1 = bin1["pairs"].get<double>();
+  EXPECT_NEAR(z["ft_flow_by_covis"][1]["ft_flow_aepe"].get<double>(),
+              bin1["ft_flow_aepe"].get<double>() + 2 * n1 / (3 * n1), 1e-9);
+  EXPECT_EQ(z["ft_flow_by_covis"][1]["pairs"], bin1["pairs"]);
   for (const auto& row : m["rows"]) {
-    double sum = 0;
-    int n = 0;
-    for (const auto& run : m["runs"])
-      if (run["set"] == row["set"]) sum += run["mean_covis"].get<double>(), ++n;
-    ASSERT_EQ(n, 3) << row["set"];
-    EXPECT_NEAR(row["mean_covis"].get<double>(), sum / 3, 1e-12) << row["set"];
+    const auto before = std::find_if(twoSeeds["rows"].begin(), twoSeeds["rows"].end(),
+                                     [&](const auto& r) { return r["set"] == row["set"]; });
+    ASSERT_NE(before, twoSeeds["rows"].end()) << row["set"];
+    EXPECT_NEAR(row["mean_covis"].get<double>(), (*before)["mean_covis"].get<double>() + 0.01 / 3,
+                1e-12)
+        << row["set"];
   }
-  EXPECT_EQ(m["config"]["parts"][1]["draw"]["finetune_baselines"], moved["finetune_baselines"]);
-  EXPECT_EQ(m["config"]["parts"][0]["draw"]["sets_mean_covis"].size(), twoSeeds["rows"].size());
+  const nlohmann::json& draw = m["config"]["parts"][1]["draw"];
+  EXPECT_EQ(draw["finetune_baselines"], moved["finetune_baselines"]);
+  for (const auto& row : moved["rows"])
+    EXPECT_EQ(draw["sets_mean_covis"][row["set"].get<std::string>()], row["mean_covis"]);
+  // Parts of one draw merge alike with or without the flag, which then records nothing.
+  const std::string same = writePart(testing::scratchDir("draws_same"), movedDraw(seed1, false));
+  const nlohmann::json plain = mergeSweepParts({a, same}, merged);
+  const nlohmann::json flagged = mergeSweepParts({a, same}, merged, true);
+  EXPECT_FALSE(flagged["config"].contains("other_draws"));
+  EXPECT_EQ(flagged.dump(), plain.dump());
   // The command: --other-draws merges, and is refused without --merge.
   const std::string cli = testing::scratchDir("draws_merged_cli");
   EXPECT_EQ(testing::runProcess({covisSweepTool(), "--merge", a, b, "--out", cli}), 1);
