@@ -26,6 +26,10 @@ struct Part {
 // (compared by file name) and the precision each machine chose.
 const std::set<std::string> kPartKeys = {"seeds", "first_seed", "scenes", "heldout", "precision"};
 
+// The config keys that count what a draw found (held-out pairs, mechanism pairs): another CPU's
+// draw may come up a pair short, so they belong to the draw, not to the settings.
+const std::set<std::string> kDrawCounts = {"eval_pairs", "mechanism_pairs"};
+
 const char* const kOtherDrawsHint =
     " (drawn on a CPU that draws other pairs? --other-draws merges parts whose settings agree)";
 
@@ -115,11 +119,16 @@ nlohmann::json setsMeanCovis(const nlohmann::json& results) {
 std::vector<Identity> studyIdentity(const nlohmann::json& results) {
   const nlohmann::json& config = results["config"];
   std::vector<Identity> id;
+  nlohmann::json counts = nlohmann::json::object();
   for (auto it = config.begin(); it != config.end(); ++it)
-    if (!kPartKeys.count(it.key())) id.push_back({"setting '" + it.key() + "'", it.value()});
+    if (kDrawCounts.count(it.key()))
+      counts[it.key()] = it.value();
+    else if (!kPartKeys.count(it.key()))
+      id.push_back({"setting '" + it.key() + "'", it.value()});
   id.push_back({"scene files", fileNames(config.value("scenes", nlohmann::json()))});
   id.push_back({"held-out scene files", fileNames(config.value("heldout", nlohmann::json()))});
   id.push_back({"pool", results.value("pool_pairs", nlohmann::json())});
+  id.push_back({"held-out pair counts", counts, true});
   id.push_back({"sets' mean covis", setsMeanCovis(results), true});
   id.push_back({"held-out data (zero flow's and constant depth's figures)",
                 nlohmann::json::array({results.value("finetune_baselines", nlohmann::json()),

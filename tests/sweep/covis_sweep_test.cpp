@@ -881,6 +881,12 @@ void expectBadPartsRefused(const std::string& part0, const std::string& part1) {
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, steps}, merged, true),
                         "its setting 'steps' is 5, not 4");  // a setting is never a draw
   other = r;
+  other["config"]["eval_pairs"] = r["config"]["eval_pairs"].get<int>() - 1;  // a pair short
+  const std::string shortDraw = writePart(testing::scratchDir("parts_short_draw"), other);
+  EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, shortDraw}, merged), "its held-out pair counts is");
+  EXPECT_NO_THROW(
+      mergeSweepParts({part0, shortDraw}, testing::scratchDir("parts_short_draw_merged"), true));
+  other = r;
   other["config"]["scenes"] = nlohmann::json::array({"/elsewhere/apartment"});
   const std::string scenes = writePart(testing::scratchDir("parts_bad_scenes"), other);
   EXPECT_ERROR_CONTAINS(mergeSweepParts({part0, scenes}, merged),
