@@ -62,13 +62,10 @@ if [[ $budget == flow ]]; then  # the small budget's settings would be silently 
   fi
 fi
 # An OUT holds one budget's runs: the flow budget's links would land in the small one's folders.
-if [[ -f $out/budget && $(cat "$out/budget") != "$budget" ]]; then
-  echo "finetune_table.sh: $out holds BUDGET=$(cat "$out/budget")'s runs, not $budget's:" \
-    "give another OUT" >&2
-  exit 2
-fi
-if [[ ! -f $out/budget && -d $out/finetune ]] && [[ $budget == flow ]]; then
-  echo "finetune_table.sh: $out holds BUDGET=small's runs, not flow's: give another OUT" >&2
+made=small  # an OUT of before OUT/budget holds the small budget's runs
+[[ -f $out/budget ]] && made=$(cat "$out/budget")
+if [[ (-f $out/budget || -d $out/finetune) && $made != "$budget" ]]; then
+  echo "finetune_table.sh: $out holds BUDGET=$made's runs, not $budget's: give another OUT" >&2
   exit 2
 fi
 bin=${BUILD_DIR:-build}/tools

@@ -173,8 +173,9 @@ void checkSeedsOnce(const std::vector<Part>& parts) {
                                 " too: merge each seed from one part");
 }
 
-// The seed-weighted mean of the parts' figures: numbers averaged, arrays and objects element by
-// element, anything else (names, nulls, figures equal in every part) as the first part has it.
+// The seed-weighted mean of the parts' figures: numbers averaged, objects key by key, anything
+// else (names, nulls, arrays, figures equal in every part) as the first part has it. The one array
+// among the baselines, zero flow by covis, is merged bin by bin (mergeByCovis).
 nlohmann::json weightedMean(const std::vector<std::pair<nlohmann::json, double>>& items) {
   const nlohmann::json& first = items.front().first;
   if (first.is_number()) {
@@ -187,17 +188,12 @@ nlohmann::json weightedMean(const std::vector<std::pair<nlohmann::json, double>>
                                   [&](const auto& item) { return item.first == first; });
     return same ? first : nlohmann::json(sum / weight);
   }
-  if (!first.is_object() && !first.is_array()) return first;
+  if (!first.is_object()) return first;
   nlohmann::json out = first;
   for (auto it = out.begin(); it != out.end(); ++it) {
     std::vector<std::pair<nlohmann::json, double>> children;
-    const std::string key = first.is_object() ? it.key() : "";
-    const size_t index = first.is_array() ? static_cast<size_t>(it - out.begin()) : 0;
     for (const auto& [value, w] : items)
-      if (first.is_object() && value.is_object() && value.contains(key))
-        children.emplace_back(value[key], w);
-      else if (first.is_array() && value.is_array() && value.size() == first.size())
-        children.emplace_back(value[index], w);
+      if (value.is_object() && value.contains(it.key())) children.emplace_back(value[it.key()], w);
     *it = weightedMean(children);
   }
   return out;
