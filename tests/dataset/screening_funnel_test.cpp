@@ -388,8 +388,8 @@ TEST(NoRenderWasted, AReferenceBelowTheValidBoundIsCheckedBeforeItsCandidates) {
   o.maxReferences = 1;
   const PairGenerator gen(room.scene, room.caster, room.sampler, o);
   // Such references are rare (6 of the first 600 indices on one of our machines, more on another:
-  // the sampled views follow the renders' last bits, which differ between CPUs), so indices are
-  // drawn until 12 have failed.
+  // the same seed samples other views on CPUs of another kind), so indices are drawn until 12
+  // have failed.
   int failed = 0, failedAtOnce = 0;
   for (int i = 0; i < 3000 && failed < 12; ++i) {
     GenerationCost c;
