@@ -32,6 +32,11 @@
 # BUDGET=flow, and an OUT holds one budget's runs (OUT/budget says which). A killed call skips
 # the stages it finished. On a 2-core machine with bf16 units the pre-trainings took 17 and 14
 # minutes and a fine-tune 17, so three seeds take about 3 hours.
+# STUDY=DIR (with BUDGET=flow) builds the flow table from a co-visibility study's fine-tunes
+# instead of training (DIR is covis_sweep's folder, OUT/sweep-flow of BUDGET=flow
+# scripts/covis_ablation.sh OUT): seed k's random weights, mae and uniform_0.50 (CroCo's own
+# set, as cross-view), each fine-tuned for flow by the study, measured with finetune --evaluate
+# on the same 100 held-out pairs of the studio. Each seed of the study is then a seed of the table.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:?usage: [BUDGET=small|flow] scripts/finetune_table.sh OUT [SEEDS]}
@@ -61,11 +66,20 @@ if [[ $budget == flow ]]; then  # the small budget's settings would be silently 
     exit 2
   fi
 fi
-# An OUT holds one budget's runs: the flow budget's links would land in the small one's folders.
+study=${STUDY:-}
+if [[ -n $study && ($budget != flow || -n ${FINETUNE_STEPS:-}) ]]; then
+  echo "finetune_table.sh: STUDY takes the study's flow fine-tunes as they are: BUDGET=flow," \
+    "without FINETUNE_STEPS" >&2
+  exit 2
+fi
+# An OUT holds one budget's runs: the flow budget's links would land in the small one's folders,
+# and a study's measurements beside the pilot's runs.
+label=$budget
+[[ -n $study ]] && label=flow-study
 made=small  # an OUT of before OUT/budget holds the small budget's runs
 [[ -f $out/budget ]] && made=$(cat "$out/budget")
-if [[ (-f $out/budget || -d $out/finetune) && $made != "$budget" ]]; then
-  echo "finetune_table.sh: $out holds BUDGET=$made's runs, not $budget's: give another OUT" >&2
+if [[ (-f $out/budget || -d $out/finetune) && $made != "$label" ]]; then
+  echo "finetune_table.sh: $out holds BUDGET=$made's runs, not $label's: give another OUT" >&2
   exit 2
 fi
 bin=${BUILD_DIR:-build}/tools
@@ -75,8 +89,40 @@ read -r -a tasks <<< "${TASKS:-flow depth pose}"
 patch=${PATCH_SIZE:-16}
 amp=${AMP:-auto}
 mkdir -p "$out"
-echo "$budget" > "$out/budget"
+echo "$label" > "$out/budget"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
+
+from_study() {  # OUT/finetune/flow-INIT-SEED/heldout.json from STUDY's finished flow fine-tunes
+  [[ -f "$out/flow-heldout/summary.json" ]] ||  # flow_pilot.sh's held-out pairs, the same draw
+    "$bin/generate_pairs" --scenes scenes/studio --out "$out/flow-heldout" --pairs-per-scene 100 \
+      --resolution 64 --save-flow --save-depth --seed 7 --quiet --motion near --min-covis 0.6 \
+      > /dev/null
+  local seed init set ft run
+  for ((seed = 0; seed < seeds; ++seed)); do
+    for init in random mae croco; do
+      set=$init
+      [[ $init == croco ]] && set=uniform_0.50
+      ft=$study/runs/$set/seed-$seed/finetune-flow run=$out/finetune/flow-$init-$seed
+      [[ -f $run/heldout.json ]] && continue
+      if [[ ! -f $ft/heldout.json ]]; then  # written when the fine-tune ends
+        echo "finetune_table.sh: $ft: no finished flow fine-tune of $set, seed $seed" >&2
+        exit 2
+      fi
+      mkdir -p "$run"
+      # shellcheck disable=SC2046  # the fine-tune's model settings, one flag and value each
+      "$bin/finetune" --evaluate --task flow --head linear --checkpoint "$ft/checkpoint-last.pth" \
+        $(python3 -c 'import json, sys; s = json.load(open(sys.argv[1]))
+print(*(f"--{k.replace(chr(95), chr(45))} {s[k]}" for k in
+        ("preset", "img_size", "patch_size", "flow_scale")))' "$ft/settings.json") \
+        --eval-data "$out/flow-heldout/pairs-*.tar" --quiet | tail -n 1 > "$run/heldout.tmp"
+      mv "$run/heldout.tmp" "$run/heldout.json"
+    done
+  done
+}
+if [[ -n $study ]]; then
+  from_study
+  INITS=random,mae,croco exec python3 scripts/finetune_table.py "$out" "$seeds" flow
+fi
 
 if [[ $budget == flow ]]; then  # the pilot's run D, seed by seed, as the table's runs
   steps=${FINETUNE_STEPS:-20000} pretrain_steps=20000 plans=40 more_plans=80 per_scene=150

@@ -1,8 +1,9 @@
 """scripts/finetune_table.py's flow targets on made-up fine-tunes (cross-view at most half of zero
 flow's; cross-view ahead of random weights and mae by intervals below zero, each half-width within
 a quarter of the random-to-cross-view gap), and scripts/finetune_table.sh: its refusals, and
-BUDGET=flow, which runs flow_pilot.sh's run D seed by seed as the table's runs (here with tools
-that only write what the real ones would, and log how they were called)."""
+BUDGET=flow, which runs flow_pilot.sh's run D seed by seed as the table's runs, and STUDY, which
+measures a co-visibility study's flow fine-tunes instead (here with tools that only write what
+the real ones would, and log how they were called)."""
 
 import json
 import os
@@ -99,7 +100,7 @@ def test_one_seed_decides_nothing_on_intervals(tmp_path):
 SETTINGS = ["BUDGET", "TASKS", "HOMES", "PATCH_SIZE", "AMP", "PRETRAIN_EPOCHS", "FINETUNE_EPOCHS",
             "POSE_BLR", "PRETRAIN_ONLY", "FINETUNE_STEPS", "EVAL_EVERY", "INITS", "POS_EMBED",
             "MAX_RATIO", "SEEDS", "PATCHES", "SCALES", "FLOORPLANS", "PRETRAIN_FLOORPLANS",
-            "WIDE_PAIRS", "FLOW_PAIRS", "PRETRAIN_STEPS", "BUILD_DIR"]
+            "WIDE_PAIRS", "FLOW_PAIRS", "PRETRAIN_STEPS", "BUILD_DIR", "STUDY"]
 
 
 def run_script(out, *args, **env):
@@ -175,6 +176,15 @@ args = sys.argv[1:]
 name = pathlib.Path(sys.argv[0]).name
 with open(os.environ["FAKE_LOG"], "a") as log:
     log.write(json.dumps([name] + args) + "\n")
+if "--evaluate" in args:  # a study's fine-tune, whose AEPE its folder's fake.json gives
+    ckpt = pathlib.Path(args[args.index("--checkpoint") + 1])
+    aepe = json.loads((ckpt.parent / "fake.json").read_text())["aepe"]
+    base = {"aepe": 5.0, "aepe_covisible": 5.0, "aepe_all_known": 5.3, "px1": 0.97, "px3": 0.7,
+            "px5": 0.4, "pairs": 100}
+    model = dict(base, aepe=aepe, aepe_covisible=aepe, aepe_all_known=aepe + 0.3)
+    print("evaluating", file=sys.stderr)
+    print(json.dumps({"baseline": base, "model": model}))
+    sys.exit(0)
 out = pathlib.Path(args[args.index("--out") + 1])
 out.mkdir(parents=True, exist_ok=True)
 if name == "generate_pairs":
@@ -251,3 +261,97 @@ def test_the_flow_budget_runs_the_pilots_run_d_seed_by_seed(tmp_path):
                        FAKE_LOG=str(log))
     assert rerun.returncode == 0, rerun.stderr
     assert len(log.read_text().splitlines()) == len(calls)
+
+
+def fake_tools(tmp_path):
+    tools = tmp_path / "build" / "tools"
+    tools.mkdir(parents=True)
+    for name in ["make_scenes", "generate_pairs", "pretrain", "finetune"]:
+        path = tools / name
+        path.write_text(FAKE_TOOL)
+        path.chmod(path.stat().st_mode | stat.S_IXUSR)
+    return str(tmp_path / "build")
+
+
+def fake_study(study, seeds, finished=True):
+    """A covis_sweep folder whose flow fine-tunes of random, mae and uniform_0.50 end at AEPE
+    4.0, 3.9 and 2.0 px (+ 0.1 a seed); the last seed's uniform_0.50 unfinished unless finished."""
+    for seed in range(seeds):
+        for set_, aepe in [("random", 4.0), ("mae", 3.9), ("uniform_0.50", 2.0), ("bin_0.95", 1.0)]:
+            ft = study / "runs" / set_ / f"seed-{seed}" / "finetune-flow"
+            ft.mkdir(parents=True)
+            (ft / "checkpoint-last.pth").write_text("")
+            (ft / "fake.json").write_text(json.dumps({"aepe": aepe + 0.1 * seed}))
+            (ft / "settings.json").write_text(json.dumps(
+                {"preset": "tiny", "img_size": 64, "patch_size": 16, "flow_scale": 4.0}))
+            if finished or seed < seeds - 1 or set_ != "uniform_0.50":
+                (ft / "heldout.json").write_text("{}")
+
+
+def test_a_study_gives_the_flow_table_seed_by_seed(tmp_path):
+    build, log, out, study = fake_tools(tmp_path), tmp_path / "calls.jsonl", tmp_path / "out", \
+        tmp_path / "sweep-flow"
+    fake_study(study, 3)
+    done = run_script(out, "2", BUDGET="flow", STUDY=str(study), BUILD_DIR=build,
+                      FAKE_LOG=str(log))
+    assert done.returncode == 0, done.stderr
+    calls = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [c[0] for c in calls] == ["generate_pairs"] + ["finetune"] * 6  # nothing trained
+    pairs = calls[0]
+    assert pairs[pairs.index("--scenes") + 1:pairs.index("--out")] == ["scenes/studio"]
+    for flag, value in [("--pairs-per-scene", "100"), ("--resolution", "64"), ("--seed", "7"),
+                        ("--motion", "near"), ("--min-covis", "0.6")]:
+        assert pairs[pairs.index(flag) + 1] == value
+    checkpoints = sorted(c[c.index("--checkpoint") + 1] for c in calls[1:])
+    assert checkpoints == sorted(f"{study}/runs/{s}/seed-{k}/finetune-flow/checkpoint-last.pth"
+                                 for s in ["random", "mae", "uniform_0.50"] for k in [0, 1])
+    for c in calls[1:]:
+        assert [c[c.index(f) + 1] for f in ["--preset", "--img-size", "--patch-size",
+                                            "--flow-scale", "--eval-data"]] == \
+            ["tiny", "64", "16", "4.0", f"{out}/flow-heldout/pairs-*.tar"]
+    flow = json.loads((out / "table.json").read_text())["flow"]
+    assert flow["random"]["aepe"][0] == pytest.approx(4.05)
+    assert flow["mae"]["aepe"][0] == pytest.approx(3.95)
+    assert flow["croco"]["aepe"][0] == pytest.approx(2.05)
+    assert flow["targets"]["croco_over_zero_flow_by_seed"] == pytest.approx([0.4, 0.42])
+    assert (out / "budget").read_text() == "flow-study\n"
+    assert "at most 0.5: met" in done.stdout
+    # The next call measures only the seed it adds; an OUT of the pilot's runs is refused.
+    more = run_script(out, "3", BUDGET="flow", STUDY=str(study), BUILD_DIR=build,
+                      FAKE_LOG=str(log))
+    assert more.returncode == 0, more.stderr
+    assert len(log.read_text().splitlines()) == len(calls) + 3
+    pilot = run_script(out, "3", BUDGET="flow", BUILD_DIR=build, FAKE_LOG=str(log))
+    assert pilot.returncode == 2
+    assert pilot.stderr == f"finetune_table.sh: {out} holds BUDGET=flow-study's runs, not " \
+        "flow's: give another OUT\n"
+
+
+def test_a_study_seed_not_yet_fine_tuned_is_named_and_nothing_is_measured_twice(tmp_path):
+    build, log, out, study = fake_tools(tmp_path), tmp_path / "calls.jsonl", tmp_path / "out", \
+        tmp_path / "sweep-flow"
+    fake_study(study, 2, finished=False)
+    done = run_script(out, "2", BUDGET="flow", STUDY=str(study), BUILD_DIR=build,
+                      FAKE_LOG=str(log))
+    assert done.returncode == 2
+    assert done.stderr.splitlines()[-1] == f"finetune_table.sh: {study}/runs/uniform_0.50/" \
+        "seed-1/finetune-flow: no finished flow fine-tune of uniform_0.50, seed 1"
+    assert not (out / "table.md").exists()
+    measured = len(log.read_text().splitlines())
+    assert measured == 1 + 5  # the held-out pairs and every finished fine-tune
+    ft = study / "runs" / "uniform_0.50" / "seed-1" / "finetune-flow"
+    (ft / "heldout.json").write_text("{}")
+    again = run_script(out, "2", BUDGET="flow", STUDY=str(study), BUILD_DIR=build,
+                       FAKE_LOG=str(log))
+    assert again.returncode == 0, again.stderr
+    assert len(log.read_text().splitlines()) == measured + 1
+
+
+@pytest.mark.parametrize("env", [{"BUDGET": "small"},
+                                 {"BUDGET": "flow", "FINETUNE_STEPS": "30000"}])
+def test_a_study_is_taken_as_it_is(tmp_path, env):
+    done = run_script(tmp_path / "out", "2", STUDY=str(tmp_path), **env)
+    assert done.returncode == 2
+    assert done.stderr == "finetune_table.sh: STUDY takes the study's flow fine-tunes as they " \
+        "are: BUDGET=flow, without FINETUNE_STEPS\n"
+    assert not (tmp_path / "out").exists()
