@@ -207,13 +207,18 @@ elif name == "finetune":
 """
 
 
-def test_the_flow_budget_runs_the_pilots_run_d_seed_by_seed(tmp_path):
+def fake_tools(tmp_path):
     tools = tmp_path / "build" / "tools"
     tools.mkdir(parents=True)
     for name in ["make_scenes", "generate_pairs", "pretrain", "finetune"]:
         path = tools / name
         path.write_text(FAKE_TOOL)
         path.chmod(path.stat().st_mode | stat.S_IXUSR)
+    return str(tmp_path / "build")
+
+
+def test_the_flow_budget_runs_the_pilots_run_d_seed_by_seed(tmp_path):
+    fake_tools(tmp_path)
     log, out = tmp_path / "calls.jsonl", tmp_path / "out"
     # A caller's flow_pilot.sh settings are overridden: with these, the runs would have other
     # names, mae would be missing and the pilot would fail its ratio check (exit 1).
@@ -261,16 +266,6 @@ def test_the_flow_budget_runs_the_pilots_run_d_seed_by_seed(tmp_path):
                        FAKE_LOG=str(log))
     assert rerun.returncode == 0, rerun.stderr
     assert len(log.read_text().splitlines()) == len(calls)
-
-
-def fake_tools(tmp_path):
-    tools = tmp_path / "build" / "tools"
-    tools.mkdir(parents=True)
-    for name in ["make_scenes", "generate_pairs", "pretrain", "finetune"]:
-        path = tools / name
-        path.write_text(FAKE_TOOL)
-        path.chmod(path.stat().st_mode | stat.S_IXUSR)
-    return str(tmp_path / "build")
 
 
 def fake_study(study, seeds, finished=True):
