@@ -92,39 +92,7 @@ mkdir -p "$out"
 echo "$label" > "$out/budget"
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 
-from_study() {  # OUT/finetune/flow-INIT-SEED/heldout.json from STUDY's finished flow fine-tunes
-  [[ -f "$out/flow-heldout/summary.json" ]] ||  # flow_pilot.sh's held-out pairs, the same draw
-    "$bin/generate_pairs" --scenes scenes/studio --out "$out/flow-heldout" --pairs-per-scene 100 \
-      --resolution 64 --save-flow --save-depth --seed 7 --quiet --motion near --min-covis 0.6 \
-      > /dev/null
-  local seed init set ft run
-  for ((seed = 0; seed < seeds; ++seed)); do
-    for init in random mae croco; do
-      set=$init
-      [[ $init == croco ]] && set=uniform_0.50
-      ft=$study/runs/$set/seed-$seed/finetune-flow run=$out/finetune/flow-$init-$seed
-      [[ -f $run/heldout.json ]] && continue
-      if [[ ! -f $ft/heldout.json ]]; then  # written when the fine-tune ends
-        echo "finetune_table.sh: $ft: no finished flow fine-tune of $set, seed $seed" >&2
-        exit 2
-      fi
-      mkdir -p "$run"
-      # shellcheck disable=SC2046  # the fine-tune's model settings, one flag and value each
-      "$bin/finetune" --evaluate --task flow --head linear --checkpoint "$ft/checkpoint-last.pth" \
-        $(python3 -c 'import json, sys; s = json.load(open(sys.argv[1]))
-print(*(f"--{k.replace(chr(95), chr(45))} {s[k]}" for k in
-        ("preset", "img_size", "patch_size", "flow_scale")))' "$ft/settings.json") \
-        --eval-data "$out/flow-heldout/pairs-*.tar" --quiet | tail -n 1 > "$run/heldout.tmp"
-      mv "$run/heldout.tmp" "$run/heldout.json"
-    done
-  done
-}
-if [[ -n $study ]]; then
-  from_study
-  INITS=random,mae,croco exec python3 scripts/finetune_table.py "$out" "$seeds" flow
-fi
-
-if [[ $budget == flow ]]; then  # the pilot's run D, seed by seed, as the table's runs
+if [[ $budget == flow && -z $study ]]; then  # the pilot's run D, seed by seed, as the table's runs
   steps=${FINETUNE_STEPS:-20000} pretrain_steps=20000 plans=40 more_plans=80 per_scene=150
   PATCHES=16 SCALES=0 INITS="random mae croco" POS_EMBED=cosine MAX_RATIO='' \
     FLOORPLANS=$plans PRETRAIN_FLOORPLANS=$more_plans WIDE_PAIRS=$per_scene \
@@ -155,6 +123,36 @@ truth() {  # OUT/NAME PAIRS [generate_pairs flags] -- SCENES...: pairs with flow
 # Flow fine-tunes and is held out on flow-style pairs (small, dense motions: generate_pairs
 # --motion near), as docs/finetune.md's pilot; depth and pose on the wide pre-training pairs.
 near=(--motion near --min-covis 0.6)
+
+from_study() {  # OUT/finetune/flow-INIT-SEED/heldout.json from STUDY's finished flow fine-tunes
+  truth flow-heldout 100 "${near[@]}" -- scenes/studio  # flow_pilot.sh's held-out pairs
+  local seed init set ft run
+  for ((seed = 0; seed < seeds; ++seed)); do
+    for init in random mae croco; do
+      set=$init
+      [[ $init == croco ]] && set=uniform_0.50
+      ft=$study/runs/$set/seed-$seed/finetune-flow run=$out/finetune/flow-$init-$seed
+      [[ -f $run/heldout.json ]] && continue
+      if [[ ! -f $ft/heldout.json ]]; then  # written when the fine-tune ends
+        echo "finetune_table.sh: $ft: no finished flow fine-tune of $set, seed $seed" >&2
+        exit 2
+      fi
+      mkdir -p "$run"
+      # shellcheck disable=SC2046  # the fine-tune's model settings, one flag and value each
+      "$bin/finetune" --evaluate --task flow --head linear --checkpoint "$ft/checkpoint-last.pth" \
+        $(python3 -c 'import json, sys; s = json.load(open(sys.argv[1]))
+print(*(f"--{k.replace(chr(95), chr(45))} {s[k]}" for k in
+        ("preset", "img_size", "patch_size", "flow_scale")))' "$ft/settings.json") \
+        --eval-data "$out/flow-heldout/pairs-*.tar" --quiet | tail -n 1 > "$run/heldout.tmp"
+      mv "$run/heldout.tmp" "$run/heldout.json"
+    done
+  done
+}
+if [[ -n $study ]]; then
+  from_study
+  INITS=random,mae,croco exec python3 scripts/finetune_table.py "$out" "$seeds" flow
+fi
+
 if [[ ${HOMES:-0} -gt 0 ]]; then
   [[ -d "$out/homes" ]] ||
     "$bin/make_scenes" --random "$HOMES" --furnish --models train --seed 21 --out "$out/homes" \
