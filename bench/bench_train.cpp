@@ -299,13 +299,17 @@ nlohmann::json finetuneRows(const Options& o, const std::vector<std::string>& sh
 }
 #endif
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  // OpenBLAS's right kernels for both steps: the official one inherits OPENBLAS_CORETYPE.
-  checkBlasCore("bench_train", argv);
+// What every run of the pre-training step shares: the options, the data and the peaks.
+struct Bench {
   Options o;
-  CLI::App app{"Pre-training step speed, data included"};
+  Precision precision;
+  GemmPeaks peaks;
+  std::vector<std::string> shards;
+  std::string tmp;     // scratch folder, removed at the end
+  std::string scenes;  // the shipped scenes, for live rendering
+};
+
+void addOptions(CLI::App& app, Options& o) {
   app.add_option("--presets", o.presets, "Presets");
   app.add_option("--batch", o.batch, "Batch size");
   app.add_option("--steps", o.steps, "Iterations per run");
@@ -335,180 +339,233 @@ int main(int argc, char** argv) {
   app.add_flag(
       "--finetune", o.finetune,
       "Time finetune's flow step (DPT head) instead, beside naver/croco's CroCo-Flow step");
+}
+
+// The shards to train from: --data's, or pairs rendered from the shipped scenes into b.tmp.
+void prepareData(Bench& b) {
+  b.shards = b.o.data;
+#if PAIRCAST_WITH_RENDER
+  b.scenes = std::string(PAIRCAST_SOURCE_DIR) + "/scenes";
+  if (!b.shards.empty()) return;
+  GenerateConfig g;
+  g.scenes = {b.scenes};
+  g.out = b.tmp + "/pairs";
+  g.pairsPerScene = (b.o.batch * (b.o.steps + 2)) / 3 + 8;
+  g.pair.resolution = 256;
+  g.saveFlow = g.saveDepth = b.o.finetune;
+  g.progress = false;
+  runGenerate(g);
+  b.shards = {b.tmp + "/pairs/pairs-*.tar"};
+#else
+  if (b.shards.empty()) throw Error("this trainer-only build renders nothing: give --data shards");
+  b.o.live = false;
+#endif
+}
+
+struct Rate {
+  double pairsPerS = 0, dataWait = 0;
+  nlohmann::json summary;
+};
+
+// Ours on `preset` at --amp `amp`: steady pairs/s, data wait and summary.json.
+Rate runOurs(const Bench& b, const std::string& preset, bool isLive, const std::string& amp,
+             bool fusedAdamW, const std::string& profile) {
+  TrainConfig c;
+#if PAIRCAST_WITH_RENDER
+  if (isLive) c.live = {b.scenes};
+#endif
+  if (!isLive) c.shards = b.shards;
+  c.model = presetConfig(preset);
+  c.model.img_size = b.o.imgSize;
+  c.batchSize = b.o.batch;
+  c.maxSteps = b.o.steps;
+  c.epochs = 100;
+  c.saveEvery = 1000000;
+  c.out = b.tmp + "/run-" + preset + (isLive ? "-live-" : "-shards-") + amp;
+  c.workers = b.o.workers;
+  c.device = b.o.device;
+  c.amp = amp;
+  c.fusedAdamW = fusedAdamW;
+  c.profile = profile;
+  c.progress = false;
+  Rate r;
+  r.summary = runPretrain(c);
+  std::tie(r.pairsPerS, r.dataWait) = steadyRate(c.out, b.o.batch, b.o.warmupSteps);
+  if (r.pairsPerS <= 0) r.pairsPerS = r.summary["pairs_per_s"], r.dataWait = r.summary["data_wait"];
+  return r;
+}
+
+// Our step on `preset` at --amp, from shards or live, with its MFU (CUDA) or GEMM-peak fraction.
+nlohmann::json oursRow(const Bench& b, const std::string& preset, bool isLive, const FlopCount& f,
+                       double* pps) {
+  const Rate r = runOurs(b, preset, isLive, b.o.amp, b.o.fusedAdamW, "");
+  const std::string& ran = b.precision.ran;
+  std::printf("%-6s %-7s %-7s %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
+              isLive ? "live" : "shards", ran.c_str(), r.pairsPerS, 100 * r.dataWait);
+  nlohmann::json row = {{"preset", preset},
+                        {"source", isLive ? "live" : "shards"},
+                        {"pairs_per_s", r.pairsPerS},
+                        {"data_wait", r.dataWait},
+                        {"loss", r.summary["loss"]},
+                        {"fused_adamw", r.summary.value("fused_adamw", false)},
+                        {"precision", ran}};
+  if (b.o.device == "cuda") {
+    // Forward and backward: 3x the forward FLOPs.
+    const double mfuPaper = 3 * f.flops * r.pairsPerS / (b.o.peakTflops * 1e12);
+    const double mfuFull = 3 * f.flops_full * r.pairsPerS / (b.o.peakTflops * 1e12);
+    std::printf("  MFU %.1f%% (paper's FLOPs), %.1f%% (full count) of %.0f TFLOP/s", 100 * mfuPaper,
+                100 * mfuFull, b.o.peakTflops);
+    row["mfu_paper"] = mfuPaper;
+    row["mfu_full"] = mfuFull;
+  } else {
+    addFraction(row, "gemm_fraction", f.flops_full, r.pairsPerS, b.peaks, ran);
+  }
+  std::printf("\n");
+  *pps = r.pairsPerS;
+  return row;
+}
+
+// Our own variants from shards, beside `pps`: float32 when --amp ran another precision, the
+// per-parameter AdamW, and the operator profile when asked.
+void addOurVariants(const Bench& b, const std::string& preset, const FlopCount& f, double pps,
+                    nlohmann::json& row) {
+  const std::string& ran = b.precision.ran;
+  if (b.o.device == "cpu" && ran != "float32") {
+    const Rate r32 = runOurs(b, preset, false, "none", b.o.fusedAdamW, "");
+    std::printf("%-6s shards  float32 %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
+                r32.pairsPerS, 100 * r32.dataWait);
+    addFraction(row, "float32_gemm_fraction", f.flops_full, r32.pairsPerS, b.peaks, "float32");
+    std::printf("  -> %s is %.2fx\n", ran.c_str(), pps / r32.pairsPerS);
+    row["float32_pairs_per_s"] = r32.pairsPerS;
+    row["float32_data_wait"] = r32.dataWait;
+  }
+  if (b.o.device == "cpu" && b.o.fusedAdamW) {
+    const Rate own = runOurs(b, preset, false, b.o.amp, false, "");
+    std::printf(
+        "%-6s shards  %-7s %8.2f pairs/s  with LibTorch's per-parameter AdamW "
+        "-> flat buffers %.2fx\n",
+        preset.c_str(), ran.c_str(), own.pairsPerS, pps / own.pairsPerS);
+    row["per_parameter_adamw_pairs_per_s"] = own.pairsPerS;
+  }
+  if (b.o.profile) {
+    const std::string file = b.tmp + "/profile-" + preset + ".json";
+    runOurs(b, preset, false, b.o.amp, b.o.fusedAdamW, file);
+    row["profile"] = printProfile(preset, file);
+  }
+}
+
+// The official CroCo train step beside `pps`: on CUDA at our precision; on the CPU in float32
+// and under torch.autocast's bf16.
+void addOfficialRates(const Bench& b, const std::string& preset, const FlopCount& f, double pps,
+                      nlohmann::json& row) {
+  const bool cuda = b.o.device == "cuda";
+  const std::string amp =
+      cuda ? (b.precision.ran == "float32" ? "none" : b.precision.ran) : std::string("none");
+  const double off = officialTrainSeconds(b.o, preset, amp);
+  if (off > 0) {
+    const double offPps = b.o.batch / off;
+    std::printf("%-6s official CroCo train step (model only), %s: %8.2f pairs/s -> ours %.2fx",
+                preset.c_str(), cuda ? amp.c_str() : "float32", offPps, pps / offPps);
+    row["official_pairs_per_s"] = offPps;
+    row["ratio"] = pps / offPps;
+    if (!cuda) addFraction(row, "official_gemm_fraction", f.flops_full, offPps, b.peaks, "float32");
+    std::printf("\n");
+  } else if (!b.o.crocoDir.empty()) {
+    std::printf("%-6s official step did not run (%s with torch, --croco-dir)\n", preset.c_str(),
+                b.o.python.c_str());
+  }
+  const double offBf16 = cuda ? 0 : officialTrainSeconds(b.o, preset, "bf16");
+  if (offBf16 <= 0) return;
+  const double bf16Pps = b.o.batch / offBf16;
+  std::printf("%-6s official step under torch.autocast(\"cpu\", bf16): %8.2f pairs/s -> ours %.2fx",
+              preset.c_str(), bf16Pps, pps / bf16Pps);
+  row["official_bf16_pairs_per_s"] = bf16Pps;
+  row["ratio_bf16"] = pps / bf16Pps;
+  addFraction(row, "official_bf16_gemm_fraction", f.flops_full, bf16Pps, b.peaks, "bf16");
+  std::printf("\n");
+}
+
+// The pre-training step for each preset: from shards (with our variants and the official step
+// beside it) and, unless --no-live, with pairs rendered live.
+nlohmann::json pretrainRows(const Bench& b) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const auto& preset : b.o.presets) {
+    CroCoConfig c = presetConfig(preset);
+    c.img_size = b.o.imgSize;
+    const FlopCount f = countFlops(c);
+    for (const bool isLive : {false, true}) {
+      if (isLive && !b.o.live) continue;
+      double pps = 0;
+      nlohmann::json row = oursRow(b, preset, isLive, f, &pps);
+      if (!isLive) {
+        addOurVariants(b, preset, f, pps, row);
+        addOfficialRates(b, preset, f, pps, row);
+      }
+      rows.push_back(row);
+    }
+  }
+  return rows;
+}
+
+void printSummary(const Bench& b, const nlohmann::json& rows) {
+  const nlohmann::json summary = {
+      {"batch", b.o.batch},
+      {"threads", b.o.threads},
+      {"device", b.o.device},
+      {"amp", b.o.amp},
+      {"precision", b.precision.toJson()},
+      {"gemm_peak_gflops", {{"float32", b.peaks.float32}, {"bf16", b.peaks.bf16}}},
+      {"img_size", b.o.imgSize},
+      {"peak_tflops", b.o.peakTflops},
+      {"results", rows}};
+  std::printf("%s\n", summary.dump().c_str());
+}
+
+int run(Bench& b) {
+  torch::set_num_threads(b.o.threads);
+  const torch::Device device(b.o.device == "cuda" ? torch::kCUDA : torch::kCPU);
+  b.precision = resolvePrecision(b.o.amp, device.type(), "bench_train");
+  if (b.o.device == "cpu") {
+    b.peaks.float32 = gemmPeakGflops(device, torch::kFloat32);
+    b.peaks.bf16 = gemmPeakGflops(device, torch::kBFloat16);
+    std::printf("GEMM peak, 2048^3 matmul, %d threads: float32 %.0f GFLOP/s, bf16 %.0f GFLOP/s\n",
+                b.o.threads, b.peaks.float32, b.peaks.bf16);
+  }
+  b.tmp = (fs::temp_directory_path() / ("bench_train_" + std::to_string(::getpid()))).string();
+  prepareData(b);
+  nlohmann::json rows = nlohmann::json::array();
+  if (b.o.finetune) {
+#if PAIRCAST_WITH_FINETUNE
+    std::printf("batch %d, %s, %d torch threads, %dx%d crops, %d steps (%d left out)\n", b.o.batch,
+                b.o.device.c_str(), b.o.threads, b.o.imgSize, b.o.imgSize, b.o.steps,
+                b.o.warmupSteps);
+    rows = finetuneRows(b.o, b.shards, b.tmp, b.peaks);
+#else
+    throw Error("this build has no finetune");
+#endif
+  } else {
+    std::printf(
+        "batch %d, %s %s, %d torch threads, %d workers, %dx%d crops, %d steps (%d left out)\n",
+        b.o.batch, b.o.device.c_str(), b.precision.ran.c_str(), b.o.threads, b.o.workers,
+        b.o.imgSize, b.o.imgSize, b.o.steps, b.o.warmupSteps);
+    rows = pretrainRows(b);
+  }
+  fs::remove_all(b.tmp);
+  printSummary(b, rows);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // OpenBLAS's right kernels for both steps: the official one inherits OPENBLAS_CORETYPE.
+  checkBlasCore("bench_train", argv);
+  Bench b;
+  CLI::App app{"Pre-training step speed, data included"};
+  addOptions(app, b.o);
   CLI11_PARSE(app, argc, argv);
   try {
-    torch::set_num_threads(o.threads);
-    const torch::Device device(o.device == "cuda" ? torch::kCUDA : torch::kCPU);
-    const Precision precision = resolvePrecision(o.amp, device.type(), "bench_train");
-    GemmPeaks peaks;
-    if (o.device == "cpu") {
-      peaks.float32 = gemmPeakGflops(device, torch::kFloat32);
-      peaks.bf16 = gemmPeakGflops(device, torch::kBFloat16);
-      std::printf("GEMM peak, 2048^3 matmul, %d threads: float32 %.0f GFLOP/s, bf16 %.0f GFLOP/s\n",
-                  o.threads, peaks.float32, peaks.bf16);
-    }
-    const std::string tmp =
-        (fs::temp_directory_path() / ("bench_train_" + std::to_string(::getpid()))).string();
-    std::vector<std::string> shards = o.data;
-#if PAIRCAST_WITH_RENDER
-    const std::string scenes = std::string(PAIRCAST_SOURCE_DIR) + "/scenes";
-    if (shards.empty()) {
-      GenerateConfig g;
-      g.scenes = {scenes};
-      g.out = tmp + "/pairs";
-      g.pairsPerScene = (o.batch * (o.steps + 2)) / 3 + 8;
-      g.pair.resolution = 256;
-      g.saveFlow = g.saveDepth = o.finetune;
-      g.progress = false;
-      runGenerate(g);
-      shards = {tmp + "/pairs/pairs-*.tar"};
-    }
-#else
-    if (shards.empty()) throw Error("this trainer-only build renders nothing: give --data shards");
-    o.live = false;
-#endif
-    nlohmann::json rows = nlohmann::json::array();
-#if PAIRCAST_WITH_FINETUNE
-    if (o.finetune) {
-      std::printf("batch %d, %s, %d torch threads, %dx%d crops, %d steps (%d left out)\n", o.batch,
-                  o.device.c_str(), o.threads, o.imgSize, o.imgSize, o.steps, o.warmupSteps);
-      rows = finetuneRows(o, shards, tmp, peaks);
-      o.presets.clear();
-    }
-#else
-    if (o.finetune) throw Error("this build has no finetune");
-#endif
-    std::printf(
-        "batch %d, %s%s, %d torch threads, %d workers, %dx%d crops, %d steps (%d left out)\n",
-        o.batch, o.device.c_str(), (" " + precision.ran).c_str(), o.threads, o.workers, o.imgSize,
-        o.imgSize, o.steps, o.warmupSteps);
-    // Ours on `preset` at --amp `amp`: steady pairs/s, data wait and summary.json.
-    auto runOurs = [&](const std::string& preset, bool isLive, const std::string& amp,
-                       bool fusedAdamW, const std::string& profile) {
-      TrainConfig c;
-#if PAIRCAST_WITH_RENDER
-      if (isLive) c.live = {scenes};
-#endif
-      if (!isLive) c.shards = shards;
-      c.model = presetConfig(preset);
-      c.model.img_size = o.imgSize;
-      c.batchSize = o.batch;
-      c.maxSteps = o.steps;
-      c.epochs = 100;
-      c.saveEvery = 1000000;
-      c.out = tmp + "/run-" + preset + (isLive ? "-live-" : "-shards-") + amp;
-      c.workers = o.workers;
-      c.device = o.device;
-      c.amp = amp;
-      c.fusedAdamW = fusedAdamW;
-      c.profile = profile;
-      c.progress = false;
-      const nlohmann::json s = runPretrain(c);
-      auto [pps, wait] = steadyRate(c.out, o.batch, o.warmupSteps);
-      if (pps <= 0) pps = s["pairs_per_s"], wait = s["data_wait"];
-      return std::make_tuple(pps, wait, s);
-    };
-    // On CUDA the official step runs at our precision; on the CPU in float32 and in bf16.
-    const std::string officialAmp = precision.ran == "float32" ? "none" : precision.ran;
-    for (const auto& preset : o.presets) {
-      const FlopCount f = countFlops([&] {
-        CroCoConfig c = presetConfig(preset);
-        c.img_size = o.imgSize;
-        return c;
-      }());
-      for (const bool isLive : {false, true}) {
-        if (isLive && !o.live) continue;
-        const auto [pps, wait, s] = runOurs(preset, isLive, o.amp, o.fusedAdamW, "");
-        std::printf("%-6s %-7s %-7s %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
-                    isLive ? "live" : "shards", precision.ran.c_str(), pps, 100 * wait);
-        nlohmann::json row = {
-            {"preset", preset},          {"source", isLive ? "live" : "shards"},
-            {"pairs_per_s", pps},        {"data_wait", wait},
-            {"loss", s["loss"]},         {"fused_adamw", s.value("fused_adamw", false)},
-            {"precision", precision.ran}};
-        if (o.device == "cuda") {
-          // Forward and backward: 3x the forward FLOPs.
-          const double mfuPaper = 3 * f.flops * pps / (o.peakTflops * 1e12);
-          const double mfuFull = 3 * f.flops_full * pps / (o.peakTflops * 1e12);
-          std::printf("  MFU %.1f%% (paper's FLOPs), %.1f%% (full count) of %.0f TFLOP/s",
-                      100 * mfuPaper, 100 * mfuFull, o.peakTflops);
-          row["mfu_paper"] = mfuPaper;
-          row["mfu_full"] = mfuFull;
-        } else {
-          addFraction(row, "gemm_fraction", f.flops_full, pps, peaks, precision.ran);
-        }
-        std::printf("\n");
-        if (!isLive) {
-          if (o.device == "cpu" && precision.ran != "float32") {
-            const auto [pps32, wait32, s32] = runOurs(preset, false, "none", o.fusedAdamW, "");
-            std::printf("%-6s shards  float32 %8.2f pairs/s  data-wait %5.1f%%", preset.c_str(),
-                        pps32, 100 * wait32);
-            addFraction(row, "float32_gemm_fraction", f.flops_full, pps32, peaks, "float32");
-            std::printf("  -> %s is %.2fx\n", precision.ran.c_str(), pps / pps32);
-            row["float32_pairs_per_s"] = pps32;
-            row["float32_data_wait"] = wait32;
-          }
-          if (o.device == "cpu" && o.fusedAdamW) {
-            const auto [ppsOwn, waitOwn, sOwn] = runOurs(preset, false, o.amp, false, "");
-            std::printf(
-                "%-6s shards  %-7s %8.2f pairs/s  with LibTorch's per-parameter AdamW "
-                "-> flat buffers %.2fx\n",
-                preset.c_str(), precision.ran.c_str(), ppsOwn, pps / ppsOwn);
-            row["per_parameter_adamw_pairs_per_s"] = ppsOwn;
-          }
-          if (o.profile) {
-            const std::string file = tmp + "/profile-" + preset + ".json";
-            runOurs(preset, false, o.amp, o.fusedAdamW, file);
-            row["profile"] = printProfile(preset, file);
-          }
-          const double off =
-              officialTrainSeconds(o, preset, o.device == "cuda" ? officialAmp : "none");
-          if (off > 0) {
-            std::printf(
-                "%-6s official CroCo train step (model only), %s: %8.2f pairs/s -> ours %.2fx",
-                preset.c_str(), o.device == "cuda" ? officialAmp.c_str() : "float32", o.batch / off,
-                pps / (o.batch / off));
-            row["official_pairs_per_s"] = o.batch / off;
-            row["ratio"] = pps / (o.batch / off);
-            if (o.device == "cpu")
-              addFraction(row, "official_gemm_fraction", f.flops_full, o.batch / off, peaks,
-                          "float32");
-            std::printf("\n");
-          } else if (!o.crocoDir.empty()) {
-            std::printf("%-6s official step did not run (%s with torch, --croco-dir)\n",
-                        preset.c_str(), o.python.c_str());
-          }
-          const double offBf16 = o.device == "cpu" ? officialTrainSeconds(o, preset, "bf16") : 0;
-          if (offBf16 > 0) {
-            std::printf(
-                "%-6s official step under torch.autocast(\"cpu\", bf16): %8.2f pairs/s -> ours "
-                "%.2fx",
-                preset.c_str(), o.batch / offBf16, pps / (o.batch / offBf16));
-            row["official_bf16_pairs_per_s"] = o.batch / offBf16;
-            row["ratio_bf16"] = pps / (o.batch / offBf16);
-            addFraction(row, "official_bf16_gemm_fraction", f.flops_full, o.batch / offBf16, peaks,
-                        "bf16");
-            std::printf("\n");
-          }
-        }
-        rows.push_back(row);
-      }
-    }
-    fs::remove_all(tmp);
-    std::printf(
-        "%s\n",
-        nlohmann::json({{"batch", o.batch},
-                        {"threads", o.threads},
-                        {"device", o.device},
-                        {"amp", o.amp},
-                        {"precision", precision.toJson()},
-                        {"gemm_peak_gflops", {{"float32", peaks.float32}, {"bf16", peaks.bf16}}},
-                        {"img_size", o.imgSize},
-                        {"peak_tflops", o.peakTflops},
-                        {"results", rows}})
-            .dump()
-            .c_str());
-    return 0;
+    return run(b);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_train: error: %s\n", e.what());
     return 1;
