@@ -320,9 +320,134 @@ struct ScratchDir {
   }
 };
 
+// Sums and worst agreements over the pairs.
+struct Totals {
+  double ours = 0, kd = 0, refKd = 0, refReproj = 0;  // ms
+  double worstReproj = 0, worstCovis = 0, worstSame = 0, worstKd = 0;
+  int refCount = 0;
+};
+
+// Ours and the kd-tree's co-visibility of `p`, each timed at its best, printed as a table row.
+nlohmann::json measurePair(const Config& c, const Pair& p, CovisResult& kd, Totals& t) {
+  const CovisResult r = computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], c.covis);
+  kd = computePointCloudCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1]);
+  double sink = 0;
+  const double ours =
+      1e3 *
+      bestSecondsPerCall(
+          [&] {
+            sink += computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], c.covis).covis;
+          },
+          5, 0.2);
+  const double kdMs =
+      1e3 *
+      bestSecondsPerCall(
+          [&] {
+            sink += computePointCloudCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1]).covis;
+          },
+          3, 0.0);
+  if (!(sink >= 0)) std::printf("(impossible)\n");  // keeps the timed calls alive
+  t.ours += ours;
+  t.kd += kdMs;
+  char valid[32];
+  std::snprintf(valid, sizeof valid, "%.2f/%.2f", r.valid_i, r.valid_j);
+  std::printf("%-24s %9s %8.4f %8.4f %8.4f %8.3f | %9.4f %8.2f %7.0fx\n", p.name.c_str(), valid,
+              r.v_ij, r.v_ji, r.covis, ours, kd.covis, kdMs, kdMs / ours);
+  return {{"pair", p.name},   {"v12", r.v_ij},       {"v21", r.v_ji},
+          {"covis", r.covis}, {"ms", ours},          {"kd_covis", kd.covis},
+          {"kd_ms", kdMs},    {"valid1", r.valid_i}, {"valid2", r.valid_j}};
+}
+
+// ref_covis.py on `p`: its timings, and its values' agreement with ours and with our kd-tree's
+// `kd`, printed and added to `row` and `t`.
+void compareWithReference(const Config& c, const std::string& script, const Pair& p,
+                          const CovisResult& kd, nlohmann::json& row, Totals& t) {
+  // 1. The script with our tolerance values. Its test is max(abs, rel * z), ours abs + rel * d,
+  //    so grazing pixels may differ: this is the agreement of the two definitions.
+  const nlohmann::json rr =
+      runReference(script, p, "both", c.covis.absTol, c.covis.relTol, c.refRepeat);
+  // 2. An absolute tolerance only, where both tests are |z - d| <= abs: the agreement of the
+  //    implementations.
+  const nlohmann::json ra = runReference(script, p, "reproj", kSameTestTol, 0.0f, 1);
+  if (!rr.contains("reproj") || !rr.contains("official") || !ra.contains("reproj")) return;
+  // Ours normalised by valid pixels, as the script's reprojection is; our kd-tree (by all
+  // pixels) against its CroCo kd-tree.
+  CovisOptions byValid = c.covis;
+  byValid.normalize = CovisOptions::Normalize::Valid;
+  const CovisResult rv = computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], byValid);
+  byValid.absTol = kSameTestTol;
+  byValid.relTol = 0.0f;
+  const CovisResult rs = computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], byValid);
+  const double dReproj = maxAbsDiff(rv, rr["reproj"]), dKd = maxAbsDiff(kd, rr["official"]);
+  const double dSame = maxAbsDiff(rs, ra["reproj"]);
+  const double dCovis = std::abs(rv.covis - rr["reproj"]["covis"].get<double>());
+  t.worstReproj = std::max(t.worstReproj, dReproj);
+  t.worstCovis = std::max(t.worstCovis, dCovis);
+  t.worstSame = std::max(t.worstSame, dSame);
+  t.worstKd = std::max(t.worstKd, dKd);
+  t.refKd += rr["official"]["ms"].get<double>();
+  t.refReproj += rr["reproj"]["ms"].get<double>();
+  ++t.refCount;
+  std::printf(
+      "  ref_covis.py reproj: v12 %.4f v21 %.4f covis %.4f, %.1f ms; |diff| covis %.4f, "
+      "any %.4f; with |dz| <= %.2f m alone %.5f\n"
+      "  ref_covis.py CroCo kd-tree: covis %.4f, %.1f ms; |diff| with our kd-tree %.5f\n",
+      rr["reproj"]["v12"].get<double>(), rr["reproj"]["v21"].get<double>(),
+      rr["reproj"]["covis"].get<double>(), rr["reproj"]["ms"].get<double>(), dCovis, dReproj,
+      kSameTestTol, dSame, rr["official"]["covis"].get<double>(),
+      rr["official"]["ms"].get<double>(), dKd);
+  row["ref"] = rr;
+  row["ref_abs_only"] = ra;
+}
+
+// Prints the means over the pairs and the reference's agreement; returns the summary line.
+nlohmann::json summarise(const Config& c, const std::vector<Pair>& pairs, const Totals& t) {
+  const double n = static_cast<double>(pairs.size());
+  const double msOurs = t.ours / n, msKd = t.kd / n;
+  std::printf(
+      "\nmean over %zu pairs, one thread: ours %.3f ms per pair, kd-tree (nanoflann) %.2f "
+      "ms: %.0fx\n",
+      pairs.size(), msOurs, msKd, msKd / msOurs);
+  nlohmann::json last = {{"ms_per_pair", msOurs},
+                         {"ms_kdtree", msKd},
+                         {"speedup", msKd / msOurs},
+                         {"pairs", pairs.size()},
+                         {"width", pairs.front().cam[0].width},
+                         {"height", pairs.front().cam[0].height}};
+  if (t.refCount == 0) {
+    std::printf("ref_covis.py comparison skipped (%s)\n",
+                c.ref ? "needs ../shared/tools/ref_covis.py and python3-sklearn" : "--no-ref");
+    return last;
+  }
+  const double refKd = t.refKd / t.refCount, refReproj = t.refReproj / t.refCount;
+  std::printf(
+      "ref_covis.py over %d pairs (best of %d, one thread): CroCo kd-tree %.1f ms (ours "
+      "%.0fx faster), numpy reprojection %.1f ms (ours %.0fx faster)\n",
+      t.refCount, c.refRepeat, refKd, refKd / msOurs, refReproj, refReproj / msOurs);
+  std::printf(
+      "agreement, max |difference| over the pairs: ours vs its reprojection: covis %.4f, any "
+      "of v12/v21/covis %.4f (same numbers, abs + rel vs max(abs, rel)); with the same test "
+      "(|dz| <= %.2f m) %.5f. Our kd-tree vs its CroCo kd-tree: %.5f\n",
+      t.worstCovis, t.worstReproj, kSameTestTol, t.worstSame, t.worstKd);
+  last["ms_ref_kdtree"] = refKd;
+  last["ms_ref_reproj"] = refReproj;
+  last["speedup_vs_ref_kdtree"] = refKd / msOurs;
+  last["max_diff_ref_reproj_covis"] = t.worstCovis;
+  last["max_diff_ref_reproj"] = t.worstReproj;
+  last["max_diff_ref_reproj_same_test"] = t.worstSame;
+  last["max_diff_ref_kdtree"] = t.worstKd;
+  return last;
+}
+
+void writeJson(const std::string& path, const nlohmann::json& j) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (!f) throw Error(path, "cannot write");
+  std::fprintf(f, "%s\n", j.dump(1).c_str());
+  std::fclose(f);
+}
+
 int run(const Config& c) {
   const ScratchDir scratch;
-  const std::string& tmp = scratch.path;
   std::vector<Pair> pairs;
   std::unique_ptr<RoomScene> scene;
   if (!c.depth1.empty()) {
@@ -331,7 +456,7 @@ int run(const Config& c) {
     std::printf("rendering %d pairs of the procedural room at %dx%d, hfov %.0f...\n", c.pairs,
                 c.size, c.size, c.hfov);
     scene = std::make_unique<RoomScene>();
-    pairs = renderPairs(c, *scene, tmp);
+    pairs = renderPairs(c, *scene, scratch.path);
   }
   const std::string script =
       c.refScript.empty()
@@ -344,133 +469,22 @@ int run(const Config& c) {
       c.covis.absTol, c.covis.relTol, toString(c.covis.normalize), c.covis.stride);
   std::printf("%-24s %9s %8s %8s %8s %8s | %9s %8s %8s\n", "pair", "valid1/2", "v12", "v21",
               "covis", "ms", "kd covis", "kd ms", "speedup");
-
-  double sumOurs = 0, sumKd = 0, sumRefKd = 0, sumRefReproj = 0;
-  double worstReproj = 0, worstCovis = 0, worstSame = 0, worstKd = 0;
-  int refCount = 0;
+  Totals totals;
   nlohmann::json perPair = nlohmann::json::array();
   for (const Pair& p : pairs) {
-    const CovisResult r = computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], c.covis);
-    const CovisResult kd =
-        computePointCloudCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1]);
-    double sink = 0;
-    const double ours =
-        1e3 *
-        bestSecondsPerCall(
-            [&] {
-              sink +=
-                  computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], c.covis).covis;
-            },
-            5, 0.2);
-    const double kdMs =
-        1e3 *
-        bestSecondsPerCall(
-            [&] {
-              sink +=
-                  computePointCloudCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1]).covis;
-            },
-            3, 0.0);
-    if (!(sink >= 0)) std::printf("(impossible)\n");  // keeps the timed calls alive
-    sumOurs += ours;
-    sumKd += kdMs;
-    char valid[32];
-    std::snprintf(valid, sizeof valid, "%.2f/%.2f", r.valid_i, r.valid_j);
-    std::printf("%-24s %9s %8.4f %8.4f %8.4f %8.3f | %9.4f %8.2f %7.0fx\n", p.name.c_str(), valid,
-                r.v_ij, r.v_ji, r.covis, ours, kd.covis, kdMs, kdMs / ours);
-    nlohmann::json row = {{"pair", p.name},   {"v12", r.v_ij},       {"v21", r.v_ji},
-                          {"covis", r.covis}, {"ms", ours},          {"kd_covis", kd.covis},
-                          {"kd_ms", kdMs},    {"valid1", r.valid_i}, {"valid2", r.valid_j}};
-    if (ref) {
-      // 1. The script with our tolerance values. Its test is max(abs, rel * z), ours abs + rel *
-      //    d, so grazing pixels may differ: this is the agreement of the two definitions.
-      const nlohmann::json rr =
-          runReference(script, p, "both", c.covis.absTol, c.covis.relTol, c.refRepeat);
-      // 2. An absolute tolerance only, where both tests are |z - d| <= abs: the agreement of
-      //    the implementations.
-      const nlohmann::json ra = runReference(script, p, "reproj", kSameTestTol, 0.0f, 1);
-      if (rr.contains("reproj") && rr.contains("official") && ra.contains("reproj")) {
-        // Ours normalised by valid pixels, as the script's reprojection is; our kd-tree (by all
-        // pixels) against its CroCo kd-tree.
-        CovisOptions byValid = c.covis;
-        byValid.normalize = CovisOptions::Normalize::Valid;
-        const CovisResult rv =
-            computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], byValid);
-        byValid.absTol = kSameTestTol;
-        byValid.relTol = 0.0f;
-        const CovisResult rs =
-            computeCovisibility(p.cam[0], p.depth[0], p.cam[1], p.depth[1], byValid);
-        const double dReproj = maxAbsDiff(rv, rr["reproj"]), dKd = maxAbsDiff(kd, rr["official"]);
-        const double dSame = maxAbsDiff(rs, ra["reproj"]);
-        const double dCovis = std::abs(rv.covis - rr["reproj"]["covis"].get<double>());
-        worstReproj = std::max(worstReproj, dReproj);
-        worstCovis = std::max(worstCovis, dCovis);
-        worstSame = std::max(worstSame, dSame);
-        worstKd = std::max(worstKd, dKd);
-        sumRefKd += rr["official"]["ms"].get<double>();
-        sumRefReproj += rr["reproj"]["ms"].get<double>();
-        ++refCount;
-        std::printf(
-            "  ref_covis.py reproj: v12 %.4f v21 %.4f covis %.4f, %.1f ms; |diff| covis %.4f, "
-            "any %.4f; with |dz| <= %.2f m alone %.5f\n"
-            "  ref_covis.py CroCo kd-tree: covis %.4f, %.1f ms; |diff| with our kd-tree %.5f\n",
-            rr["reproj"]["v12"].get<double>(), rr["reproj"]["v21"].get<double>(),
-            rr["reproj"]["covis"].get<double>(), rr["reproj"]["ms"].get<double>(), dCovis, dReproj,
-            kSameTestTol, dSame, rr["official"]["covis"].get<double>(),
-            rr["official"]["ms"].get<double>(), dKd);
-        row["ref"] = rr;
-        row["ref_abs_only"] = ra;
-      }
-    }
+    CovisResult kd;
+    nlohmann::json row = measurePair(c, p, kd, totals);
+    if (ref) compareWithReference(c, script, p, kd, row, totals);
     perPair.push_back(row);
   }
-  const double n = static_cast<double>(pairs.size());
-  const double msOurs = sumOurs / n, msKd = sumKd / n;
-  std::printf(
-      "\nmean over %zu pairs, one thread: ours %.3f ms per pair, kd-tree (nanoflann) %.2f "
-      "ms: %.0fx\n",
-      pairs.size(), msOurs, msKd, msKd / msOurs);
-  nlohmann::json last = {{"ms_per_pair", msOurs},
-                         {"ms_kdtree", msKd},
-                         {"speedup", msKd / msOurs},
-                         {"pairs", pairs.size()},
-                         {"width", pairs.front().cam[0].width},
-                         {"height", pairs.front().cam[0].height}};
-  if (refCount > 0) {
-    const double refKd = sumRefKd / refCount, refReproj = sumRefReproj / refCount;
-    std::printf(
-        "ref_covis.py over %d pairs (best of %d, one thread): CroCo kd-tree %.1f ms (ours "
-        "%.0fx faster), numpy reprojection %.1f ms (ours %.0fx faster)\n",
-        refCount, c.refRepeat, refKd, refKd / msOurs, refReproj, refReproj / msOurs);
-    std::printf(
-        "agreement, max |difference| over the pairs: ours vs its reprojection: covis %.4f, any "
-        "of v12/v21/covis %.4f (same numbers, abs + rel vs max(abs, rel)); with the same test "
-        "(|dz| <= %.2f m) %.5f. Our kd-tree vs its CroCo kd-tree: %.5f\n",
-        worstCovis, worstReproj, kSameTestTol, worstSame, worstKd);
-    last["ms_ref_kdtree"] = refKd;
-    last["ms_ref_reproj"] = refReproj;
-    last["speedup_vs_ref_kdtree"] = refKd / msOurs;
-    last["max_diff_ref_reproj_covis"] = worstCovis;
-    last["max_diff_ref_reproj"] = worstReproj;
-    last["max_diff_ref_reproj_same_test"] = worstSame;
-    last["max_diff_ref_kdtree"] = worstKd;
-  } else {
-    std::printf("ref_covis.py comparison skipped (%s)\n",
-                c.ref ? "needs ../shared/tools/ref_covis.py and python3-sklearn" : "--no-ref");
-  }
+  const nlohmann::json last = summarise(c, pairs, totals);
   nlohmann::json sweep;
   if (c.sweep) {
     if (!scene) throw Error("--tolerance-sweep needs rendered pairs (it casts shadow rays)");
     sweep = toleranceSweep(*scene, pairs);
   }
-  if (!c.jsonOut.empty()) {
-    std::FILE* f = std::fopen(c.jsonOut.c_str(), "w");
-    if (!f) throw Error(c.jsonOut, "cannot write");
-    std::fprintf(f, "%s\n",
-                 nlohmann::json{{"summary", last}, {"pairs", perPair}, {"tolerance_sweep", sweep}}
-                     .dump(1)
-                     .c_str());
-    std::fclose(f);
-  }
+  if (!c.jsonOut.empty())
+    writeJson(c.jsonOut, {{"summary", last}, {"pairs", perPair}, {"tolerance_sweep", sweep}});
   std::printf("%s\n", last.dump().c_str());
   return 0;
 }
