@@ -25,6 +25,7 @@
 #include "covis/unproject.h"
 #include "render/procedural_scene.h"
 #include "render/ray_caster.h"
+#include "util/atomic_file.h"
 #include "util/error.h"
 #include "util/image_io.h"
 #include "util/random.h"
@@ -439,13 +440,6 @@ nlohmann::json summarise(const Config& c, const std::vector<Pair>& pairs, const 
   return last;
 }
 
-void writeJson(const std::string& path, const nlohmann::json& j) {
-  std::FILE* f = std::fopen(path.c_str(), "w");
-  if (!f) throw Error(path, "cannot write");
-  std::fprintf(f, "%s\n", j.dump(1).c_str());
-  std::fclose(f);
-}
-
 int run(const Config& c) {
   const ScratchDir scratch;
   std::vector<Pair> pairs;
@@ -484,7 +478,10 @@ int run(const Config& c) {
     sweep = toleranceSweep(*scene, pairs);
   }
   if (!c.jsonOut.empty())
-    writeJson(c.jsonOut, {{"summary", last}, {"pairs", perPair}, {"tolerance_sweep", sweep}});
+    writeFileAtomic(
+        c.jsonOut,
+        nlohmann::json{{"summary", last}, {"pairs", perPair}, {"tolerance_sweep", sweep}}.dump(1) +
+            "\n");
   std::printf("%s\n", last.dump().c_str());
   return 0;
 }
